@@ -1,0 +1,76 @@
+"""Sparse assembly of element matrices on a fixed sparsity pattern."""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+__all__ = ["Assembler"]
+
+
+class Assembler:
+    """Assemble element matrices into CSR matrices that all share one pattern.
+
+    The pattern and the scatter map are computed once per mesh; every assembly after
+    that is one weighted ``bincount``. Matrices that share the pattern can be combined
+    through their ``data`` arrays (see :meth:`combine`).
+
+    Parameters
+    ----------
+    element_dofs : numpy.ndarray of int, shape (n_elements, n_local)
+        Global unknowns of each element.
+    n_dofs : int
+        Number of global unknowns.
+    """
+
+    def __init__(self, element_dofs, n_dofs):
+        dofs = np.asarray(element_dofs, dtype=np.int64)
+        self.n_elements, self.n_local = dofs.shape
+        self.n_dofs = int(n_dofs)
+        rows = np.repeat(dofs, self.n_local, axis=1).ravel()
+        cols = np.tile(dofs, (1, self.n_local)).ravel()
+        keys, self._scatter = np.unique(rows * self.n_dofs + cols, return_inverse=True)
+        self.indices = (keys % self.n_dofs).astype(np.int32)
+        counts = np.bincount(keys // self.n_dofs, minlength=self.n_dofs)
+        self.indptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
+        self.nnz = len(keys)
+
+    def data(self, element_matrices, factors=None):
+        """CSR data of the assembled matrix.
+
+        Parameters
+        ----------
+        element_matrices : numpy.ndarray, shape (n_local, n_local) or (n_elements, n_local, n_local)
+            One matrix shared by all elements, or one per element.
+        factors : numpy.ndarray, shape (n_elements,), optional
+            Per-element multipliers of the element matrices.
+
+        Returns
+        -------
+        numpy.ndarray, shape (nnz,)
+        """
+        Ke = np.asarray(element_matrices, dtype=float)
+        Ke = Ke.reshape(-1, self.n_local * self.n_local)
+        if factors is not None:
+            Ke = np.asarray(factors, dtype=float)[:, None] * Ke
+        values = np.broadcast_to(Ke, (self.n_elements, Ke.shape[1])).ravel()
+        return np.bincount(self._scatter, weights=values, minlength=self.nnz)
+
+    def matrix(self, data):
+        """CSR matrix on the shared pattern from its ``data`` array."""
+        shape = (self.n_dofs, self.n_dofs)
+        return sp.csr_matrix((data, self.indices, self.indptr), shape=shape)
+
+    def assemble(self, element_matrices, factors=None):
+        """Assembled CSR matrix; see :meth:`data` for the arguments."""
+        return self.matrix(self.data(element_matrices, factors))
+
+    def combine(self, weights, datas):
+        """CSR matrix ``sum_j weights[j] * matrix(datas[j])``.
+
+        Parameters
+        ----------
+        weights : array_like, shape (n_terms,)
+        datas : numpy.ndarray, shape (n_terms, nnz)
+        """
+        return self.matrix(np.asarray(weights, dtype=float) @ np.asarray(datas))

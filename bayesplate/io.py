@@ -1,0 +1,47 @@
+"""Files at the edge of the package: every output is written whole or not at all."""
+
+from __future__ import annotations
+
+import json
+import os
+import pathlib
+import sys
+import tempfile
+
+import numpy as np
+
+__all__ = ["atomic_write_text", "write_json"]
+
+
+def atomic_write_text(path, text):
+    """Write ``text`` to ``path`` through a temporary file and a rename.
+
+    A reader never sees a partial file, and an error leaves any previous file untouched.
+    """
+    path = pathlib.Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as handle:
+            handle.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        pathlib.Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _jsonable(value):
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"{type(value).__name__} is not JSON serialisable")
+
+
+def write_json(obj, target):
+    """Write ``obj`` as JSON to the file ``target``, or to standard output for ``"-"``."""
+    text = json.dumps(obj, indent=2, default=_jsonable) + "\n"
+    if str(target) == "-":
+        sys.stdout.write(text)
+    else:
+        atomic_write_text(target, text)

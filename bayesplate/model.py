@@ -1,0 +1,228 @@
+"""The forward model: lamina stiffness coefficients -> natural frequencies and sensitivities.
+
+The plate stiffness is linear in the six lamina stiffness coefficients when all plies share
+one material (eqs. 23-25), so it is assembled once as ``K(b) = sum_j b_j K_j``; the mass
+matrix does not depend on ``b``. Sensitivities follow Fox and Kapoor (paper eq. 28):
+``d lambda_i / d b_j = a_i^T K_j a_i`` for mass-normalised eigenvectors ``a_i``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import laminate
+from .fem.assembly import Assembler
+from .fem.eigen import lowest_modes
+from .fem.element import TSDTRectangle
+from .fem.mesh import RectangularMesh
+
+__all__ = ["BOUNDARIES", "DEFAULT_MESH", "ModalResult", "PlateModel"]
+
+BOUNDARIES = ("free", "simply_supported")
+DEFAULT_MESH = (24, 12)
+
+
+@dataclass(frozen=True)
+class ModalResult:
+    """Elastic modes of the plate at one set of stiffness coefficients.
+
+    Attributes
+    ----------
+    b : numpy.ndarray, shape (6,)
+        ``(C11, C22, C12, C66, C44, C55)`` in Pa.
+    eigenvalues : numpy.ndarray, shape (n,)
+        ``lambda = (2 pi f)^2`` in rad^2/s^2 (eq. 27).
+    vectors : numpy.ndarray, shape (n_dofs, n)
+        Mass-normalised mode shapes on all unknowns (constrained ones are zero).
+    sensitivities : numpy.ndarray, shape (n, 6)
+        ``d lambda_i / d b_j`` (eq. 28), in rad^2/s^2 per Pa.
+    rigid_eigenvalues : numpy.ndarray
+        Near-zero eigenvalues detected and dropped (six for a free plate).
+    """
+
+    b: np.ndarray
+    eigenvalues: np.ndarray
+    vectors: np.ndarray
+    sensitivities: np.ndarray
+    rigid_eigenvalues: np.ndarray = field(repr=False)
+
+    @property
+    def frequency_Hz(self):
+        """Natural frequencies in Hz, shape (n,)."""
+        return np.sqrt(np.maximum(self.eigenvalues, 0.0)) / (2 * np.pi)
+
+    @property
+    def n_rigid(self):
+        """Number of rigid-body modes detected and dropped."""
+        return len(self.rigid_eigenvalues)
+
+    def normalised_sensitivities(self):
+        """``s_ij = (d lambda_i / d b_j) b_j / lambda_i`` (eq. 29), shape (n, 6)."""
+        return self.sensitivities * self.b[None, :] / self.eigenvalues[:, None]
+
+    def engineering_sensitivities(self):
+        """``d lambda_i / d e_j`` for ``e = (E1, E2, nu12, G12, G13, G23)``, shape (n, 6)."""
+        e = laminate.engineering_from_stiffness(self.b)
+        return self.sensitivities @ laminate.stiffness_jacobian(e)
+
+
+class PlateModel:
+    """Finite-element model of one plate (geometry, layup, density) on one mesh.
+
+    Parameters
+    ----------
+    length, width, thickness : float
+        Plate sides and total thickness in m.
+    density : float
+        kg/m^3.
+    layup_deg : sequence of float
+        Ply angles from the bottom face upward, degrees.
+    ply_thickness : sequence of float, optional
+        m, one per ply; default equal plies.
+    mesh : tuple of int
+        Elements along x and y.
+    boundary : {"free", "simply_supported"}
+        Free-free (the test configuration) or SS-1 simple supports (for verification).
+    shear_order : int, optional
+        Gauss points per direction for the transverse-shear terms (default: exact, 4).
+    """
+
+    def __init__(
+        self,
+        length,
+        width,
+        thickness,
+        density,
+        layup_deg,
+        ply_thickness=None,
+        mesh=DEFAULT_MESH,
+        boundary="free",
+        shear_order=None,
+    ):
+        if boundary not in BOUNDARIES:
+            raise ValueError(f"boundary = {boundary!r}: must be one of {BOUNDARIES}")
+        self.layup_deg = np.asarray(layup_deg, dtype=float)
+        n_plies = len(self.layup_deg)
+        if ply_thickness is None:
+            ply_thickness = np.full(n_plies, thickness / n_plies)
+        self.ply_thickness = np.asarray(ply_thickness, dtype=float)
+        self.thickness = float(thickness)
+        self.density = float(density)
+        self.boundary = boundary
+        self.mesh = RectangularMesh(float(length), float(width), int(mesh[0]), int(mesh[1]))
+        self.element = TSDTRectangle(self.mesh.dx, self.mesh.dy, shear_order=shear_order)
+        self.assembler = Assembler(self.mesh.element_dofs, self.mesh.n_dofs)
+        self.stiffness_terms = np.array(
+            [self.assembler.data(Ke) for Ke in self.element_stiffness_terms()]
+        )
+        self.mass_data = self.assembler.data(self.element_mass())
+        self.free_dofs = self._free_dofs()
+        self._ordering = self._free_ordering()
+
+    @classmethod
+    def from_case(cls, case, mesh=None, **kwargs):
+        """Model of a :class:`bayesplate.case.Case`, on ``mesh`` or the case's own mesh."""
+        p = case.plate
+        mesh = mesh or case.mesh or DEFAULT_MESH
+        return cls(
+            p.length,
+            p.width,
+            p.thickness,
+            p.density,
+            p.layup_deg,
+            p.ply_thickness,
+            mesh=mesh,
+            **kwargs,
+        )
+
+    def laminate(self, b):
+        """Laminate integrals of eqs. 24-25 for stiffness coefficients ``b``."""
+        return laminate.laminate_matrices(b, self.layup_deg, self.ply_thickness)
+
+    def element_stiffness_terms(self):
+        """Element matrices ``K_j^e`` of a unit value of each coefficient, shape (6, 32, 32)."""
+        unit = np.eye(6)
+        C = np.array([laminate.constitutive_matrix(self.laminate(e)) for e in unit])
+        return self.element.stiffness(C)
+
+    def element_mass(self):
+        """Consistent element mass with all inertias I0..I6, shape (32, 32)."""
+        moments = laminate.inertias(self.density, self.ply_thickness)
+        return self.element.mass(laminate.inertia_matrix(moments, self.laminate(np.ones(6)).c))
+
+    def stiffness(self, b):
+        """Assembled ``K(b) = sum_j b_j K_j`` (CSR, all unknowns)."""
+        return self.assembler.combine(b, self.stiffness_terms)
+
+    def stiffness_term(self, j):
+        """Assembled ``K_j = d K / d b_j`` (CSR, all unknowns)."""
+        return self.assembler.matrix(self.stiffness_terms[j])
+
+    @property
+    def mass(self):
+        """Assembled consistent mass matrix (CSR, all unknowns)."""
+        return self.assembler.matrix(self.mass_data)
+
+    def _free_dofs(self):
+        """Unknowns left free by the boundary conditions."""
+        fixed = []
+        if self.boundary == "simply_supported":
+            m = self.mesh
+            for edge, names in (
+                ("x0", ("v", "w", "w_y", "psi_y")),
+                ("xa", ("v", "w", "w_y", "psi_y")),
+                ("y0", ("u", "w", "w_x", "psi_x")),
+                ("yb", ("u", "w", "w_x", "psi_x")),
+            ):
+                fixed += [m.dofs(n, m.edge_nodes(edge)) for n in names]
+        fixed = np.unique(np.concatenate(fixed)) if fixed else np.array([], dtype=int)
+        return np.setdiff1d(np.arange(self.mesh.n_dofs), fixed)
+
+    def _free_ordering(self):
+        """Nested-dissection order of the free unknowns, as positions in ``free_dofs``."""
+        position = np.full(self.mesh.n_dofs, -1)
+        position[self.free_dofs] = np.arange(len(self.free_dofs))
+        order = position[self.mesh.nested_dissection()]
+        return order[order >= 0]
+
+    def _shift(self, b):
+        """Spectral shift, a tenth of a plate-bending estimate of the lowest eigenvalue."""
+        D = self.laminate(b).Cf[2]
+        I0 = laminate.inertias(self.density, self.ply_thickness)[0]
+        span = max(self.mesh.a, self.mesh.b)
+        return -0.1 * (np.pi / span) ** 4 * min(D[0, 0], D[1, 1], D[2, 2]) / I0
+
+    def solve(self, b, n_modes=14):
+        """Lowest ``n_modes`` elastic modes and their sensitivities.
+
+        Parameters
+        ----------
+        b : array_like, shape (6,)
+            ``(C11, C22, C12, C66, C44, C55)`` in Pa.
+        n_modes : int
+
+        Returns
+        -------
+        ModalResult
+        """
+        b = np.asarray(b, dtype=float)
+        free = self.free_dofs
+        K = self.stiffness(b)[free][:, free]
+        M = self.mass[free][:, free]
+        n_rigid = 6 if self.boundary == "free" else 0
+        sol = lowest_modes(
+            K, M, n_modes, self._shift(b), n_rigid_max=n_rigid, ordering=self._ordering
+        )
+        vectors = np.zeros((self.mesh.n_dofs, len(sol.eigenvalues)))
+        vectors[free] = sol.vectors
+        return ModalResult(
+            b, sol.eigenvalues, vectors, self.sensitivities(vectors), sol.rigid_eigenvalues
+        )
+
+    def sensitivities(self, vectors):
+        """``d lambda_i / d b_j = a_i^T K_j a_i`` for mass-normalised ``a_i``, shape (n, 6)."""
+        return np.column_stack(
+            [np.einsum("di,di->i", vectors, self.stiffness_term(j) @ vectors) for j in range(6)]
+        )
