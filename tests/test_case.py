@@ -136,7 +136,7 @@ def test_frederiksen_values_in_si():
 
 
 def test_laminate_cases_have_33_equal_plies():
-    # the 33-ply readings reproduce the paper's Tables 16 and 19 (see tests/test_paper_frequencies.py)
+    # the 33-ply readings reproduce Tables 16 and 19 (tests/test_paper_frequencies.py)
     for name in ("crossply", "angleply"):
         plate = load_case(bundled_case_path(name)).plate
         assert len(plate.layup_deg) == 33 and plate.layup_deg[16] == 0
