@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.sparse as sp
 
 from . import laminate
 from .fem.assembly import Assembler
@@ -220,6 +221,29 @@ class PlateModel:
         return ModalResult(
             b, sol.eigenvalues, vectors, self.sensitivities(vectors), sol.rigid_eigenvalues
         )
+
+    def interpolation(self, points, field="w"):
+        """Sparse matrix evaluating one field of a nodal vector at points on the plate.
+
+        Parameters
+        ----------
+        points : array_like, shape (p, 2)
+            ``(x, y)`` in m.
+        field : str
+            ``"w"`` (default), ``"u"``, ``"v"``, ``"psi_x"``, ``"psi_y"`` or a derivative of w
+            (``"w_x"``, ``"w_y"``).
+
+        Returns
+        -------
+        scipy.sparse.csr_matrix, shape (p, n_dofs)
+            ``interpolation(points) @ vectors`` gives the field at the points.
+        """
+        element, local = self.mesh.locate(points)
+        values = np.array([self.element.fields(xy[None, :])[field][0] for xy in local])
+        rows = np.repeat(np.arange(len(element)), values.shape[1])
+        cols = self.mesh.element_dofs[element].ravel()
+        shape = (len(element), self.mesh.n_dofs)
+        return sp.csr_matrix((values.ravel(), (rows, cols)), shape=shape)
 
     def sensitivities(self, vectors):
         """``d lambda_i / d b_j = a_i^T K_j a_i`` for mass-normalised ``a_i``, shape (n, 6)."""
