@@ -71,14 +71,18 @@ def lowest_modes(K, M, n_modes, shift, n_rigid_max=6, ordering=None):
         raise ValueError(f"shift = {shift}: must be negative so that K - shift M is definite")
     k = min(n_modes + n_rigid_max + 2, K.shape[0] - 1)
     op = _shift_invert(K - shift * M, ordering)
-    vals, vecs = spla.eigsh(K, k=k, M=M, sigma=shift, OPinv=op, which="LM", tol=1e-12)
+    vals, vecs = spla.eigsh(K, k=k, M=M, sigma=shift, OPinv=op, which="LM", tol=1e-10)
     order = np.argsort(vals)
     vals, vecs = vals[order], vecs[:, order]
     rigid = np.abs(vals) <= RIGID_TOL * np.max(np.abs(vals))
     if rigid.sum() > n_rigid_max:
         log.warning("%d near-zero eigenvalues found, at most %d expected", rigid.sum(), n_rigid_max)
     elastic = np.flatnonzero(~rigid)[:n_modes]
-    return EigenSolution(vals[elastic], vecs[:, elastic], vals[rigid])
+    vecs = vecs[:, elastic]
+    # Rayleigh quotients: eigenvalues to second order in the residual of the Lanczos vectors
+    vecs /= np.sqrt(np.einsum("di,di->i", vecs, M @ vecs))
+    refined = np.einsum("di,di->i", vecs, K @ vecs)
+    return EigenSolution(refined, vecs, vals[rigid])
 
 
 def _shift_invert(A, ordering):
