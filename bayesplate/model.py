@@ -8,6 +8,7 @@ matrix does not depend on ``b``. Sensitivities follow Fox and Kapoor (paper eq. 
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -119,8 +120,10 @@ class PlateModel:
             [self.assembler.data(Ke) for Ke in self.element_stiffness_terms()]
         )
         self.mass_data = self.assembler.data(self.element_mass())
+        self.extra_stiffness_data = None
         self.free_dofs = self._free_dofs()
         self._ordering = self._free_ordering()
+        self._rigid_basis = self._rigid_basis_on_free_dofs()
 
     @classmethod
     def from_case(cls, case, mesh=None, **kwargs):
@@ -138,24 +141,68 @@ class PlateModel:
             **kwargs,
         )
 
-    def laminate(self, b):
-        """Laminate integrals of eqs. 24-25 for stiffness coefficients ``b``."""
-        return laminate.laminate_matrices(b, self.layup_deg, self.ply_thickness)
+    def laminate(self, b, thickness_scale=1.0, angle_offset_deg=0.0):
+        """Laminate integrals of eqs. 24-25 for stiffness coefficients ``b``.
 
-    def element_stiffness_terms(self):
-        """Element matrices ``K_j^e`` of a unit value of each coefficient, shape (6, 32, 32)."""
-        unit = np.eye(6)
-        C = np.array([laminate.constitutive_matrix(self.laminate(e)) for e in unit])
+        ``thickness_scale`` scales every ply (a locally thicker or thinner plate) and
+        ``angle_offset_deg`` turns every ply by the same angle.
+        """
+        return laminate.laminate_matrices(
+            b, self.layup_deg + angle_offset_deg, self.ply_thickness * thickness_scale
+        )
+
+    def element_stiffness_terms(self, thickness_scale=1.0, angle_offset_deg=0.0):
+        """Element matrices ``K_j^e`` of a unit value of each coefficient, shape (6, 32, 32).
+
+        See :meth:`laminate` for the optional arguments.
+        """
+        C = np.array(
+            [
+                laminate.constitutive_matrix(self.laminate(e, thickness_scale, angle_offset_deg))
+                for e in np.eye(6)
+            ]
+        )
         return self.element.stiffness(C)
 
-    def element_mass(self):
+    def element_mass(self, thickness_scale=1.0):
         """Consistent element mass with all inertias I0..I6, shape (32, 32)."""
-        moments = laminate.inertias(self.density, self.ply_thickness)
-        return self.element.mass(laminate.inertia_matrix(moments, self.laminate(np.ones(6)).c))
+        plies = self.ply_thickness * thickness_scale
+        moments = laminate.inertias(self.density, plies)
+        c = laminate.higher_order_coefficient(plies.sum())
+        return self.element.mass(laminate.inertia_matrix(moments, c))
+
+    def modified(self, stiffness_terms=None, mass_data=None, extra_stiffness_data=None):
+        """A copy of the model with some assembled matrices replaced (same mesh and pattern).
+
+        Parameters
+        ----------
+        stiffness_terms : numpy.ndarray, shape (6, nnz), optional
+            CSR data of the ``K_j``.
+        mass_data : numpy.ndarray, shape (nnz,), optional
+            CSR data of ``M``.
+        extra_stiffness_data : numpy.ndarray, shape (nnz,), optional
+            CSR data of a stiffness independent of ``b`` (a foundation, say), added to
+            ``K(b)``.
+
+        Returns
+        -------
+        PlateModel
+        """
+        other = copy.copy(self)
+        if stiffness_terms is not None:
+            other.stiffness_terms = np.asarray(stiffness_terms)
+        if mass_data is not None:
+            other.mass_data = np.asarray(mass_data)
+        if extra_stiffness_data is not None:
+            other.extra_stiffness_data = np.asarray(extra_stiffness_data)
+        return other
 
     def stiffness(self, b):
-        """Assembled ``K(b) = sum_j b_j K_j`` (CSR, all unknowns)."""
-        return self.assembler.combine(b, self.stiffness_terms)
+        """Assembled ``K(b) = sum_j b_j K_j`` (+ any extra stiffness; CSR, all unknowns)."""
+        data = np.asarray(b, dtype=float) @ self.stiffness_terms
+        if self.extra_stiffness_data is not None:
+            data = data + self.extra_stiffness_data
+        return self.assembler.matrix(data)
 
     def stiffness_term(self, j):
         """Assembled ``K_j = d K / d b_j`` (CSR, all unknowns)."""
@@ -188,7 +235,33 @@ class PlateModel:
         order = position[self.mesh.nested_dissection()]
         return order[order >= 0]
 
-    def _shift(self, b):
+    def rigid_body_modes(self):
+        """The six rigid-body motions of the free plate on all unknowns, shape (n_dofs, 6).
+
+        Translations along x, y, z; rotations about y (``w = x``, ``psi_x = -1``) and x
+        (``w = y``, ``psi_y = -1``), for which every strain of eq. 15 vanishes; and the
+        in-plane rotation ``u = -y``, ``v = x``.
+        """
+        m = self.mesh
+        x, y = m.nodes.T
+        R = np.zeros((m.n_dofs, 6))
+        R[m.dofs("u"), 0] = 1.0
+        R[m.dofs("v"), 1] = 1.0
+        R[m.dofs("w"), 2] = 1.0
+        R[m.dofs("w"), 3], R[m.dofs("w_x"), 3], R[m.dofs("psi_x"), 3] = x, 1.0, -1.0
+        R[m.dofs("w"), 4], R[m.dofs("w_y"), 4], R[m.dofs("psi_y"), 4] = y, 1.0, -1.0
+        R[m.dofs("u"), 5], R[m.dofs("v"), 5] = -y, x
+        return R
+
+    def _rigid_basis_on_free_dofs(self):
+        """M-orthonormal basis of the rigid-body motions the supports allow, or None."""
+        if self.boundary != "free":
+            return None
+        R = self.rigid_body_modes()
+        G = R.T @ (self.mass @ R)
+        return R @ np.linalg.inv(np.linalg.cholesky(G)).T
+
+    def spectral_shift(self, b):
         """Spectral shift, a tenth of a plate-bending estimate of the lowest eigenvalue."""
         D = self.laminate(b).Cf[2]
         I0 = laminate.inertias(self.density, self.ply_thickness)[0]
@@ -213,8 +286,15 @@ class PlateModel:
         K = self.stiffness(b)[free][:, free]
         M = self.mass[free][:, free]
         n_rigid = 6 if self.boundary == "free" else 0
+        rigid = None if self._rigid_basis is None else self._rigid_basis[free]
         sol = lowest_modes(
-            K, M, n_modes, self._shift(b), n_rigid_max=n_rigid, ordering=self._ordering
+            K,
+            M,
+            n_modes,
+            self.spectral_shift(b),
+            n_rigid_max=n_rigid,
+            ordering=self._ordering,
+            rigid_basis=rigid,
         )
         vectors = np.zeros((self.mesh.n_dofs, len(sol.eigenvalues)))
         vectors[free] = sol.vectors

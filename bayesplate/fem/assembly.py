@@ -56,6 +56,23 @@ class Assembler:
         values = np.broadcast_to(Ke, (self.n_elements, Ke.shape[1])).ravel()
         return np.bincount(self._scatter, weights=values, minlength=self.nnz)
 
+    def element_data(self, elements, element_matrices):
+        """CSR data of the contributions of a few elements only.
+
+        Parameters
+        ----------
+        elements : array_like of int, shape (k,)
+        element_matrices : numpy.ndarray, shape (k, n_local, n_local)
+
+        Returns
+        -------
+        numpy.ndarray, shape (nnz,)
+        """
+        scatter = self._scatter.reshape(self.n_elements, -1)[np.asarray(elements)]
+        data = np.zeros(self.nnz)
+        np.add.at(data, scatter.ravel(), np.asarray(element_matrices, dtype=float).ravel())
+        return data
+
     def matrix(self, data):
         """CSR matrix on the shared pattern from its ``data`` array."""
         shape = (self.n_dofs, self.n_dofs)

@@ -45,7 +45,7 @@ class EigenSolution:
         return len(self.rigid_eigenvalues)
 
 
-def lowest_modes(K, M, n_modes, shift, n_rigid_max=6, ordering=None):
+def lowest_modes(K, M, n_modes, shift, n_rigid_max=6, ordering=None, rigid_basis=None):
     """Lowest ``n_modes`` elastic modes, detecting and dropping rigid-body modes.
 
     Parameters
@@ -62,6 +62,10 @@ def lowest_modes(K, M, n_modes, shift, n_rigid_max=6, ordering=None):
     ordering : numpy.ndarray of int, optional
         Fill-reducing symmetric permutation of the unknowns for the factorisation of
         ``K - sigma M`` (for example nested dissection); SuperLU's own ordering otherwise.
+    rigid_basis : numpy.ndarray, shape (n_dofs, r), optional
+        M-orthonormal rigid-body motions. A mode whose mass-weighted projection on them
+        exceeds one half is also counted as rigid, even if its eigenvalue is not near zero
+        (a plate on a soft support bounces at a small but finite frequency).
 
     Returns
     -------
@@ -75,6 +79,9 @@ def lowest_modes(K, M, n_modes, shift, n_rigid_max=6, ordering=None):
     order = np.argsort(vals)
     vals, vecs = vals[order], vecs[:, order]
     rigid = np.abs(vals) <= RIGID_TOL * np.max(np.abs(vals))
+    if rigid_basis is not None:
+        projection = np.sum((rigid_basis.T @ (M @ vecs)) ** 2, axis=0)
+        rigid |= projection > 0.5 * np.einsum("di,di->i", vecs, M @ vecs)
     if rigid.sum() > n_rigid_max:
         log.warning("%d near-zero eigenvalues found, at most %d expected", rigid.sum(), n_rigid_max)
     elastic = np.flatnonzero(~rigid)[:n_modes]

@@ -1,0 +1,39 @@
+"""Model discrepancy: candidate physics the nominal model leaves out, and their diagnosis.
+
+Every candidate implements the small interface of :class:`.base.Physics`: its parameters
+with units and priors, and how it changes the plate (a modified ``PlateModel``).
+"""
+
+from .base import Parameter, Physics
+from .elastic_foundation import ElasticFoundation
+from .local_stiffness_loss import LocalStiffnessLoss
+from .ply_misalignment import PlyMisalignment
+from .point_mass import PointMass
+from .thickness_taper import ThicknessTaper
+
+__all__ = [
+    "CANDIDATES",
+    "ElasticFoundation",
+    "LocalStiffnessLoss",
+    "Parameter",
+    "Physics",
+    "PlyMisalignment",
+    "PointMass",
+    "ThicknessTaper",
+    "candidates",
+]
+
+
+def candidates():
+    """One instance of every candidate physics (the taper once per direction)."""
+    return [
+        PointMass(),
+        ThicknessTaper("x"),
+        ThicknessTaper("y"),
+        PlyMisalignment(),
+        ElasticFoundation(),
+        LocalStiffnessLoss(),
+    ]
+
+
+CANDIDATES = tuple(sorted({c.name for c in candidates()}))

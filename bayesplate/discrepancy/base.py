@@ -1,0 +1,87 @@
+"""The one small interface every candidate physics implements.
+
+A candidate is a family of modified plates indexed by a few parameters ``theta`` (in the
+units their names spell). :meth:`Physics.apply` returns the modified
+:class:`~bayesplate.model.PlateModel`; its stiffness stays linear in the six lamina
+coefficients, so the estimators, the posterior and the sampler work on it unchanged.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Parameter", "Physics", "mirror_positions"]
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One parameter of a candidate physics, with its Gaussian prior and hard bounds.
+
+    Attributes
+    ----------
+    name : str
+        Unit in the name (``mass_g``, ``x_mm``), as in the case files.
+    mean, sd : float
+        Gaussian prior, in the parameter's unit.
+    lower, upper : float
+        Bounds of the admissible region (the prior is truncated there).
+    """
+
+    name: str
+    mean: float
+    sd: float
+    lower: float = -np.inf
+    upper: float = np.inf
+
+
+class Physics:
+    """A candidate piece of physics the nominal model leaves out.
+
+    Subclasses set :attr:`name` and :attr:`description` and implement :meth:`parameters`
+    and :meth:`apply`. ``theta`` is always a 1-D array ordered as :meth:`parameters`.
+    """
+
+    name = ""
+    description = ""
+
+    def parameters(self, model, b):
+        """The parameters and their priors: tuple of :class:`Parameter`.
+
+        Priors are scaled to the plate (``model``) and its nominal stiffness coefficients
+        ``b`` (Pa), so that "small" and "large" mean the same on every plate.
+        """
+        raise NotImplementedError
+
+    def apply(self, model, theta):
+        """The plate with this physics at ``theta``: a modified ``PlateModel``."""
+        raise NotImplementedError
+
+    def mirror_images(self, model, theta):
+        """Parameter values that the plate's symmetry makes indistinguishable from ``theta``.
+
+        Default: none. Located effects override this (see :mod:`.point_mass`).
+        """
+        return []
+
+    def labelled(self, model, b, theta):
+        """``{name: value}`` of a parameter vector, for reports and JSON."""
+        names = [p.name for p in self.parameters(model, b)]
+        return {n: float(v) for n, v in zip(names, theta, strict=True)}
+
+
+def mirror_positions(model, x_mm, y_mm):
+    """The mirror images of a point under the symmetries of a rectangular plate (mm).
+
+    A single-material plate whose layup is unchanged by the reflections (0 and 90 degree
+    plies) has the same frequencies for a located effect at ``(x, y)``, ``(a - x, y)``,
+    ``(x, b - y)`` and ``(a - x, b - y)``. Other layups are only symmetric under the
+    half-turn ``(a - x, b - y)``.
+    """
+    a_mm, b_mm = 1e3 * model.mesh.a, 1e3 * model.mesh.b
+    half_turn = [(a_mm - x_mm, b_mm - y_mm)]
+    angles = np.mod(model.layup_deg, 90.0)
+    if np.all(np.isclose(angles, 0.0) | np.isclose(angles, 90.0)):
+        return [(a_mm - x_mm, y_mm), (x_mm, b_mm - y_mm)] + half_turn
+    return half_turn

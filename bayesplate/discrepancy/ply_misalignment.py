@@ -1,0 +1,37 @@
+"""Every ply turned by the same small angle (a laminate cut or laid up off-axis)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .base import Parameter, Physics
+
+__all__ = ["PlyMisalignment"]
+
+
+class PlyMisalignment(Physics):
+    """The layup ``theta_L + delta`` for every ply ``L`` (eqs. 24-25 with rotated plies).
+
+    For a plate whose layup is symmetric under ``y -> -y`` (0 and 90 degree plies), ``delta``
+    and ``-delta`` give the same frequencies: only ``|delta|`` is identified.
+    """
+
+    name = "ply_misalignment"
+    description = "every ply turned by the same angle delta"
+
+    def parameters(self, model, b):
+        """``delta_deg``: prior 0 +- 5 degrees, within +-45 degrees."""
+        return (Parameter("delta_deg", 0.0, 5.0, -45.0, 45.0),)
+
+    def apply(self, model, theta):
+        """The plate with turned plies; ``theta = (delta_deg,)``."""
+        (delta,) = theta
+        terms = model.element_stiffness_terms(angle_offset_deg=delta)
+        return model.modified(stiffness_terms=[model.assembler.data(Ke) for Ke in terms])
+
+    def mirror_images(self, model, theta):
+        """``-delta`` when the layup is mirror-symmetric."""
+        angles = np.mod(model.layup_deg, 90.0)
+        if np.all(np.isclose(angles, 0.0) | np.isclose(angles, 90.0)):
+            return [-np.asarray(theta)]
+        return []

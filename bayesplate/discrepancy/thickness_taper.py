@@ -1,0 +1,47 @@
+"""A plate thicker at one end than at the other, its mean thickness kept."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .base import Parameter, Physics
+
+__all__ = ["ThicknessTaper"]
+
+
+class ThicknessTaper(Physics):
+    """Thickness ``h (1 + e (2 s - 1))`` with ``s`` in [0, 1] along ``direction``.
+
+    The thickness goes from ``h (1 - e)`` to ``h (1 + e)``; every ply scales with it. Each
+    element takes the thickness at its centre (piecewise constant), so the effect is
+    resolved to the mesh.
+
+    Parameters
+    ----------
+    direction : {"x", "y"}
+    """
+
+    name = "thickness_taper"
+    description = "linear thickness taper along x or y, mean thickness kept"
+
+    def __init__(self, direction="x"):
+        if direction not in ("x", "y"):
+            raise ValueError(f"direction = {direction!r}: must be 'x' or 'y'")
+        self.direction = direction
+
+    def parameters(self, model, b):
+        """``ratio`` e: prior 0 +- 0.05, within +-0.5."""
+        return (Parameter("ratio", 0.0, 0.05, -0.5, 0.5),)
+
+    def apply(self, model, theta):
+        """The tapered plate; ``theta = (ratio,)``."""
+        (ratio,) = theta
+        axis, length = (0, model.mesh.a) if self.direction == "x" else (1, model.mesh.b)
+        s = model.mesh.centroids[:, axis] / length
+        scale = 1.0 + ratio * (2.0 * s - 1.0)
+        levels, element_level = np.unique(np.round(scale, 12), return_inverse=True)
+        per_level = np.array([model.element_stiffness_terms(thickness_scale=v) for v in levels])
+        terms = [model.assembler.data(per_level[element_level, j]) for j in range(6)]
+        masses = np.array([model.element_mass(thickness_scale=v) for v in levels])
+        mass = model.assembler.data(masses[element_level])
+        return model.modified(stiffness_terms=terms, mass_data=mass)
