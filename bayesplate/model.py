@@ -199,7 +199,7 @@ class PlateModel:
 
     def stiffness(self, b):
         """Assembled ``K(b) = sum_j b_j K_j`` (+ any extra stiffness; CSR, all unknowns)."""
-        data = np.asarray(b, dtype=float) @ self.stiffness_terms
+        data = sum(bj * term for bj, term in zip(b, self.stiffness_terms, strict=True))
         if self.extra_stiffness_data is not None:
             data = data + self.extra_stiffness_data
         return self.assembler.matrix(data)

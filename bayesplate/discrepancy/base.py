@@ -58,6 +58,18 @@ class Physics:
         """The plate with this physics at ``theta``: a modified ``PlateModel``."""
         raise NotImplementedError
 
+    def starting_points(self, model, b):
+        """Values of ``theta`` to start a fit from, besides the prior mean.
+
+        Default: one prior deviation either side of the mean for a single parameter (effects
+        of either sign, and parameters whose sign the data cannot tell); none otherwise.
+        """
+        params = self.parameters(model, b)
+        if len(params) != 1:
+            return []
+        p = params[0]
+        return [np.array([np.clip(p.mean + s * p.sd, p.lower, p.upper)]) for s in (-1.0, 1.0)]
+
     def mirror_images(self, model, theta):
         """Parameter values that the plate's symmetry makes indistinguishable from ``theta``.
 

@@ -13,7 +13,7 @@ class Assembler:
 
     The pattern and the scatter map are computed once per mesh; every assembly after
     that is one weighted ``bincount``. Matrices that share the pattern can be combined
-    through their ``data`` arrays (see :meth:`combine`).
+    through their ``data`` arrays.
 
     Parameters
     ----------
@@ -81,13 +81,3 @@ class Assembler:
     def assemble(self, element_matrices, factors=None):
         """Assembled CSR matrix; see :meth:`data` for the arguments."""
         return self.matrix(self.data(element_matrices, factors))
-
-    def combine(self, weights, datas):
-        """CSR matrix ``sum_j weights[j] * matrix(datas[j])``.
-
-        Parameters
-        ----------
-        weights : array_like, shape (n_terms,)
-        datas : numpy.ndarray, shape (n_terms, nnz)
-        """
-        return self.matrix(np.asarray(weights, dtype=float) @ np.asarray(datas))
