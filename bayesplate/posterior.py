@@ -1,0 +1,273 @@
+"""The one Gaussian likelihood and prior of the identification problem (paper sections 2, 3.6).
+
+Parameters are the lamina stiffness coefficients ``b = (C11, C22, C12, C66, C44, C55)`` in
+Pa (section 3.6). The data are the measured eigenvalues ``Y = (2 pi f)^2`` (eq. 27) and the
+model is ``Y = g(b) + e`` (eq. 1) with Gaussian errors ``e ~ N(0, V_Y)`` and a Gaussian prior
+``b ~ N(mu_b, V_b)`` (eqs. 3-4).
+
+Observation covariance
+    The deviation of a measured eigenvalue follows from the frequency deviation,
+    ``d lambda = 8 pi^2 f df`` (section 3.6). The paper then prints
+    ``V_Y = diag(d lambda)``: a deviation where a variance belongs, in rad^2/s^2 instead of
+    rad^4/s^4, so its weight relative to the prior changes with the units. ``observation=
+    "variance"`` uses ``diag(d lambda^2)``, the consistent choice; ``observation="deviation"``
+    the printed formula, for comparison.
+
+Prior covariance
+    The prior of the case file is on the engineering constants ``e`` (independent, means
+    ``mu_e`` and deviations ``sd_e``). It is carried to the stiffness coefficients by
+    first-order propagation through eqs. 20-21: ``mu_b = b(mu_e)`` and, with the Jacobian
+    ``J = d b / d e`` at ``mu_e`` (:func:`bayesplate.laminate.stiffness_jacobian`),
+    ``dC_i = sqrt(sum_j J_ij^2 sd_j^2)``. The paper prints ``V_b = diag(dC_ij)``;
+    ``prior="variance"`` uses ``diag(dC^2)`` (the diagonal of the propagated covariance),
+    ``prior="full"`` the full propagated covariance ``J diag(sd_e^2) J^T`` (C11, C22 and C12
+    are correlated through E1, E2, nu12) and ``prior="deviation"`` the printed formula.
+
+Which of these reproduces the paper's Tables 3-8 is settled in ``studies/paper_tables.py``
+and recorded in README.md ("Estimators") and ``reports/estimators_conventions.md``.
+
+The forward model is one callable, ``forward(b) -> ModalResult`` (anything with
+``eigenvalues``, ``sensitivities`` and ``vectors`` for the requested modes), so a faster
+evaluator (a reduced-basis model) can replace the finite-element solve unchanged.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import laminate
+from .pairing import Pairing
+
+__all__ = [
+    "OBSERVATION_CONVENTIONS",
+    "PRIOR_CONVENTIONS",
+    "Prediction",
+    "GaussianProblem",
+    "observed_eigenvalues",
+    "observation_covariance",
+    "prior_in_stiffness",
+]
+
+log = logging.getLogger(__name__)
+
+OBSERVATION_CONVENTIONS = ("variance", "deviation")
+PRIOR_CONVENTIONS = ("variance", "full", "deviation")
+
+
+def observed_eigenvalues(frequency_Hz):
+    """Measured eigenvalues ``Y = (2 pi f)^2`` (eq. 27), rad^2/s^2, shape (m,)."""
+    return (2.0 * np.pi * np.asarray(frequency_Hz, dtype=float)) ** 2
+
+
+def observation_covariance(frequency_Hz, sigma_Hz, convention="variance"):
+    """Covariance ``V_Y`` of the measured eigenvalues (section 3.6).
+
+    Parameters
+    ----------
+    frequency_Hz, sigma_Hz : array_like, shape (m,)
+        Measured frequencies and their standard deviations, Hz.
+    convention : {"variance", "deviation"}
+        ``diag(d lambda^2)`` (consistent) or ``diag(d lambda)`` (as printed in the paper),
+        with ``d lambda = 8 pi^2 f df``.
+
+    Returns
+    -------
+    numpy.ndarray, shape (m, m)
+    """
+    _check(convention, OBSERVATION_CONVENTIONS, "observation")
+    f = np.asarray(frequency_Hz, dtype=float)
+    dlam = 8.0 * np.pi**2 * f * np.asarray(sigma_Hz, dtype=float)
+    return np.diag(dlam**2 if convention == "variance" else dlam)
+
+
+def prior_in_stiffness(mean_e, sd_e, convention="variance"):
+    """Prior mean and covariance of ``b`` from those of ``e`` (first order, eqs. 20-21).
+
+    Parameters
+    ----------
+    mean_e, sd_e : array_like, shape (6,)
+        Prior means and deviations of ``(E1, E2, nu12, G12, G13, G23)``, SI.
+    convention : {"variance", "full", "deviation"}
+        ``diag(dC^2)``, ``J diag(sd_e^2) J^T`` or ``diag(dC)`` (as printed), where
+        ``dC_i = sqrt(sum_j J_ij^2 sd_e_j^2)`` and ``J = d b / d e`` at ``mean_e``.
+
+    Returns
+    -------
+    mu_b : numpy.ndarray, shape (6,)
+        Pa.
+    V_b : numpy.ndarray, shape (6, 6)
+        Pa^2 (Pa for ``"deviation"``).
+    """
+    _check(convention, PRIOR_CONVENTIONS, "prior")
+    mean_e = np.asarray(mean_e, dtype=float)
+    J = laminate.stiffness_jacobian(mean_e)
+    full = J @ np.diag(np.asarray(sd_e, dtype=float) ** 2) @ J.T
+    mu_b = laminate.stiffness_from_engineering(mean_e)
+    if convention == "full":
+        return mu_b, full
+    dC = np.sqrt(np.diag(full))
+    return mu_b, np.diag(dC**2 if convention == "variance" else dC)
+
+
+def _check(value, allowed, what):
+    if value not in allowed:
+        raise ValueError(f"{what} = {value!r}: must be one of {allowed}")
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """Model eigenvalues paired with the measured ones, at one ``b``.
+
+    Attributes
+    ----------
+    g : numpy.ndarray, shape (m,)
+        Paired model eigenvalues, rad^2/s^2.
+    S : numpy.ndarray, shape (m, 6)
+        Sensitivity rows ``d g_i / d b_j`` (eq. 28), rad^2/s^2 per Pa.
+    modal : object
+        The forward result (a :class:`bayesplate.model.ModalResult`).
+    modes : numpy.ndarray of int, shape (m,)
+        0-based computed elastic mode paired with each measured one.
+    """
+
+    g: np.ndarray
+    S: np.ndarray
+    modal: object = field(repr=False)
+    modes: np.ndarray
+
+
+class GaussianProblem:
+    """Gaussian likelihood and prior in the stiffness coefficients ``b``.
+
+    Parameters
+    ----------
+    Y : array_like, shape (m,)
+        Measured eigenvalues, rad^2/s^2.
+    V_Y : array_like, shape (m, m)
+        Their covariance.
+    mu_b : array_like, shape (6,)
+        Prior mean of ``b``, Pa.
+    V_b : array_like, shape (6, 6)
+        Prior covariance of ``b``.
+    forward : callable
+        ``forward(b, n_modes) -> ModalResult``; e.g. ``PlateModel.solve``.
+    pairing : Pairing
+        Which computed mode goes with which measured one.
+
+    Attributes
+    ----------
+    n_solves : int
+        Forward evaluations made so far.
+    """
+
+    def __init__(self, Y, V_Y, mu_b, V_b, forward: Callable, pairing: Pairing):
+        self.Y = np.asarray(Y, dtype=float)
+        self.V_Y = np.asarray(V_Y, dtype=float)
+        self.mu_b = np.asarray(mu_b, dtype=float)
+        self.V_b = np.asarray(V_b, dtype=float)
+        self.forward = forward
+        self.pairing = pairing
+        self.n_solves = 0
+        self._VY_inv = np.linalg.inv(self.V_Y)
+        self._Vb_inv = np.linalg.inv(self.V_b)
+        # normalising constants of eqs. 3 and 4
+        self._norm_Y = np.linalg.slogdet(self.V_Y)[1] + self.Y.size * np.log(2 * np.pi)
+        self._norm_b = np.linalg.slogdet(self.V_b)[1] + self.mu_b.size * np.log(2 * np.pi)
+
+    @classmethod
+    def from_case(
+        cls,
+        case,
+        model,
+        pairing=None,
+        observation="variance",
+        prior="variance",
+        prior_mean=None,
+        prior_sd=None,
+    ):
+        """The problem of a case file on a forward model.
+
+        Parameters
+        ----------
+        case : bayesplate.case.Case
+        model : object
+            Has ``solve(b, n_modes)`` (a :class:`bayesplate.model.PlateModel`).
+        pairing : Pairing, optional
+            Default: by order, or by the case's ``measured.mode`` indices when given.
+        observation, prior : str
+            Conventions for ``V_Y`` and ``V_b`` (see the module docstring).
+        prior_mean, prior_sd : array_like, shape (6,), optional
+            Engineering prior (SI) replacing the case's.
+
+        Returns
+        -------
+        GaussianProblem
+        """
+        measured = case.measured
+        pairing = pairing or Pairing.from_measurement(measured)
+        mean_e = case.prior.mean if prior_mean is None else prior_mean
+        sd_e = case.prior.sd if prior_sd is None else prior_sd
+        mu_b, V_b = prior_in_stiffness(mean_e, sd_e, prior)
+        Y = observed_eigenvalues(measured.frequency_Hz)
+        V_Y = observation_covariance(measured.frequency_Hz, measured.sigma_Hz, observation)
+        return cls(Y, V_Y, mu_b, V_b, model.solve, pairing)
+
+    @property
+    def m(self):
+        """Number of measured eigenvalues."""
+        return self.Y.size
+
+    def with_prior(self, mu_b, V_b):
+        """The same data and forward model with another prior on ``b``."""
+        return type(self)(self.Y, self.V_Y, mu_b, V_b, self.forward, self.pairing)
+
+    def predict(self, b, modes=None):
+        """Paired model eigenvalues and sensitivities at ``b``.
+
+        Parameters
+        ----------
+        b : array_like, shape (6,)
+            Pa.
+        modes : array_like of int, shape (m,), optional
+            0-based computed modes to pair (e.g. as tracked); default the pairing's own.
+
+        Returns
+        -------
+        Prediction
+        """
+        modes = self.pairing.modes if modes is None else np.asarray(modes)
+        modal = self.forward(np.asarray(b, dtype=float), self.pairing.n_modes(modes))
+        self.n_solves += 1
+        return Prediction(modal.eigenvalues[modes], modal.sensitivities[modes], modal, modes)
+
+    def log_likelihood(self, b, prediction=None):
+        """``ln f(Y | b)`` of eq. 3, with its normalising constant."""
+        prediction = prediction or self.predict(b)
+        r = self.Y - prediction.g
+        return -0.5 * (r @ self._VY_inv @ r + self._norm_Y)
+
+    def log_prior(self, b):
+        """``ln f(b)`` of eq. 4, with its normalising constant; -inf outside the lamina."""
+        b = np.asarray(b, dtype=float)
+        if not laminate.is_physical(b):
+            return -np.inf
+        d = b - self.mu_b
+        return -0.5 * (d @ self._Vb_inv @ d + self._norm_b)
+
+    def log_posterior(self, b):
+        """``ln f(b | Y)`` up to ``ln f(Y)`` (eq. 2); -inf outside the physical region."""
+        lp = self.log_prior(b)
+        if not np.isfinite(lp):
+            return -np.inf
+        return lp + self.log_likelihood(b)
+
+    def objective(self, b, prediction=None):
+        """``S_B`` of eq. 5: ``(Y - g)^T V_Y^-1 (Y - g) + (b - mu)^T V_b^-1 (b - mu)``."""
+        prediction = prediction or self.predict(b)
+        r = self.Y - prediction.g
+        d = np.asarray(b, dtype=float) - self.mu_b
+        return float(r @ self._VY_inv @ r + d @ self._Vb_inv @ d)
