@@ -1,0 +1,318 @@
+"""The paper's estimators B, MVE and MVE-mod against closed forms and the paper's tables."""
+
+import json
+import sys
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from bayesplate import laminate
+from bayesplate.case import bundled_case_path, load_case
+from bayesplate.cli import main as cli_main
+from bayesplate.estimators import CONVENTIONS, b_step, estimate, mve_step, run
+from bayesplate.model import PlateModel
+from bayesplate.pairing import Pairing
+from bayesplate.posterior import GaussianProblem, prior_in_stiffness
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+PAPER = tomllib.loads(
+    (bundled_case_path("plate1").parents[1] / "paper" / "results.toml").read_text()
+)
+SI = np.array([1e9, 1e9, 1.0, 1e9, 1e9, 1e9])
+FRACTION = {"1/2": 1 / 2, "1/3": 1 / 3, "1/6": 1 / 6, "1/10": 1 / 10}
+TARGET1 = np.array(PAPER["plate1"]["target"]["constants"]) * SI
+IN_PLANE = [0, 1, 3]  # E1, E2, G12: the constants the frequencies determine well (sec. 4.1)
+
+
+@pytest.fixture(scope="module")
+def plate1():
+    case = load_case(bundled_case_path("plate1"))
+    return case, PlateModel.from_case(case)
+
+
+def _paper_run(plate1, test, method, d, **kwargs):
+    case, model = plate1
+    initial = np.array(PAPER["plate1"][test]["initial"]) * SI
+    sd = FRACTION[d] * initial
+    return estimate(case, method, model=model, prior_mean=initial, prior_sd=sd, **kwargs)
+
+
+# ----------------------------------------------------------------------------- closed forms
+
+
+def test_section_2_3_one_b_step_with_mu_at_the_iterate_is_one_mve_step(plate1):
+    # Section 2.3 (matrix inversion lemma, eq. 13): eq. 9 with mu = b^k is eq. 12, and P^k
+    # equals the updated covariance. Only rounding separates them: 1e-9 relative is far
+    # above double-precision solves of 6x6 / 14x14 systems and far below any real difference.
+    case, model = plate1
+    problem = GaussianProblem.from_case(case, model)
+    b = laminate.stiffness_from_engineering(np.array([180e9, 12e9, 0.2, 2e9, 2e9, 4e9]))
+    p = problem.predict(b)
+    b_B, P = b_step(b, b, p.g, p.S, problem.Y, problem.V_Y, problem.V_b)
+    b_MVE, V_next = mve_step(b, p.g, p.S, problem.Y, problem.V_Y, problem.V_b)
+    np.testing.assert_allclose(b_B, b_MVE, rtol=1e-9)
+    np.testing.assert_allclose(P, V_next, rtol=1e-7, atol=1e-9 * np.max(np.abs(P)))
+    assert np.max(np.abs(b_B - b) / b) > 0.01  # the step is not trivially zero
+
+
+@dataclass
+class _Linear:
+    b: np.ndarray
+    eigenvalues: np.ndarray
+    sensitivities: np.ndarray
+    vectors: np.ndarray
+
+
+def _linear_problem(A, Y, V_Y, mu, V_b, S=None):
+    """g(b) = A b, with sensitivities S (default the true A)."""
+    S = A if S is None else S
+
+    def forward(b, n_modes):
+        return _Linear(b, A @ b, S, np.eye(len(A)))
+
+    return GaussianProblem(Y, V_Y, mu, V_b, forward, Pairing(np.arange(len(A)), extra=0))
+
+
+def _linear_case(rng, m=10):
+    e0 = np.array([150e9, 10e9, 0.25, 3e9, 3e9, 2e9])
+    mu, V_b = prior_in_stiffness(e0, e0 / 6, "full")
+    A = rng.uniform(0.2, 2.0, size=(m, 6)) * 1e7 / mu[None, :]
+    b_true = mu * rng.uniform(0.85, 1.15, 6)
+    V_Y = np.diag((0.01 * A @ b_true) ** 2)
+    return A, b_true, V_Y, mu, V_b
+
+
+def test_b_on_a_linear_problem_gives_the_exact_gaussian_posterior(rng):
+    # For g(b) = A b the posterior is Gaussian with covariance P = (A^T V_Y^-1 A + V_b^-1)^-1
+    # and mean P (A^T V_Y^-1 Y + V_b^-1 mu) (closed form). One step of eq. 9 lands on it;
+    # 1e-8 relative allows for the inversions of matrices spanning ~1e20 in scale.
+    A, b_true, V_Y, mu, V_b = _linear_case(rng)
+    Y = A @ b_true + rng.normal(0, np.sqrt(np.diag(V_Y)))
+    W = np.linalg.inv(V_Y)
+    P = np.linalg.inv(A.T @ W @ A + np.linalg.inv(V_b))
+    mean = P @ (A.T @ W @ Y + np.linalg.solve(V_b, mu))
+    result = run(_linear_problem(A, Y, V_Y, mu, V_b), "B", tol=1e-10)
+    assert result.converged and result.iterations <= 3
+    np.testing.assert_allclose(result.b, mean, rtol=1e-8)
+    np.testing.assert_allclose(result.covariance_b, P, rtol=1e-6, atol=1e-8 * np.max(P))
+
+
+def test_mve_on_noise_free_linear_data_reaches_the_truth_and_b_is_biased(rng):
+    # Section 4.3: MVE forgets the prior mean (its fixed point has S^T (S V S^T + V_Y)^-1
+    # (Y - g) = 0, i.e. Y = A b for exact data), B keeps a bias towards it.
+    A, b_true, V_Y, mu, V_b = _linear_case(rng)
+    problem = _linear_problem(A, A @ b_true, V_Y, mu, V_b)
+    mve = run(problem, "MVE", tol=1e-10, max_iter=2000)
+    bayes = run(problem, "B", tol=1e-10)
+    assert mve.converged
+    # the stopping rule leaves an error of the order of the last step (1e-10) over the
+    # contraction margin; 1e-6 is a generous bound
+    np.testing.assert_allclose(mve.b, b_true, rtol=1e-6)
+    assert np.max(np.abs(bayes.b - b_true) / b_true) > 1e-3
+
+
+def test_oscillation_is_detected_and_reported(rng):
+    # Sensitivities half the true ones make each (nearly undamped) MVE step twice too long:
+    # b^{k+1} - b* = -(b^k - b*), an exact period-2 cycle.
+    A, b_true, _, mu, V_b = _linear_case(rng, m=6)
+    b_star = mu * 1.02
+    V_Y = np.diag((1e-9 * A @ b_star) ** 2)
+    problem = _linear_problem(A, A @ b_star, V_Y, mu, V_b, S=A / 2)
+    result = run(problem, "MVE", max_iter=100)
+    assert not result.converged
+    assert "oscillating" in result.message and "period 2" in result.message
+    assert result.iterations < 30
+
+
+def test_iteration_cap_and_failed_solves_end_the_run_without_raising(plate1, rng):
+    capped = _paper_run(plate1, "test1", "MVE", "1/6", max_iter=3)
+    assert not capped.converged and capped.iterations == 3
+    assert "iteration cap" in capped.message
+
+    A, b_true, V_Y, mu, V_b = _linear_case(rng)
+    calls = []
+
+    def failing(b, n_modes):
+        calls.append(1)
+        if len(calls) > 1:
+            raise RuntimeError("ARPACK did not converge")
+        return _Linear(b, A @ b, A, np.eye(len(A)))
+
+    problem = GaussianProblem(
+        A @ b_true, V_Y, mu, V_b, failing, Pairing(np.arange(len(A)), extra=0)
+    )
+    result = run(problem, "MVE")
+    assert not result.converged and "forward solve failed at iteration 1" in result.message
+
+    def broken(b, n_modes):
+        raise RuntimeError("no factorisation")
+
+    problem = GaussianProblem(A @ b_true, V_Y, mu, V_b, broken, Pairing(np.arange(len(A)), extra=0))
+    result = run(problem, "B")
+    assert not result.converged and "forward solve failed" in result.message
+
+
+def test_engineering_covariance_is_the_first_order_image(plate1):
+    # cov_e = (de/db) cov_b (de/db)^T with de/db by central differences of eqs. 20-21
+    # (independent of stiffness_jacobian); 1e-5 is the finite-difference error.
+    result = _paper_run(plate1, "test2", "B", "1/3")
+    b = result.b
+    D = np.empty((6, 6))
+    for j in range(6):
+        h = np.zeros(6)
+        h[j] = 1e-6 * b[j]
+        D[:, j] = (
+            laminate.engineering_from_stiffness(b + h) - laminate.engineering_from_stiffness(b - h)
+        ) / (2 * h[j])
+    np.testing.assert_allclose(
+        result.covariance, D @ result.covariance_b @ D.T, rtol=1e-5, atol=1e-12
+    )
+    np.testing.assert_allclose(result.sd, np.sqrt(np.diag(result.covariance)))
+
+
+# ----------------------------------------------------------------------------- the paper
+
+
+@pytest.mark.parametrize("test", ["test2", "test3"])
+def test_b_bias_grows_as_the_deviation_shrinks(plate1, test):
+    # Section 4.3 on Tables 4 and 5: B's E1 lies between the initial value and the target
+    # and moves towards the initial value as d shrinks.
+    initial = PAPER["plate1"][test]["initial"][0] * 1e9
+    runs = [_paper_run(plate1, test, "B", d) for d in ("1/3", "1/6", "1/10")]
+    assert all(r.converged for r in runs)
+    e1 = np.array([r.constants[0] for r in runs])
+    low, high = sorted([initial, TARGET1[0]])
+    assert np.all((e1 > low) & (e1 < high))
+    distance = np.abs(e1 - initial)
+    assert distance[0] > distance[1] > distance[2]
+    # and the values themselves: the paper prints 4 figures (<= 0.04 %), our frequencies
+    # differ from the paper's by <= 0.003 %, so 0.2 % on E1 bounds rounding plus model
+    paper = [PAPER["plate1"][test]["B"][d][0] * 1e9 for d in ("1/3", "1/6", "1/10")]
+    np.testing.assert_allclose(e1, paper, rtol=2e-3)
+    assert [r.iterations for r in runs] == [
+        PAPER["plate1"][test]["B"][d][6] for d in ("1/3", "1/6", "1/10")
+    ]
+
+
+_CONVERGED_MVE = [
+    (test, d)
+    for test in ("test1", "test2", "test3")
+    for d in ("1/3", "1/6", "1/10")
+    if not isinstance(PAPER["plate1"][test]["MVE"][d], str)
+]
+
+
+@pytest.mark.parametrize("test, d", _CONVERGED_MVE)
+def test_mve_reaches_the_target_where_the_paper_does(plate1, test, d):
+    # Issue 3: E1, E2, G12 within 0.5 % of the target (the paper's own rows are within
+    # 0.2 %; TOL = 1e-3 on the step leaves errors of that order on slow directions).
+    result = _paper_run(plate1, test, "MVE", d)
+    assert result.converged, result.message
+    np.testing.assert_allclose(result.constants[IN_PLANE], TARGET1[IN_PLANE], rtol=5e-3)
+
+
+_MVE_MOD = [
+    (test, row["d1"], row["d2"])
+    for test in ("test1", "test2", "test3")
+    for row in PAPER["plate1"][test]["MVE_mod"]
+]
+
+
+@pytest.mark.parametrize("test, d1, d2", _MVE_MOD)
+def test_mve_mod_reaches_the_target_where_the_paper_does(plate1, test, d1, d2):
+    # Tables 9-11: every MVE-mod run on Plate 1 reaches the target; same 0.5 % as above.
+    factor = FRACTION[d2] / FRACTION[d1]
+    result = _paper_run(plate1, test, "MVE-mod", d1, stage2_factor=factor)
+    assert result.converged, result.message
+    assert len(result.stages) == 2
+    np.testing.assert_allclose(result.constants[IN_PLANE], TARGET1[IN_PLANE], rtol=5e-3)
+    stage1, stage2 = result.stages
+    assert stage1.settings["tol"] == 1e-2 and stage2.settings["tol"] == 1e-3
+    np.testing.assert_allclose(stage2.settings["prior_mean"], stage1.constants)
+    initial = np.array(PAPER["plate1"][test]["initial"]) * SI
+    np.testing.assert_allclose(stage2.settings["prior_sd"], FRACTION[d2] * initial)
+
+
+@pytest.mark.parametrize("method", ["B", "MVE", "MVE-mod"])
+def test_the_papers_diverging_run_ends_unconverged_with_a_message(plate1, method):
+    # Table 3 (and 9): test 1 on Plate 1 with d = 1/3 does not converge.
+    result = _paper_run(plate1, "test1", method, "1/3")
+    assert not result.converged
+    assert "physical region" in result.message
+
+
+def test_mve_mod_on_a_case_file_doubles_the_deviations(plate1):
+    # Section 6: stage-2 deviations are twice stage 1's (the case prior).
+    case, model = plate1
+    result = estimate(
+        case.with_prior(case.prior.mean * 1.0, case.prior.sd), "MVE-mod", model=model, max_iter=3
+    )
+    if result.stages[0].converged:  # pragma: no cover - three iterations cannot meet TOL
+        pytest.fail("stage 1 should hit its cap")
+    assert "stage 1 did not converge" in result.message
+    case2 = case.with_prior(TARGET1 * 1.05, TARGET1 / 20)
+    result = estimate(case2, "MVE-mod", model=model)
+    assert result.converged
+    np.testing.assert_allclose(result.stages[1].settings["prior_sd"], 2 * TARGET1 / 20)
+
+
+def test_conventions_are_named_and_checked(plate1):
+    assert set(CONVENTIONS) >= {"paper", "full-prior", "printed"}
+    case, model = plate1
+    with pytest.raises(ValueError, match="convention"):
+        estimate(case, "MVE", model=model, convention="nope")
+    with pytest.raises(ValueError, match="method"):
+        estimate(case, "LS", model=model)
+
+
+# ----------------------------------------------------------------------------- command line
+
+
+def test_cli_estimate_json(capsys):
+    status = cli_main(["estimate", "plate1", "--method", "B", "--json", "-", "-q"])
+    out = json.loads(capsys.readouterr().out)
+    assert status == 0
+    for key in (
+        "method",
+        "converged",
+        "iterations",
+        "message",
+        "n_solves",
+        "constants",
+        "frequency_Hz",
+        "measured_Hz",
+    ):
+        assert key in out
+    assert set(out["constants"]) == {"E1_GPa", "E2_GPa", "nu12", "G12_GPa", "G13_GPa", "G23_GPa"}
+    assert set(out["constants"]["E1_GPa"]) == {"mean", "sd"}
+    # plate1.toml carries test 1 at d = 1/6: Table 3 prints B = 145.0 GPa after 15 iterations
+    assert out["constants"]["E1_GPa"]["mean"] == pytest.approx(145.0, rel=2e-3)
+    assert out["iterations"] == 15 and out["converged"] is True
+
+
+def test_cli_estimate_table_and_exit_status(capsys):
+    status = cli_main(["estimate", "plate1", "--method", "MVE", "--max-iter", "2", "-q"])
+    text = capsys.readouterr().out
+    assert status == 1  # not converged
+    assert "NOT converged" in text and "iteration cap" in text
+    assert "E1_GPa" in text and "diff_%" in text
+
+
+# ----------------------------------------------------------------------------- slow
+
+
+@pytest.mark.slow
+def test_frederiksen_mve_matches_the_paper():
+    # Table 23 (50 x 50 mesh): issue 3 asks for 2 % on E1, E2, G12 and 10 % on the weakly
+    # determined nu12, G13, G23.
+    case = load_case(bundled_case_path("frederiksen_t300"))
+    result = estimate(case, "MVE")
+    assert result.converged, result.message
+    paper = np.array(PAPER["frederiksen"]["MVE"]) * SI
+    np.testing.assert_allclose(result.constants[IN_PLANE], paper[IN_PLANE], rtol=0.02)
+    np.testing.assert_allclose(result.constants[[2, 4, 5]], paper[[2, 4, 5]], rtol=0.10)
