@@ -10,7 +10,7 @@ import tempfile
 
 import numpy as np
 
-__all__ = ["atomic_write_text", "write_json"]
+__all__ = ["atomic_write_text", "constants_json", "write_json"]
 
 
 def atomic_write_text(path, text):
@@ -28,6 +28,29 @@ def atomic_write_text(path, text):
     except BaseException:
         pathlib.Path(tmp).unlink(missing_ok=True)
         raise
+
+
+_CONSTANT_KEYS = ("E1_GPa", "E2_GPa", "nu12", "G12_GPa", "G13_GPa", "G23_GPa")
+_TO_CASE_UNITS = np.array([1e-9, 1e-9, 1.0, 1e-9, 1e-9, 1e-9])
+
+
+def constants_json(mean, sd=None, **extra):
+    """Engineering constants in case-file units: ``{"E1_GPa": {"mean", "sd", ...}, ...}``.
+
+    Parameters
+    ----------
+    mean, sd : array_like, shape (6,)
+        SI values (Pa, dimensionless nu12); ``sd`` may be None.
+    **extra : array_like, shape (6,)
+        Further SI fields per constant (e.g. ``hdi_3%``).
+    """
+    fields = {"mean": mean, "sd": sd, **extra}
+    scaled = {k: None if v is None else np.asarray(v, dtype=float) * _TO_CASE_UNITS
+              for k, v in fields.items()}  # fmt: skip
+    return {
+        key: {k: None if v is None else float(v[i]) for k, v in scaled.items()}
+        for i, key in enumerate(_CONSTANT_KEYS)
+    }
 
 
 def _jsonable(value):

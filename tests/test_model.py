@@ -138,3 +138,11 @@ def test_interpolation_reproduces_nodal_values():
 def test_bad_boundary_is_refused():
     with pytest.raises(ValueError, match="boundary"):
         _model(boundary="clamped")
+
+
+def test_same_inputs_give_the_same_numbers():
+    # the Lanczos start vector is fixed: no hidden randomness in the forward model
+    m = _model()
+    a, b = m.solve(B_REF, 8), m.solve(B_REF, 8)
+    assert np.array_equal(a.eigenvalues, b.eigenvalues)
+    assert np.array_equal(a.sensitivities, b.sensitivities)
