@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import pathlib
 import sys
 
 from . import case as case_module
@@ -173,6 +174,94 @@ def _register_import(sub):
 
 
 _EXTRA_COMMANDS.append(_register_import)
+
+
+def _cmd_diagnose(args):
+    from .discrepancy.diagnose import diagnose, diagnosis_to_dict
+
+    case = _resolve_case(args.case)
+    mesh = tuple(args.mesh) if args.mesh else None
+    model = PlateModel.from_case(case, mesh=mesh)
+    quiet = args.json == "-"
+    d = diagnose(
+        case,
+        model=model,
+        rng=args.seed,
+        progress=None if quiet else (lambda msg: print(f"  {msg}", flush=True)),
+    )
+    if args.plots:
+        from .plots import diagnosis_figures
+
+        for name, fig in diagnosis_figures(model, d).items():
+            _save_figure(fig, pathlib.Path(args.plots) / f"{name}.png")
+    if args.json:
+        write_json(diagnosis_to_dict(d), args.json)
+    if not quiet:
+        print(_diagnosis_text(d))
+    return 0
+
+
+def _save_figure(fig, path):
+    """Write a figure whole or not at all (temporary file, then rename)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp.png")
+    fig.savefig(tmp, dpi=120, bbox_inches="tight")
+    tmp.replace(path)
+
+
+def _diagnosis_text(d):
+    """Human-readable summary of a diagnosis."""
+    lines = [
+        f"verdict: {d.verdict}" + (f" ({d.chosen.name})" if d.chosen else ""),
+        f"nominal fit: chi2 = {d.nominal.chi2:.1f} on {d.dof:.1f} dof, p = {d.p_value:.3g}",
+    ]
+    if d.located_modes:
+        kinds = ", ".join(f"{i} ({d.mode_kinds[i - 1]})" for i in d.located_modes)
+        lines.append(f"misfit carried by modes {kinds}")
+    if d.region_mm is not None:
+        lines.append(f"located near x = {d.region_mm[0]:.0f} mm, y = {d.region_mm[1]:.0f} mm")
+    lines.append("candidates (evidence gain over the nominal model, nats):")
+    for c in d.candidates:
+        params = ", ".join(
+            f"{k} = {v:.4g}" if isinstance(v, float) else f"{k} = {v}"
+            for k, v in c.parameters.items()
+        )
+        lines.append(f"  {c.name:22s} {c.log_evidence_gain:+8.1f}   {params}")
+    if d.chosen is not None:
+        lines.append(
+            f"refit: chi2 = {d.chosen.fit.chi2:.1f} on {d.refit_dof:.1f} dof, "
+            f"p = {d.refit_p_value:.3g}"
+        )
+    if d.unidentified:
+        lines.append("unidentified by the data (prior dominates): " + ", ".join(d.unidentified))
+    lines += [f"note: {n}" for n in d.notes]
+    return "\n".join(lines)
+
+
+def _register_diagnose(sub):
+    p = sub.add_parser(
+        "diagnose",
+        help="locate a model-data mismatch, name the missing physics, refit",
+        description="Fit the nominal model, test it (chi-square), locate the misfit, rank "
+        "candidate physics (point_mass, thickness_taper, ply_misalignment, "
+        "elastic_foundation, local_stiffness_loss) by Laplace evidence, refit, and give a "
+        "verdict: consistent, explained or unexplained.",
+    )
+    p.add_argument("case", help="case file (TOML) or the name of a bundled case")
+    p.add_argument(
+        "--mesh",
+        type=int,
+        nargs=2,
+        metavar=("NX", "NY"),
+        help="elements along x and y (default: the case's [model] mesh)",
+    )
+    p.add_argument("--seed", type=int, default=0, help="seed of the random fit starts")
+    p.add_argument("--json", metavar="FILE", help="write results as JSON ('-' for stdout)")
+    p.add_argument("--plots", metavar="DIR", help="write figures (PNG) into DIR")
+    p.set_defaults(func=_cmd_diagnose)
+
+
+_EXTRA_COMMANDS.append(_register_diagnose)
 
 
 _GPA_SCALE = (1e9, 1e9, 1.0, 1e9, 1e9, 1e9)  # SI -> case units (GPa, -)

@@ -92,8 +92,13 @@ def mirror_positions(model, x_mm, y_mm):
     half-turn ``(a - x, b - y)``.
     """
     a_mm, b_mm = 1e3 * model.mesh.a, 1e3 * model.mesh.b
-    half_turn = [(a_mm - x_mm, b_mm - y_mm)]
+    images = [(a_mm - x_mm, b_mm - y_mm)]
     angles = np.mod(model.layup_deg, 90.0)
     if np.all(np.isclose(angles, 0.0) | np.isclose(angles, 90.0)):
-        return [(a_mm - x_mm, y_mm), (x_mm, b_mm - y_mm)] + half_turn
-    return half_turn
+        images = [(a_mm - x_mm, y_mm), (x_mm, b_mm - y_mm)] + images
+    tol = 1e-6 * max(a_mm, b_mm)
+    distinct = []
+    for p in images:  # a point on a line of symmetry is its own mirror image
+        if all(np.hypot(p[0] - q[0], p[1] - q[1]) > tol for q in [(x_mm, y_mm), *distinct]):
+            distinct.append(p)
+    return distinct

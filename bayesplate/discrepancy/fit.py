@@ -19,6 +19,7 @@ volume is its prior volume, which is the right Occam penalty.
 
 from __future__ import annotations
 
+import copy
 import logging
 from dataclasses import dataclass, field
 
@@ -65,6 +66,10 @@ class JointFit:
         Eigen solves used.
     success : bool
     message : str
+    modal : ModalResult
+        The forward solution at the best fit.
+    refined : bool
+        False when the fit stayed on a corrected coarse mesh (see :func:`fit`).
     """
 
     physics: object
@@ -81,6 +86,7 @@ class JointFit:
     success: bool
     message: str
     modal: object = field(repr=False, default=None)
+    refined: bool = True
 
     @property
     def constants(self):
@@ -139,7 +145,19 @@ class JointProblem:
         self.theta_lower = np.array([p.lower for p in params])
         self.theta_upper = np.array([p.upper for p in params])
         self.n_solves = 0
+        self.scale = None
         self._cache = {}
+
+    def on(self, model, scale=None):
+        """The same problem on another mesh of the same plate (same unknowns ``z``).
+
+        ``scale`` (m,) multiplies the predicted eigenvalues: the fine-to-coarse ratio at a
+        reference point corrects most of a coarse mesh's discretisation error.
+        """
+        other = copy.copy(self)
+        other.model, other.n_solves, other._cache = model, 0, {}
+        other.scale = None if scale is None else np.asarray(scale, dtype=float)
+        return other
 
     @property
     def k(self):
@@ -191,6 +209,8 @@ class JointProblem:
         J[:, :6] = modal.sensitivities[self.modes] @ self.L
         for i in range(self.k):
             J[:, 6 + i] = self.theta_sd[i] * self._theta_derivative(theta, i, b, lam, vectors)
+        if self.scale is not None:
+            lam, J = lam * self.scale, J * self.scale[:, None]
         return lam, J, modal
 
     def _theta_derivative(self, theta, i, b, lam, vectors):
@@ -228,7 +248,7 @@ class JointProblem:
         return float(np.sum(np.log(hi - lo)))
 
 
-def fit(problem, starts, max_nfev=40):
+def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None):
     """Best joint fit over several starts, with its Laplace evidence.
 
     Parameters
@@ -238,11 +258,30 @@ def fit(problem, starts, max_nfev=40):
         Whitened starting points (see :meth:`JointProblem.pack`).
     max_nfev : int
         Evaluation cap of each local fit.
+    coarse : PlateModel, optional
+        A cheaper mesh of the same plate: every start is fitted there, and only the best
+        result is refined on ``problem``'s own mesh.
+    scale : numpy.ndarray, shape (m,), optional
+        Correction of the coarse mesh's eigenvalues (see :meth:`JointProblem.on`).
+    refine : callable, optional
+        ``refine(coarse_fit) -> bool``: whether to refine on the fine mesh; a fit that is not
+        refined is returned as fitted on the (corrected) coarse mesh, ``refined`` False.
 
     Returns
     -------
     JointFit
     """
+    if coarse is None:
+        return _summarise(problem, _best_start(problem, starts, max_nfev))
+    rough_problem = problem.on(coarse, scale)
+    rough = _best_start(rough_problem, starts, max_nfev)
+    if refine is not None and not refine(_summarise(rough_problem, rough, refined=False)):
+        return _summarise(rough_problem, rough, refined=False)
+    return _summarise(problem, _best_start(problem, [rough.x], max_nfev))
+
+
+def _best_start(problem, starts, max_nfev):
+    """The least-squares result with the lowest cost over ``starts``."""
     lo, hi = problem.bounds()
     best = None
     for z0 in starts:
@@ -265,7 +304,7 @@ def fit(problem, starts, max_nfev=40):
         )
         if best is None or res.cost < best.cost:
             best = res
-    return _summarise(problem, best)
+    return best
 
 
 def _log_mass_inside(z, sd, lo, hi):
@@ -283,7 +322,7 @@ def _name(problem):
     return "nominal" if problem.physics is None else problem.physics.name
 
 
-def _summarise(problem, res):
+def _summarise(problem, res, refined=True):
     """The :class:`JointFit` of the best least-squares result."""
     z = res.x
     out = problem.evaluate(z)
@@ -303,6 +342,7 @@ def _summarise(problem, res):
             problem.n_solves,
             False,
             "the fit left the physical region",
+            refined=refined,
         )
     lam, Jg, modal = out
     Jd = Jg / problem.sigma[:, None]
@@ -337,4 +377,5 @@ def _summarise(problem, res):
         bool(res.success),
         str(res.message),
         modal,
+        refined,
     )

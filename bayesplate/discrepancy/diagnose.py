@@ -1,0 +1,420 @@
+"""Diagnose a mismatch between the model and the recordings.
+
+1. Fit the nominal model globally (several starts) and check it: chi-square of the
+   standardised residuals against ``m - p_eff`` degrees of freedom (``p_eff``: parameters
+   the data fix), and a predictive check per mode.
+2. Locate: which modes carry the misfit, what kind of modes they are, and where on the plate
+   a local change would explain the residuals (after the constants took their share).
+3. Name: fit every candidate physics jointly with the constants and rank the candidates by
+   their Laplace evidence gain over the nominal model (what the constants cannot absorb).
+4. Model: the chosen candidate's joint fit is the refit, with its Laplace posterior.
+5. Verdict: ``consistent``, ``explained`` or ``unexplained``.
+
+Before any of it, the mesh's own error on every frequency is estimated by Richardson
+extrapolation (the element converges as h^2) and reported beside the measurement deviation;
+where it is not well under it, it is added to the deviation in quadrature and the report says
+so, so that discretisation is never blamed on physics.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.stats import chi2 as chi2_dist
+from scipy.stats import norm
+
+from .. import laminate
+from ..model import PlateModel
+from ..posterior import observed_eigenvalues, prior_in_stiffness
+from . import candidates as all_candidates
+from .fit import JointFit, JointProblem, fit
+from .locate import (
+    absorbable_projector,
+    mode_kinds,
+    point_mass_map,
+    stiffness_loss_map,
+)
+
+__all__ = [
+    "CandidateResult",
+    "DEFAULTS",
+    "Diagnosis",
+    "coarse_model",
+    "diagnose",
+    "diagnosis_to_dict",
+    "mesh_error",
+]
+
+log = logging.getLogger(__name__)
+
+DEFAULTS = {
+    "alpha": 0.01,  # significance of the chi-square test
+    "evidence_threshold": 3.0,  # nats (about 20:1): a candidate must gain this much
+    "n_starts": 4,  # random starts of the nominal fit, besides the prior mean
+    "unidentified_ratio": 0.7,  # posterior sd / prior sd above which a constant is unidentified
+    "mesh_error_ratio": 0.3,  # mesh error / sigma above which sigma is inflated
+    "refine_margin": 1.0,  # nats: candidates below this on the coarse mesh are not refined
+}
+
+
+@dataclass(frozen=True)
+class CandidateResult:
+    """One candidate physics fitted jointly with the constants.
+
+    Attributes
+    ----------
+    name : str
+    fit : JointFit
+    log_evidence_gain : float
+        ``ln Z(candidate) - ln Z(nominal)``, nats.
+    parameters : dict
+        ``{name: value}`` in the parameters' units (plus ``direction`` for a taper).
+    parameters_sd : dict
+    mirror_images : list of dict
+        Parameter values that fit equally by the plate's symmetry.
+    """
+
+    name: str
+    fit: JointFit = field(repr=False)
+    log_evidence_gain: float
+    parameters: dict
+    parameters_sd: dict
+    mirror_images: list
+
+
+@dataclass(frozen=True)
+class Diagnosis:
+    """What :func:`diagnose` found; see the module docstring for the steps.
+
+    Attributes
+    ----------
+    verdict : {"consistent", "explained", "unexplained"}
+    nominal : JointFit
+    dof : float
+        Degrees of freedom of the nominal chi-square.
+    p_value : float
+    mode_p_values : numpy.ndarray, shape (m,)
+        Predictive two-sided p-value of each measured frequency under the nominal fit.
+    located_modes : list of int
+        1-based measured modes whose standardised residual exceeds 2.
+    mode_kinds : list of str
+    maps : dict of LocationMap
+        ``"stiffness_loss"`` and ``"point_mass"``.
+    region_mm : tuple or None
+        Best location of a local change, mm; ``region_mirrors_mm`` fit equally.
+    candidates : list of CandidateResult
+        Best first.
+    chosen : CandidateResult or None
+    refit_dof, refit_p_value : float
+    unidentified : list of str
+        Constants the data do not inform (nominal fit, and refit when there is one).
+    sigma_Hz, mesh_error_Hz : numpy.ndarray, shape (m,)
+    notes : list of str
+    """
+
+    verdict: str
+    nominal: JointFit = field(repr=False)
+    dof: float
+    p_value: float
+    mode_p_values: np.ndarray
+    located_modes: list
+    mode_kinds: list
+    maps: dict = field(repr=False)
+    region_mm: tuple | None
+    region_mirrors_mm: list
+    candidates: list = field(repr=False)
+    chosen: CandidateResult | None
+    refit_dof: float
+    refit_p_value: float
+    unidentified: list
+    sigma_Hz: np.ndarray
+    mesh_error_Hz: np.ndarray
+    measured_Hz: np.ndarray
+    notes: list
+
+
+def coarse_model(model):
+    """The same plate on a mesh with half as many elements each way."""
+    mesh = model.mesh
+    return model.__class__(
+        mesh.a, mesh.b, model.thickness, model.density, model.layup_deg, model.ply_thickness,
+        mesh=(max(mesh.nx // 2, 2), max(mesh.ny // 2, 1)),
+    )  # fmt: skip
+
+
+def mesh_error(model, b, n_modes, coarse=None):
+    """Richardson estimate of each frequency's discretisation error on ``model``'s mesh.
+
+    The mesh is compared with one of half as many elements each way; with the element's
+    ``h^2`` rate the error of the finer one is ``(f_coarse - f_fine) / 3``.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n_modes,)
+        Estimated ``f_mesh - f_converged`` in Hz (positive: the mesh is too stiff).
+    """
+    coarse = coarse or coarse_model(model)
+    fine = model.solve(b, n_modes).frequency_Hz
+    return (coarse.solve(b, n_modes).frequency_Hz - fine) / 3.0
+
+
+def diagnose(case, model=None, physics=None, rng=None, progress=None, **options):
+    """Diagnose a case: nominal fit, location, candidate ranking, refit, verdict.
+
+    Parameters
+    ----------
+    case : bayesplate.case.Case
+    model : PlateModel, optional
+        Default: the case's mesh.
+    physics : list of Physics, optional
+        Candidates to rank (default: all of :func:`bayesplate.discrepancy.candidates`).
+    rng : numpy.random.Generator or int, optional
+        Seeds the random starts of the nominal fit.
+    progress : callable, optional
+        ``progress(message)`` after each step.
+    **options
+        Overrides of :data:`DEFAULTS`.
+
+    Returns
+    -------
+    Diagnosis
+    """
+    opts = {**DEFAULTS, **options}
+    rng = np.random.default_rng(rng)
+    say = progress or (lambda message: log.info(message))
+    model = model or PlateModel.from_case(case)
+    measured = case.measured
+    m = measured.size
+    modes = np.arange(m) if measured.mode is None else np.asarray(measured.mode) - 1
+    mu_b, V_b = prior_in_stiffness(case.prior.mean, case.prior.sd, "full")
+    notes = []
+
+    coarse = coarse_model(model)
+    err = mesh_error(model, mu_b, int(modes.max()) + 1, coarse)[modes]
+    sigma_Hz = np.asarray(measured.sigma_Hz, dtype=float)
+    ratio = np.abs(err) / sigma_Hz
+    say(f"mesh {model.mesh.nx} x {model.mesh.ny}: error up to {ratio.max():.2f} sigma")
+    if ratio.max() > opts["mesh_error_ratio"]:
+        sigma_Hz = np.hypot(sigma_Hz, err)
+        notes.append(
+            f"the mesh's own error reaches {ratio.max():.2f} sigma (mode "
+            f"{int(np.argmax(ratio)) + 1}); it was added to the deviations in quadrature: "
+            "use a finer [model] mesh"
+        )
+    Y = observed_eigenvalues(measured.frequency_Hz)
+    sigma = 2.0 * Y * sigma_Hz / measured.frequency_Hz  # d lambda = 2 lambda df / f
+
+    nominal_problem = JointProblem(model, Y, sigma, mu_b, V_b, modes)
+    starts = [np.zeros(6)] + [rng.standard_normal(6) for _ in range(opts["n_starts"])]
+    nominal = fit(nominal_problem, starts, coarse=coarse)
+    dof = max(m - nominal.effective_parameters, 1.0)
+    p_value = float(chi2_dist.sf(nominal.chi2, dof))
+    say(f"nominal fit: chi2 = {nominal.chi2:.1f} on {dof:.1f} dof, p = {p_value:.3g}")
+    mode_p = _predictive_p_values(nominal, nominal_problem)
+    unidentified = _unidentified(nominal, V_b, opts["unidentified_ratio"])
+
+    kinds = mode_kinds(model, _paired(nominal, modes))
+    maps = _maps(model, nominal, modes, sigma)
+    region, mirrors = _region(model, maps)
+    located = [int(i) + 1 for i in np.flatnonzero(np.abs(nominal.residual_sigma) > 2.0)]
+
+    coarse_lam = coarse.solve(nominal.b, int(modes.max()) + 1).eigenvalues[modes]
+    level = {"coarse": coarse, "scale": nominal.eigenvalues / coarse_lam,
+             "margin": opts["refine_margin"]}  # fmt: skip
+    ranked = _rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, maps,
+                   physics or all_candidates(), say)  # fmt: skip
+    best = next((c for c in ranked if c.fit.refined), None)
+    warranted = best is not None and best.log_evidence_gain > opts["evidence_threshold"]
+    refit_dof, refit_p = np.nan, np.nan
+    if warranted:
+        refit_dof = max(m - best.fit.effective_parameters, 1.0)
+        refit_p = float(chi2_dist.sf(best.fit.chi2, refit_dof))
+        unidentified = _unidentified(best.fit, V_b, opts["unidentified_ratio"])
+    verdict, chosen = _verdict(p_value, warranted, refit_p, opts["alpha"], best)
+    if verdict == "consistent":
+        region, mirrors = None, []
+    if verdict == "unexplained":
+        notes.append(
+            "the recordings disagree with the model beyond their deviations and no candidate "
+            "physics explains the mismatch"
+        )
+    if verdict != "consistent" and region is not None and mirrors:
+        notes.append("the plate's symmetry makes the mirror images of the located region fit "
+                     "equally well from frequencies alone")  # fmt: skip
+    say(f"verdict: {verdict}" + (f" ({chosen.name})" if chosen else ""))
+    return Diagnosis(
+        verdict, nominal, dof, p_value, mode_p, located, kinds, maps, region, mirrors, ranked,
+        chosen, refit_dof, refit_p, unidentified, sigma_Hz, err, measured.frequency_Hz, notes,
+    )  # fmt: skip
+
+
+def _verdict(p_value, warranted, refit_p, alpha, best):
+    """The three verdicts of the issue."""
+    if warranted and refit_p >= alpha:
+        return "explained", best
+    if p_value >= alpha and not warranted:
+        return "consistent", None
+    return "unexplained", None
+
+
+def _paired(fit_, modes):
+    """The fit's modal result restricted to the paired modes (measured order)."""
+    modal = fit_.modal
+    return type(modal)(modal.b, modal.eigenvalues[modes], modal.vectors[:, modes],
+                       modal.sensitivities[modes], modal.rigid_eigenvalues)  # fmt: skip
+
+
+def _predictive_p_values(fit_, problem):
+    """Two-sided p-value of each residual under the Laplace posterior predictive."""
+    S = fit_.modal.sensitivities[problem.modes]
+    var = problem.sigma**2 + np.einsum("ij,jk,ik->i", S, fit_.covariance[:6, :6], S)
+    z = (problem.Y - fit_.eigenvalues) / np.sqrt(var)
+    return 2.0 * norm.sf(np.abs(z))
+
+
+def _unidentified(fit_, V_b, ratio):
+    """Engineering constants whose posterior deviation is close to the prior one."""
+    e = fit_.constants
+    Jinv = np.linalg.inv(laminate.stiffness_jacobian(e))
+    prior_sd = np.sqrt(np.diag(Jinv @ V_b @ Jinv.T))
+    names = ("E1", "E2", "nu12", "G12", "G13", "G23")
+    return [n for n, post, pri in zip(names, fit_.constants_sd, prior_sd, strict=True)
+            if post > ratio * pri]  # fmt: skip
+
+
+def _maps(model, nominal, modes, sigma):
+    """Location maps of a local stiffness loss and of a point mass at the nominal fit."""
+    paired = _paired(nominal, modes)
+    r = nominal.residual_sigma
+    P = absorbable_projector(paired.sensitivities * nominal.b / sigma[:, None])
+    return {
+        "stiffness_loss": stiffness_loss_map(model, paired, nominal.b, r, sigma, P),
+        "point_mass": point_mass_map(model, paired, r, sigma, P),
+    }
+
+
+def _region(model, maps):
+    """The best located place over both maps, with its mirror images."""
+    from .base import mirror_positions
+
+    best = None
+    for m in maps.values():
+        i = m.best()
+        if i is not None and (best is None or m.chi2_drop[i] > best[0]):
+            best = (m.chi2_drop[i], tuple(float(v) for v in m.points_mm[i]))
+    if best is None:
+        return None, []
+    return best[1], [tuple(float(v) for v in p) for p in mirror_positions(model, *best[1])]
+
+
+def _located_starts(physics, model, b, maps, problem):
+    """Starting parameters of located effects from the peaks of their map."""
+    name = physics.name
+    if name == "point_mass":
+        lm, build = maps["point_mass"], lambda p, a: [1e3 * a, *p]
+    elif name == "local_stiffness_loss":
+        params = physics.parameters(model, b)
+        lm = maps["stiffness_loss"]
+
+        def build(p, a):
+            return [*p, params[2].mean, params[3].mean, float(np.clip(1 - 3 * a, 0.1, 0.95))]
+    else:
+        return []
+    order = np.argsort(np.where(lm.physical, lm.chi2_drop, -np.inf))[::-1]
+    return [np.asarray(build(lm.points_mm[i], lm.amplitude[i]), dtype=float)
+            for i in order[:2] if lm.physical[i]]  # fmt: skip
+
+
+def _rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, maps, physics_list, say):
+    """Fit every candidate jointly with the constants; best evidence gain first.
+
+    Every start is fitted on the coarse mesh corrected by the fine-to-coarse eigenvalue
+    ratio at the nominal fit; candidates that gain at least ``level["margin"]`` there are
+    refined on the working mesh. Only refined candidates can be chosen.
+    """
+
+    def promising(rough):
+        return rough.log_evidence - nominal.log_evidence > level["margin"]
+
+    results = []
+    for physics in physics_list:
+        problem = JointProblem(model, Y, sigma, mu_b, V_b, modes, physics)
+        thetas = [problem.theta_mean, *physics.starting_points(model, nominal.b),
+                  *_located_starts(physics, model, nominal.b, maps, problem)]  # fmt: skip
+        lo, hi = problem.theta_lower, problem.theta_upper
+        starts = [problem.pack(nominal.b, np.clip(t, lo, hi)) for t in thetas]
+        result = fit(problem, starts, max_nfev=25, coarse=level["coarse"],
+                     scale=level["scale"], refine=promising)  # fmt: skip
+        gain = result.log_evidence - nominal.log_evidence
+        params = physics.labelled(model, nominal.b, result.theta)
+        sds = physics.labelled(model, nominal.b, result.theta_sd)
+        if physics.name == "thickness_taper":
+            params = {"direction": physics.direction, **params}
+        mirrors = [physics.labelled(model, nominal.b, t)
+                   for t in physics.mirror_images(model, result.theta)]  # fmt: skip
+        where = "" if result.refined else " (coarse mesh, not refined)"
+        say(f"{physics.name}: chi2 = {result.chi2:.1f}, evidence gain {gain:+.1f}{where}")
+        results.append(CandidateResult(physics.name, result, gain, params, sds, mirrors))
+    best_by_name = {}
+    for r in results:  # the taper is fitted once per direction; keep the better
+        if (
+            r.name not in best_by_name
+            or r.log_evidence_gain > best_by_name[r.name].log_evidence_gain
+        ):
+            best_by_name[r.name] = r
+    return sorted(best_by_name.values(), key=lambda r: -r.log_evidence_gain)
+
+
+def _fit_summary(fit_, dof, p_value):
+    """Chi-square, constants and residuals of one fit, for JSON."""
+    from ..io import constants_json
+
+    return {
+        "chi2": fit_.chi2,
+        "dof": dof,
+        "p_value": p_value,
+        "residual_sigma": fit_.residual_sigma,
+        "frequency_Hz": fit_.frequency_Hz,
+        "constants": constants_json(fit_.constants, fit_.constants_sd),
+    }
+
+
+def diagnosis_to_dict(d):
+    """The diagnosis as plain data, in the units of the case files (see the issue's keys)."""
+    nominal = _fit_summary(d.nominal, d.dof, d.p_value)
+    nominal["mode_p_value"] = d.mode_p_values
+    refit = None
+    if d.chosen is not None:
+        refit = _fit_summary(d.chosen.fit, d.refit_dof, d.refit_p_value)
+        refit["parameters"] = d.chosen.parameters
+        refit["parameters_sd"] = d.chosen.parameters_sd
+        refit["mirror_images"] = d.chosen.mirror_images
+    return {
+        "verdict": d.verdict,
+        "measured_Hz": d.measured_Hz,
+        "sigma_Hz": d.sigma_Hz,
+        "mesh_error_Hz": d.mesh_error_Hz,
+        "nominal": nominal,
+        "located": {
+            "modes": d.located_modes,
+            "mode_kinds": d.mode_kinds,
+            "region_mm": None if d.region_mm is None else list(d.region_mm),
+            "region_mirrors_mm": [list(p) for p in d.region_mirrors_mm],
+        },
+        "candidates": [
+            {
+                "physics": c.name,
+                "log_evidence_gain": c.log_evidence_gain,
+                "chi2": c.fit.chi2,
+                "parameters": c.parameters,
+                "parameters_sd": c.parameters_sd,
+            }
+            for c in d.candidates
+        ],  # fmt: skip
+        "chosen": None if d.chosen is None else d.chosen.name,
+        "refit": refit,
+        "unidentified": d.unidentified,
+        "notes": d.notes,
+    }
