@@ -116,10 +116,8 @@ class PlateModel:
         self.mesh = RectangularMesh(float(length), float(width), int(mesh[0]), int(mesh[1]))
         self.element = TSDTRectangle(self.mesh.dx, self.mesh.dy, shear_order=shear_order)
         self.assembler = Assembler(self.mesh.element_dofs, self.mesh.n_dofs)
-        self.stiffness_terms = np.array(
-            [self.assembler.data(Ke) for Ke in self.element_stiffness_terms()]
-        )
-        self.mass_data = self.assembler.data(self.element_mass())
+        self.stiffness_terms = self.assembler.uniform_data(self.element_stiffness_terms())
+        self.mass_data = self.assembler.uniform_data(self.element_mass())
         self.extra_stiffness_data = None
         self.free_dofs = self._free_dofs()
         self._ordering = self._free_ordering()

@@ -34,5 +34,5 @@ class ElasticFoundation(Physics):
         """The plate on the foundation; ``theta = (k_N_m3,)``."""
         (k,) = theta
         w_block = model.element.mass_kernel[6, 6]  # int N_w^T N_w dA of one element
-        extra = k * model.assembler.data(w_block)
+        extra = k * model.assembler.uniform_data(w_block)
         return model.modified(extra_stiffness_data=extra)

@@ -248,7 +248,7 @@ class JointProblem:
         return float(np.sum(np.log(hi - lo)))
 
 
-def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None):
+def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None, keep=1):
     """Best joint fit over several starts, with its Laplace evidence.
 
     Parameters
@@ -266,6 +266,8 @@ def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None):
     refine : callable, optional
         ``refine(coarse_fit) -> bool``: whether to refine on the fine mesh; a fit that is not
         refined is returned as fitted on the (corrected) coarse mesh, ``refined`` False.
+    keep : int
+        How many of the best coarse results to refine (the best fine one is returned).
 
     Returns
     -------
@@ -274,16 +276,21 @@ def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None):
     if coarse is None:
         return _summarise(problem, _best_start(problem, starts, max_nfev))
     rough_problem = problem.on(coarse, scale)
-    rough = _best_start(rough_problem, starts, max_nfev)
-    if refine is not None and not refine(_summarise(rough_problem, rough, refined=False)):
-        return _summarise(rough_problem, rough, refined=False)
-    return _summarise(problem, _best_start(problem, [rough.x], max_nfev))
+    rough = _local_fits(rough_problem, starts, max_nfev)
+    if refine is not None and not refine(_summarise(rough_problem, rough[0], refined=False)):
+        return _summarise(rough_problem, rough[0], refined=False)
+    return _summarise(problem, _best_start(problem, [r.x for r in rough[:keep]], max_nfev))
 
 
 def _best_start(problem, starts, max_nfev):
     """The least-squares result with the lowest cost over ``starts``."""
+    return _local_fits(problem, starts, max_nfev)[0]
+
+
+def _local_fits(problem, starts, max_nfev):
+    """Least-squares results from every start, lowest cost first."""
     lo, hi = problem.bounds()
-    best = None
+    results = []
     for z0 in starts:
         z0 = np.clip(np.asarray(z0, dtype=float), lo + 1e-9, hi - 1e-9)
         res = least_squares(
@@ -302,9 +309,8 @@ def _best_start(problem, starts, max_nfev):
             2 * res.cost,
             res.message,
         )
-        if best is None or res.cost < best.cost:
-            best = res
-    return best
+        results.append(res)
+    return sorted(results, key=lambda r: r.cost)
 
 
 def _log_mass_inside(z, sd, lo, hi):

@@ -27,7 +27,7 @@ class PlyMisalignment(Physics):
         """The plate with turned plies; ``theta = (delta_deg,)``."""
         (delta,) = theta
         terms = model.element_stiffness_terms(angle_offset_deg=delta)
-        return model.modified(stiffness_terms=[model.assembler.data(Ke) for Ke in terms])
+        return model.modified(stiffness_terms=model.assembler.uniform_data(terms))
 
     def mirror_images(self, model, theta):
         """``-delta`` when the layup is mirror-symmetric."""

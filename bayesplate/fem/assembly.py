@@ -34,6 +34,31 @@ class Assembler:
         counts = np.bincount(keys // self.n_dofs, minlength=self.n_dofs)
         self.indptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
         self.nnz = len(keys)
+        self._uniform = None
+
+    def uniform_data(self, element_matrices):
+        """CSR data of matrices whose element matrices are the same on every element.
+
+        A fixed sparse map from the ``n_local^2`` entries of the element matrix to the
+        ``nnz`` entries of the assembled one (built once), applied to a stack of them.
+
+        Parameters
+        ----------
+        element_matrices : numpy.ndarray, shape (..., n_local, n_local)
+
+        Returns
+        -------
+        numpy.ndarray, shape (..., nnz)
+        """
+        if self._uniform is None:
+            n = self.n_local * self.n_local
+            cols = np.tile(np.arange(n), self.n_elements)
+            ones = np.ones(self._scatter.size)
+            self._uniform = sp.csr_matrix((ones, (self._scatter, cols)), shape=(self.nnz, n))
+        Ke = np.asarray(element_matrices, dtype=float)
+        flat = Ke.reshape(-1, self.n_local * self.n_local)
+        data = np.ascontiguousarray((self._uniform @ flat.T).T)
+        return data.reshape(*Ke.shape[:-2], self.nnz)
 
     def data(self, element_matrices, factors=None):
         """CSR data of the assembled matrix.
