@@ -78,3 +78,26 @@ def test_diagnose_command_writes_json(tmp_path):
     for key in ("verdict", "nominal", "located", "candidates", "chosen", "refit"):
         assert key in data
     assert set(data["nominal"]) >= {"chi2", "dof", "p_value", "residual_sigma", "constants"}
+
+
+@pytest.mark.slow
+def test_nominal_fit_is_global_where_a_local_fit_is_trapped():
+    # Frederiksen plate with nothing wrong; a data-sheet prior (E1 +20 %, E2 -40 %, G12 +30 %
+    # from the case's) from which one local fit with modes paired by order stops at
+    # chi-square ~140 (the pitfall); the global fit must not
+    from bayesplate.discrepancy.diagnose import coarse_model, fit_nominal
+    from bayesplate.discrepancy.fit import JointProblem, fit
+    from bayesplate.posterior import prior_in_stiffness
+
+    case = load_case(bundled_case_path("frederiksen_t300"))
+    model = PlateModel.from_case(case, mesh=(24, 12))
+    f = model.solve(stiffness_from_engineering(case.reference), 14).frequency_Hz
+    f = f * (1 + NOISE * np.random.default_rng(5).standard_normal(14))
+    Y, sigma = (2 * np.pi * f) ** 2, 2 * (2 * np.pi * f) ** 2 * NOISE
+    mean = case.prior.mean * np.array([1.2, 0.6, 1.0, 1.3, 1.0, 1.0])
+    mu_b, V_b = prior_in_stiffness(mean, case.prior.sd, "full")
+    problem = JointProblem(model, Y, sigma, mu_b, V_b, np.arange(14))
+    local = fit(problem, [np.zeros(6)])
+    assert local.chi2 > 100  # the trap is real
+    best = fit_nominal(problem, coarse_model(model), np.random.default_rng(0))
+    assert best.chi2 < 30  # chi-square 99th percentile at ~8 dof is ~20; 14 data
