@@ -12,8 +12,10 @@ is Frederiksen's own estimate of its constants. Run: `python studies/concealment
 
 from __future__ import annotations
 
+import json
 import sys
 import time
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -60,23 +62,65 @@ def recordings(case, fine, physics, theta, rng):
     return f * (1 + NOISE * rng.standard_normal(f.size))
 
 
-def main(out_dir="reports", quick=False):
-    """Run every scenario and write ``concealment.md``; returns the rows."""
+def run_scenario(index, quick=False):
+    """Diagnose scenario ``index`` blind; returns its row (plain data).
+
+    Its noise comes from its own stream of ``SeedSequence(SEED)``, so a row does not depend
+    on which other rows ran, in which order or in which process.
+    """
+    label, physics, size, theta = scenarios(quick)[index]
     case = load_case(bundled_case_path("frederiksen_t300"))
     mesh = (12, 6) if quick else case.mesh
     model = PlateModel.from_case(case, mesh=mesh)
     fine = PlateModel.from_case(case, mesh=(2 * mesh[0], 2 * mesh[1]))
-    rng = np.random.default_rng(SEED)
-    rows = []
-    for label, physics, size, theta in scenarios(quick):
-        f = recordings(case, fine, physics, theta, rng)
-        blind = case.with_measured(frequency_Hz=f, sigma_Hz=NOISE * f)
-        start = time.perf_counter()
-        d = diagnose(blind, model=model, rng=SEED)
-        rows.append(_row(label, physics, size, theta, d, case, model, time.perf_counter() - start))
-        print(f"{label:22s} {size:12s} -> {d.verdict:12s} {rows[-1]['chosen']}", flush=True)
+    rng = np.random.default_rng(np.random.SeedSequence(SEED).spawn(index + 1)[index])
+    f = recordings(case, fine, physics, theta, rng)
+    blind = case.with_measured(frequency_Hz=f, sigma_Hz=NOISE * f)
+    start = time.perf_counter()
+    d = diagnose(blind, model=model, rng=SEED)
+    row = _row(label, physics, size, theta, d, case, model, time.perf_counter() - start)
+    print(f"{label:22s} {size:12s} -> {d.verdict:12s} {row['chosen']} "
+          f"({row['seconds']:.0f} s)", flush=True)  # fmt: skip
+    return row
+
+
+def main(out_dir="reports", quick=False, workers=1):
+    """Run every scenario and write ``concealment.md``; returns the rows.
+
+    Finished rows are kept in ``out_dir/.cache/`` and reused when the study is run again.
+    """
+    cache = Path(out_dir) / ".cache" / f"concealment{'-quick' if quick else ''}.json"
+    done = json.loads(cache.read_text()) if cache.exists() else {}
+    todo = [i for i in range(len(scenarios(quick))) if str(i) not in done]
+    with ProcessPoolExecutor(max_workers=workers) if workers > 1 else _Serial() as pool:
+        for i, row in zip(todo, pool.map(run_scenario, todo, [quick] * len(todo)), strict=True):
+            done[str(i)] = row
+            atomic_write_text(cache, json.dumps(done, default=_plain))
+    rows = [done[str(i)] for i in range(len(scenarios(quick)))]
+    mesh = (12, 6) if quick else load_case(bundled_case_path("frederiksen_t300")).mesh
     atomic_write_text(Path(out_dir) / "concealment.md", _report(rows, mesh, quick))
     return rows
+
+
+class _Serial:
+    """A map in this process, for one worker."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def map(self, fn, *iterables):
+        return map(fn, *iterables)
+
+
+def _plain(value):
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(type(value).__name__)
 
 
 def _row(label, physics, size, theta, d, case, model, seconds):
@@ -166,4 +210,4 @@ def _findings(rows):
 
 
 if __name__ == "__main__":
-    main(quick="--quick" in sys.argv)
+    main(quick="--quick" in sys.argv, workers=2)
