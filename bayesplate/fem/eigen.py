@@ -35,16 +35,6 @@ class EigenSolution:
     vectors: np.ndarray
     rigid_eigenvalues: np.ndarray
 
-    @property
-    def frequency_Hz(self):
-        """Natural frequencies ``sqrt(lambda) / (2 pi)`` in Hz."""
-        return np.sqrt(np.maximum(self.eigenvalues, 0.0)) / (2 * np.pi)
-
-    @property
-    def n_rigid(self):
-        """Number of rigid-body modes detected."""
-        return len(self.rigid_eigenvalues)
-
 
 def lowest_modes(K, M, n_modes, shift, n_rigid_max=6, ordering=None, rigid_basis=None):
     """Lowest ``n_modes`` elastic modes, detecting and dropping rigid-body modes.
