@@ -36,7 +36,7 @@ import numpy as np
 
 from . import laminate
 from .model import PlateModel
-from .pairing import Pairing, track
+from .pairing import Pairing, pair_measured, track
 from .posterior import (
     OBSERVATION_CONVENTIONS,
     PRIOR_CONVENTIONS,
@@ -444,7 +444,7 @@ def run(
     if method not in ("B", "MVE"):
         raise ValueError(f"method = {method!r}: run() takes 'B' or 'MVE'")
     conventions = conventions or CONVENTIONS["paper"]
-    started, solves0 = time.perf_counter(), problem.n_solves
+    started, solves0, seconds0 = time.perf_counter(), problem.n_solves, problem.solve_seconds
     settings = {
         "tol": tol,
         "max_iter": max_iter,
@@ -459,6 +459,7 @@ def run(
         state = _State(b, None, problem.V_b, [b], message=f"forward solve failed: {err}")
         return _failed_result(problem, method, state, settings, started)
     state.message += _swap_note(state.swaps)
+    settings["solve_seconds"] = problem.solve_seconds - seconds0
     return _result(
         problem, method, state, conventions, settings, problem.n_solves - solves0, started
     )
@@ -553,8 +554,11 @@ def estimate(
         MVE-mod stage-2 deviations are this multiple of stage 1's (section 6: 2).
     stage2_sd : array_like, shape (6,), optional
         Explicit stage-2 deviations (SI), overriding `stage2_factor`.
-    pairing : {"auto", "order", "index"}
-        Measured-to-computed mode pairing; "auto" uses the case's mode indices if any.
+    pairing : {"auto", "mac", "index", "order"} or Pairing
+        Measured-to-computed mode pairing (:func:`bayesplate.pairing.pair_measured`, at the
+        prior mean): "auto" pairs by shape (MAC) when the case has measured shapes, else by
+        the case's mode indices if any, else by order. Measured modes left unpaired are left
+        out of the fit.
     tracking : {"report", "follow", "off"}
         MAC tracking of paired modes between iterates (see :func:`run`).
 
@@ -568,7 +572,9 @@ def estimate(
     model = model or PlateModel.from_case(case)
     mean = np.asarray(case.prior.mean if prior_mean is None else prior_mean, dtype=float)
     sd = np.asarray(case.prior.sd if prior_sd is None else prior_sd, dtype=float)
-    pair = Pairing.from_measurement(case.measured, pairing)
+    pair = pairing
+    if not isinstance(pair, Pairing):
+        pair = pair_measured(case, model, laminate.stiffness_from_engineering(mean), pairing)
     problem = GaussianProblem.from_case(
         case, model, pair, conventions.observation, conventions.prior, mean, sd
     )
@@ -617,4 +623,8 @@ def _combine(stage1, stage2):
         message=f"stage 1: {stage1.message}; stage 2: {stage2.message}",
         stages=(stage1, stage2),
         wall_time=stage1.wall_time + stage2.wall_time,
+        settings={
+            **stage2.settings,
+            "solve_seconds": sum(s.settings.get("solve_seconds", 0.0) for s in (stage1, stage2)),
+        },
     )

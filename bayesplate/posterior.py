@@ -37,6 +37,7 @@ evaluator (a reduced-basis model) can replace the finite-element solve unchanged
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -165,6 +166,8 @@ class GaussianProblem:
     ----------
     n_solves : int
         Forward evaluations made so far.
+    solve_seconds : float
+        Wall time spent in them.
     """
 
     def __init__(self, Y, V_Y, mu_b, V_b, forward: Callable, pairing: Pairing):
@@ -175,6 +178,7 @@ class GaussianProblem:
         self.forward = forward
         self.pairing = pairing
         self.n_solves = 0
+        self.solve_seconds = 0.0
         self._VY_inv = np.linalg.inv(self.V_Y)
         self._Vb_inv = np.linalg.inv(self.V_b)
         # normalising constants of eqs. 3 and 4
@@ -200,7 +204,9 @@ class GaussianProblem:
         model : object
             Has ``solve(b, n_modes)`` (a :class:`bayesplate.model.PlateModel`).
         pairing : Pairing, optional
-            Default: by order, or by the case's ``measured.mode`` indices when given.
+            Default: by order, or by the case's ``measured.mode`` indices when given. Measured
+            frequencies it leaves unpaired (:func:`bayesplate.pairing.pair_measured`) are
+            left out of ``Y``.
         observation, prior : str
             Conventions for ``V_Y`` and ``V_b`` (see the module docstring).
         prior_mean, prior_sd : array_like, shape (6,), optional
@@ -212,6 +218,7 @@ class GaussianProblem:
         """
         measured = case.measured
         pairing = pairing or Pairing.from_measurement(measured)
+        measured = pairing.select(measured)
         mean_e = case.prior.mean if prior_mean is None else prior_mean
         sd_e = case.prior.sd if prior_sd is None else prior_sd
         mu_b, V_b = prior_in_stiffness(mean_e, sd_e, prior)
@@ -243,7 +250,9 @@ class GaussianProblem:
         Prediction
         """
         modes = self.pairing.modes if modes is None else np.asarray(modes)
+        started = time.perf_counter()
         modal = self.forward(np.asarray(b, dtype=float), self.pairing.n_modes(modes))
+        self.solve_seconds += time.perf_counter() - started
         self.n_solves += 1
         return Prediction(modal.eigenvalues[modes], modal.sensitivities[modes], modal, modes)
 
