@@ -47,6 +47,7 @@ from .posterior import (
 
 __all__ = [
     "METHODS",
+    "TRACKING",
     "Conventions",
     "CONVENTIONS",
     "EstimateResult",
@@ -59,6 +60,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 METHODS = ("B", "MVE", "MVE-mod")
+TRACKING = ("report", "follow", "off")
 #: The paper's longest converged run took 197 iterations (Table 6), so its cap was >= 197.
 DEFAULT_MAX_ITER = 200
 _CYCLE_WINDOW = 8  # iterations over which a cycle is judged
@@ -382,8 +384,11 @@ def _engineering_covariance(b, cov_b):
 
 
 def _result(problem, method, state, conventions, settings, n_solves, started):
-    cov_b = _final_covariance(problem, method, state, conventions)
-    cov = _engineering_covariance(state.b, cov_b)
+    try:
+        cov_b = _final_covariance(problem, method, state, conventions)
+        cov = _engineering_covariance(state.b, cov_b)
+    except np.linalg.LinAlgError:  # a singular final step: report no covariance, not raise
+        cov_b = cov = np.full((6, 6), np.nan)
     history_b = np.asarray(state.history)
     f = np.sqrt(np.maximum(state.prediction.g, 0.0)) / (2 * np.pi)
     measured = np.sqrt(problem.Y) / (2 * np.pi)
@@ -443,6 +448,8 @@ def run(
     """
     if method not in ("B", "MVE"):
         raise ValueError(f"method = {method!r}: run() takes 'B' or 'MVE'")
+    if tracking not in TRACKING:
+        raise ValueError(f"tracking = {tracking!r}: must be one of {TRACKING}")
     conventions = conventions or CONVENTIONS["paper"]
     started, solves0, seconds0 = time.perf_counter(), problem.n_solves, problem.solve_seconds
     settings = {

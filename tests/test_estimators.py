@@ -316,3 +316,16 @@ def test_frederiksen_mve_matches_the_paper():
     paper = np.array(PAPER["frederiksen"]["MVE"]) * SI
     np.testing.assert_allclose(result.constants[IN_PLANE], paper[IN_PLANE], rtol=0.02)
     np.testing.assert_allclose(result.constants[[2, 4, 5]], paper[[2, 4, 5]], rtol=0.10)
+
+
+def test_a_run_without_progress_is_called_oscillating():
+    # Quasi-periodic iterates (steps of constant size, no short cycle): the stall rule fires
+    # once 2 x 40 iterations show no decrease of the largest relative change.
+    from bayesplate.estimators import _oscillation
+
+    b0 = laminate.stiffness_from_engineering(np.array([150e9, 10e9, 0.25, 3e9, 3e9, 2e9]))
+    history = [b0 * (1 + 0.05 * np.sin(k * 2.399963)) for k in range(81)]
+    assert "no progress" in _oscillation(history, 1e-3)
+    assert _oscillation(history[:60], 1e-3) == ""
+    converging = [b0 * (1 + 0.5**k) for k in range(81)]
+    assert _oscillation(converging, 1e-3) == ""
