@@ -89,7 +89,7 @@ def build_parser():
         prog="bayesplate",
         description="Elastic constants of laminated plates from natural frequencies. "
         "Start with `bayesplate cases` (bundled test cases), then "
-        "`bayesplate modes frederiksen_t300`.",
+        "`bayesplate report frederiksen_t300 --quick` (everything about one case in a folder).",
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="log progress")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -386,9 +386,10 @@ def _register_estimate(sub):
     )
     p.add_argument(
         "--pairing",
-        choices=("auto", "order", "index"),
+        choices=("auto", "mac", "order", "index"),
         default="auto",
-        help="measured-to-computed modes: by the case's mode indices if any, else by order",
+        help="measured-to-computed modes: by shape (MAC) when the case has measured shapes, "
+        "else by the case's mode indices if any, else by order",
     )
     p.add_argument(
         "--mesh",
@@ -403,6 +404,59 @@ def _register_estimate(sub):
 
 
 _EXTRA_COMMANDS.append(_register_estimate)
+
+
+def _cmd_report(args):
+    from .report import ReportOptions, make_report
+
+    case = _resolve_case(args.case)
+    options = ReportOptions(
+        quick=args.quick,
+        mesh=tuple(args.mesh) if args.mesh else None,
+        seed=args.seed,
+        diagnose=not args.no_diagnose,
+        sample=not args.no_sample,
+    )
+    path, data = make_report(case.path, args.output, options, label=args.case)
+    print(f"{path}: {len(data.computed)} steps computed, {len(data.reused)} reused from the cache")
+    return 0
+
+
+def _register_report(sub):
+    p = sub.add_parser(
+        "report",
+        help="everything about a case in one folder: report.md and its figures",
+        description="Run the whole analysis of a case and write DIR/report.md with its "
+        "figures: the case and prior, mode pairing (by shape when the case has measured "
+        "shapes), the B, MVE and MVE-mod estimates side by side, per-mode residuals, "
+        "sensitivities, mode shapes, the sampled posterior (when bayesplate.sampling is "
+        "installed) and the model-discrepancy diagnosis. Every step's result is cached in "
+        "DIR/.cache: a re-run reuses what still matches the case file and options. Progress "
+        "goes to standard error.",
+    )
+    p.add_argument("case", help="case file (TOML) or the name of a bundled case")
+    p.add_argument("-o", "--output", default="report", metavar="DIR",
+                   help="folder of the report (default: ./report)")  # fmt: skip
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help="a first look: half the mesh each way, one random start in diagnose, shorter "
+        "posterior chains (nothing skipped)",
+    )
+    p.add_argument(
+        "--mesh",
+        type=int,
+        nargs=2,
+        metavar=("NX", "NY"),
+        help="elements along x and y (default: the case's [model] mesh)",
+    )
+    p.add_argument("--seed", type=int, default=0, help="seed of diagnose and the sampler")
+    p.add_argument("--no-diagnose", action="store_true", help="leave out the diagnosis")
+    p.add_argument("--no-sample", action="store_true", help="leave out posterior sampling")
+    p.set_defaults(func=_cmd_report)
+
+
+_EXTRA_COMMANDS.append(_register_report)
 
 
 def main(argv=None):

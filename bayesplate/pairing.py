@@ -2,7 +2,12 @@
 
 The paper pairs the i-th measured frequency with the i-th computed elastic mode (by order).
 A case file may instead name the 1-based elastic mode of each measured frequency
-(``measured.mode``). While an estimator iterates, the computed modes can change order
+(``measured.mode``). When it carries measured mode shapes (``points_mm`` and ``shapes``),
+:func:`pair_measured` pairs by shape instead: the computed ``w`` at the measurement points
+against every measured shape (MAC), one-to-one by the Hungarian method over more computed
+modes than measured, so that a mode missing from the test or an extra one is tolerated; a
+measured mode that no computed mode resembles is left unpaired and dropped. While an
+estimator iterates, the computed modes can change order
 (two close frequencies cross); :func:`track` follows them from one iterate to the next by the
 modal assurance criterion (MAC) of successive eigenvectors.
 
@@ -12,23 +17,40 @@ All functions are pure; :class:`Pairing` is a small immutable record. Mode numbe
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import warnings
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 __all__ = [
     "DEFAULT_EXTRA_MODES",
+    "DEFAULT_MAC_THRESHOLD",
+    "MAC_EXTRA_MODES",
     "Pairing",
+    "UnpairedModeWarning",
     "mac_matrix",
     "pair_by_order",
     "pair_by_index",
     "assign_by_mac",
     "track",
+    "pair_measured",
+    "shape_mac",
 ]
 
 #: Computed modes beyond the highest paired one, so that a tracked mode can move up.
 DEFAULT_EXTRA_MODES = 2
+#: MAC below which a measured shape is taken to match no computed mode: less than half of
+#: the measured shape's variance over the points is explained by the computed one. Noisy
+#: shapes at a few points rarely reach the 0.9 of a clean match, but a different mode
+#: rarely reaches 0.5 once the assignment is one-to-one.
+DEFAULT_MAC_THRESHOLD = 0.5
+#: Computed modes beyond the measured ones offered to the MAC assignment (missing modes).
+MAC_EXTRA_MODES = 6
+
+
+class UnpairedModeWarning(UserWarning):
+    """A measured mode matches no computed mode by shape and is left out of the fit."""
 
 
 def mac_matrix(A, B, weight=None):
@@ -47,7 +69,7 @@ def mac_matrix(A, B, weight=None):
     Returns
     -------
     numpy.ndarray, shape (p, q)
-        Entries in [0, 1].
+        Entries in [0, 1]; 0 against a zero vector (e.g. ``w`` of an in-plane mode).
     """
     A = np.asarray(A, dtype=float)
     B = np.asarray(B, dtype=float)
@@ -56,7 +78,8 @@ def mac_matrix(A, B, weight=None):
     cross = A.T @ WB
     na = np.einsum("ij,ij->j", A, WA)
     nb = np.einsum("ij,ij->j", B, WB)
-    return cross**2 / np.outer(na, nb)
+    norms = np.outer(na, nb)
+    return np.divide(cross**2, norms, out=np.zeros_like(norms), where=norms > 0)
 
 
 def pair_by_order(m):
@@ -128,26 +151,45 @@ class Pairing:
 
     Parameters
     ----------
-    modes : array_like of int, shape (m,)
-        0-based computed elastic mode of each measured frequency.
+    modes : array_like of int, shape (k,)
+        0-based computed elastic mode of each paired measured frequency.
     how : str
-        ``"order"`` or ``"index"``, for messages.
+        ``"order"``, ``"index"`` or ``"mac"``, for messages.
     extra : int
         Modes computed beyond the highest paired one (room for tracking).
+    measured : array_like of int, shape (k,), optional
+        0-based measured frequencies that are paired, in the order of `modes`; None when
+        all ``k = m`` of them are, in order. The others are left out of the fit.
+    mac : array_like, shape (m, q), optional
+        MAC of every measured shape against every computed mode (``how == "mac"``).
+    threshold : float, optional
+        The MAC a pair had to reach.
     """
 
     modes: np.ndarray
     how: str = "order"
     extra: int = DEFAULT_EXTRA_MODES
+    measured: np.ndarray | None = None
+    mac: np.ndarray | None = field(default=None, repr=False)
+    threshold: float | None = None
 
     def __post_init__(self):
-        modes = np.array(self.modes, dtype=int)
-        modes.setflags(write=False)
-        object.__setattr__(self, "modes", modes)
+        for name in ("modes", "measured"):
+            value = getattr(self, name)
+            if value is not None:
+                value = np.array(value, dtype=int)
+                value.setflags(write=False)
+                object.__setattr__(self, name, value)
+        if self.measured is not None and self.measured.shape != self.modes.shape:
+            raise ValueError("Pairing: `measured` needs one entry per paired mode")
+        if self.mac is not None:
+            mac = np.array(self.mac, dtype=float)
+            mac.setflags(write=False)
+            object.__setattr__(self, "mac", mac)
 
     @classmethod
     def from_measurement(cls, measured, how="auto", extra=DEFAULT_EXTRA_MODES):
-        """Pairing of a :class:`bayesplate.case.Measurement`.
+        """Pairing of a :class:`bayesplate.case.Measurement` by order or mode index.
 
         Parameters
         ----------
@@ -174,3 +216,123 @@ class Pairing:
         """Computed modes needed for `modes` (default the pairing's own), with the extra."""
         modes = self.modes if modes is None else np.asarray(modes)
         return int(np.max(modes)) + 1 + self.extra
+
+    def kept(self, m):
+        """0-based measured frequencies that are paired, out of `m`, shape (k,)."""
+        return np.arange(int(m)) if self.measured is None else self.measured
+
+    def unpaired(self, m):
+        """0-based measured frequencies left out (no computed mode matched), shape (m - k,)."""
+        return np.setdiff1d(np.arange(int(m)), self.kept(m))
+
+    def select(self, measurement):
+        """The :class:`bayesplate.case.Measurement` restricted to the paired frequencies.
+
+        The frequencies keep their measured order, so the pairing's `modes` must then be in
+        the order of ``measured`` (always so for :func:`pair_measured`).
+        """
+        return measurement if self.measured is None else measurement.select(self.measured)
+
+    def describe(self, m=None):
+        """One sentence on how the modes were paired, for reports and messages."""
+        m = self.modes.size if m is None and self.measured is None else m
+        if self.how == "order":
+            text = "by order: the i-th measured frequency with the i-th computed elastic mode"
+        elif self.how == "index":
+            text = "by the mode numbers the case file gives (measured.mode)"
+        else:
+            p = self.mac.shape[1] if self.mac is not None else "?"
+            text = (
+                f"by mode shape: MAC of the measured shapes against {p} computed modes, "
+                f"one-to-one (Hungarian), pairs below MAC {self.threshold:g} rejected"
+            )
+        lost = [] if m is None else [str(i + 1) for i in self.unpaired(m)]
+        if lost:
+            which = "mode" if len(lost) == 1 else "modes"
+            text += f"; measured {which} {', '.join(lost)} unpaired and left out of the fit"
+        return text
+
+
+def shape_mac(measurement, model, vectors):
+    """MAC of measured shapes against computed modes at the measurement points.
+
+    Parameters
+    ----------
+    measurement : bayesplate.case.Measurement
+        With ``points`` (p, 2) in m and ``shapes`` (m, p).
+    model : bayesplate.model.PlateModel
+        Evaluates ``w`` at the points (:meth:`~bayesplate.model.PlateModel.interpolation`).
+    vectors : array_like, shape (n_dofs, q)
+        Computed mode shapes on all unknowns.
+
+    Returns
+    -------
+    numpy.ndarray, shape (m, q)
+        Entries in [0, 1]; rows measured modes, columns computed ones.
+    """
+    if measurement.shapes is None or measurement.points is None:
+        raise ValueError("MAC pairing needs measured.points_mm and measured.shapes")
+    w = model.interpolation(measurement.points, "w") @ np.asarray(vectors)
+    return mac_matrix(np.asarray(measurement.shapes, dtype=float).T, w)
+
+
+def pair_measured(
+    case,
+    model,
+    b,
+    how="auto",
+    threshold=DEFAULT_MAC_THRESHOLD,
+    extra_modes=MAC_EXTRA_MODES,
+    modal=None,
+):
+    """Pair a case's measured modes with computed ones: by shape when it has shapes.
+
+    Parameters
+    ----------
+    case : bayesplate.case.Case
+    model : bayesplate.model.PlateModel
+        Only used for ``how == "mac"`` (one eigen solve at `b`, unless `modal` is given).
+    b : array_like, shape (6,)
+        Stiffness coefficients at which to compute the modes (e.g. the prior mean), Pa.
+    how : {"auto", "mac", "index", "order"}
+        ``"auto"``: by MAC when the case carries measured shapes, else by the case's mode
+        numbers when it has them, else by order.
+    threshold : float
+        Smallest MAC of an accepted pair; a measured mode whose assigned computed mode stays
+        below it is left unpaired (with an :class:`UnpairedModeWarning`).
+    extra_modes : int
+        Computed modes offered beyond the number measured (``m + extra_modes`` in all), so
+        that modes missing from the test do not force wrong pairs.
+    modal : ModalResult, optional
+        Modes already computed at `b` (at least ``m + extra_modes`` of them to be safe).
+
+    Returns
+    -------
+    Pairing
+        With ``measured`` (the paired measured frequencies) and ``mac`` (the matrix the
+        assignment used) for ``how == "mac"``.
+    """
+    measured = case.measured
+    if how not in ("auto", "mac", "index", "order"):
+        raise ValueError(f"pairing = {how!r}: must be 'auto', 'mac', 'index' or 'order'")
+    has_shapes = measured.shapes is not None and measured.points is not None
+    if how == "auto":
+        how = "mac" if has_shapes else "auto"
+    if how != "mac":
+        return Pairing.from_measurement(measured, how)
+    m = measured.size
+    if modal is None:
+        modal = model.solve(np.asarray(b, dtype=float), m + int(extra_modes))
+    mac = shape_mac(measured, model, modal.vectors)
+    assigned = assign_by_mac(mac, threshold)
+    kept = np.flatnonzero(assigned >= 0)
+    for i in np.flatnonzero(assigned < 0):
+        warnings.warn(
+            f"measured mode {i + 1} ({measured.frequency_Hz[i]:.6g} Hz) matches no computed "
+            f"mode by shape (best MAC {mac[i].max():.2f} < {threshold:g}): left out of the fit",
+            UnpairedModeWarning,
+            stacklevel=2,
+        )
+    if kept.size == 0:
+        raise ValueError("MAC pairing: no measured shape matches a computed mode")
+    return Pairing(assigned[kept], "mac", DEFAULT_EXTRA_MODES, kept, mac, float(threshold))
