@@ -60,7 +60,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 METHODS = ("B", "MVE", "MVE-mod")
-TRACKING = ("report", "follow", "off")
+TRACKING = ("auto", "report", "follow", "off")
 #: The paper's longest converged run took 197 iterations (Table 6), so its cap was >= 197.
 DEFAULT_MAX_ITER = 200
 _CYCLE_WINDOW = 8  # iterations over which a cycle is judged
@@ -421,7 +421,7 @@ def run(
     tol=1e-3,
     max_iter=DEFAULT_MAX_ITER,
     conventions=None,
-    tracking="report",
+    tracking="auto",
     weight=None,
 ):
     """Run B or MVE on a :class:`bayesplate.posterior.GaussianProblem`, from its prior mean.
@@ -436,9 +436,12 @@ def run(
         Iteration cap.
     conventions : Conventions, optional
         Only ``covariance`` and ``stop_on`` matter here; default ``CONVENTIONS["paper"]``.
-    tracking : {"report", "follow", "off"}
-        MAC tracking of the paired modes between iterates: report swaps only (the paper
-        keeps its pairing), re-pair along the tracked modes, or skip.
+    tracking : {"auto", "report", "follow", "off"}
+        MAC tracking of the paired modes between iterates: report swaps only (pairing by
+        order or index is re-applied at every iterate, as the paper does), re-pair along the
+        tracked modes, or skip. ``"auto"``: follow when the modes were paired by shape
+        (MAC pairing names physical modes, whose order changes as the iterate moves),
+        report otherwise.
     weight : array_like or sparse matrix, optional
         MAC weight for tracking (the mass matrix).
 
@@ -450,6 +453,8 @@ def run(
         raise ValueError(f"method = {method!r}: run() takes 'B' or 'MVE'")
     if tracking not in TRACKING:
         raise ValueError(f"tracking = {tracking!r}: must be one of {TRACKING}")
+    if tracking == "auto":
+        tracking = "follow" if problem.pairing.how == "mac" else "report"
     conventions = conventions or CONVENTIONS["paper"]
     started, solves0, seconds0 = time.perf_counter(), problem.n_solves, problem.solve_seconds
     settings = {
@@ -531,7 +536,7 @@ def estimate(
     stage2_factor=2.0,
     stage2_sd=None,
     pairing="auto",
-    tracking="report",
+    tracking="auto",
 ):
     """Estimate the elastic constants of a case with the paper's B, MVE or MVE-mod.
 
@@ -566,8 +571,9 @@ def estimate(
         prior mean): "auto" pairs by shape (MAC) when the case has measured shapes, else by
         the case's mode indices if any, else by order. Measured modes left unpaired are left
         out of the fit.
-    tracking : {"report", "follow", "off"}
-        MAC tracking of paired modes between iterates (see :func:`run`).
+    tracking : {"auto", "report", "follow", "off"}
+        MAC tracking of paired modes between iterates (see :func:`run`); "auto" follows
+        modes paired by shape and keeps order or index pairings as they are.
 
     Returns
     -------
