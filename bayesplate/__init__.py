@@ -5,6 +5,8 @@ The forward model is a finite-element model of Reddy's third-order shear deforma
 """
 
 from .case import Case, CaseError, bundled_case_path, load_case
+from .discrepancy.diagnose import diagnose
+from .estimators import EstimateResult, estimate
 from .laminate import engineering_from_stiffness, stiffness_from_engineering
 from .model import ModalResult, PlateModel
 
@@ -13,7 +15,10 @@ __all__ = [
     "CaseError",
     "ModalResult",
     "PlateModel",
+    "EstimateResult",
     "bundled_case_path",
+    "diagnose",
+    "estimate",
     "engineering_from_stiffness",
     "load_case",
     "stiffness_from_engineering",

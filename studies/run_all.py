@@ -23,6 +23,8 @@ REPORTS = HERE.parent / "reports"
 STUDIES = [
     "forward_model",
     "sensitivity_figures",
+    "paper_tables",
+    "concealment",
 ]
 
 
