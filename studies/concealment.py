@@ -96,9 +96,24 @@ def main(out_dir="reports", quick=False, workers=1):
         for i, row in zip(todo, pool.map(run_scenario, todo, [quick] * len(todo)), strict=True):
             done[str(i)] = row
             atomic_write_text(cache, json.dumps(done, default=_plain))
-    rows = [done[str(i)] for i in range(len(scenarios(quick)))]
+            write_report(out_dir, quick)
+    return write_report(out_dir, quick)
+
+
+def write_report(out_dir="reports", quick=False):
+    """Write ``concealment.md`` from the finished rows in the cache; returns them."""
+    cache = Path(out_dir) / ".cache" / f"concealment{'-quick' if quick else ''}.json"
+    done = json.loads(cache.read_text()) if cache.exists() else {}
+    n = len(scenarios(quick))
+    rows = [done[str(i)] for i in range(n) if str(i) in done]
     mesh = (12, 6) if quick else load_case(bundled_case_path("frederiksen_t300")).mesh
-    atomic_write_text(Path(out_dir) / "concealment.md", _report(rows, mesh, quick))
+    text = _report(rows, mesh, quick)
+    if len(rows) < n:
+        text += (
+            f"\n**Partial: {len(rows)} of {n} scenarios finished**; run the command again "
+            "to finish the rest (finished rows are kept in reports/.cache/).\n"
+        )
+    atomic_write_text(Path(out_dir) / "concealment.md", text)
     return rows
 
 
