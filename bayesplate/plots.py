@@ -151,7 +151,10 @@ def frequency_comparison(computed, measured, ax=None, title=None):
 
 
 def estimate_residuals(measured_Hz, sigma_Hz, computed, labels=None, ax=None, title=None):
-    """Standardised residuals ``(computed - measured) / sigma`` per mode, one series each.
+    """Standardised residuals ``(measured - computed) / sigma`` per mode, one series each.
+
+    The sign is that of :func:`residual_comparison` (diagnose): positive where the model is
+    too soft.
 
     Parameters
     ----------
@@ -175,7 +178,7 @@ def estimate_residuals(measured_Hz, sigma_Hz, computed, labels=None, ax=None, ti
     x = np.arange(m)
     width = 0.8 / max(len(computed), 1)
     for k, (label, values) in enumerate(computed.items()):
-        z = (np.asarray(values, dtype=float) - measured) / sigma
+        z = (measured - np.asarray(values, dtype=float)) / sigma
         offset = (k - (len(computed) - 1) / 2) * width
         ax.bar(x + offset, z, width, color=f"C{k}",
                label=f"{label}: chi-square {np.sum(z**2):.3g}")  # fmt: skip
@@ -185,7 +188,7 @@ def estimate_residuals(measured_Hz, sigma_Hz, computed, labels=None, ax=None, ti
     ax.set_xticks(x, labels if labels is not None else [str(i + 1) for i in x])
     ax.set_xlim(-0.6, m - 0.4)
     ax.set_xlabel("measured mode")
-    ax.set_ylabel(r"(computed $-$ measured) / $\sigma$ (-)")
+    ax.set_ylabel(r"(measured $-$ computed) / $\sigma$ (-)")
     ax.yaxis.grid(False)
     ax.legend(fontsize="small", loc="upper center", bbox_to_anchor=(0.5, -0.14), frameon=False,
               ncol=min(len(computed), 3))  # fmt: skip

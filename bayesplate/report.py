@@ -69,6 +69,10 @@ log = logging.getLogger(__name__)
 
 ESTIMATORS = ("B", "MVE", "MVE-mod")
 _HEARTBEAT = 30.0  # seconds without a progress line before a "still running" one
+# Chain bounds of the posterior section: the sampler's own defaults (5000 steps, ESS 2000)
+# cost tens of minutes of full solves where walkers leave the fast model's box.
+_CHAINS = {"max_steps": 1000, "min_ess": 1000.0}
+_QUICK_CHAINS = {"max_steps": 400, "min_ess": 400.0}
 _CORNER_DRAWS = 4000  # posterior draws kept for the corner plot
 _SHAPE_GRID = (81, 41)  # points along the long and short side (interpolation is per point)
 _GPA = np.array([1e9, 1e9, 1.0, 1e9, 1e9, 1e9])  # SI -> case units (GPa, -)
@@ -474,7 +478,7 @@ def _sample_step(case, model, pairing, options):
     from .laminate import engineering_from_stiffness
     from .sampling import sample
 
-    chains = {"max_steps": 1000, "min_ess": 400.0} if options.quick else {}
+    chains = _QUICK_CHAINS if options.quick else _CHAINS
     # the sampler takes the pairing's name for order and index pairings (the same Pairing)
     how = pairing if pairing.how == "mac" else pairing.how
     with warnings.catch_warnings(record=True) as caught:  # counted below, not repeated
@@ -904,7 +908,7 @@ def _estimates_section(data, figures):
         + _image(
             figures,
             "residuals",
-            "Per-mode residuals: (computed - measured) / measured at each estimate",
+            "Per-mode residuals at each estimate: (measured - computed) / sigma",
         )
     )
 
@@ -917,14 +921,14 @@ def _residual_table(data):
     sigma = data.case.measured.sigma_Hz[kept]
     head = ["measured mode", "computed mode", "measured (Hz)"]
     for m in methods:
-        head += [f"{m} (Hz)", f"{m} residual (sigma)"]
+        head += [f"{m} (Hz)", f"(measured - {m}) / sigma"]
     rows = []
     for k, i in enumerate(kept):
         measured = data.case.measured.frequency_Hz[i]
         row = [i + 1, int(pairing.modes[k]) + 1, f"{measured:.1f}"]
         for m in methods:
             f = r[m]["frequency_Hz"][k]
-            row += [_num(f, ".1f"), _num((f - measured) / sigma[k], "+.2f")]
+            row += [_num(f, ".1f"), _num((measured - f) / sigma[k], "+.2f")]
         rows.append(row)
     return ["### Per-mode residuals", "", *_table(head, rows), ""]
 
@@ -966,7 +970,12 @@ def _posterior_section(data, figures):
     return (
         lines
         + _sample_lines(data.results["sample"])
-        + _image(figures, "posterior_corner", "Posterior samples of the engineering constants")
+        + _image(
+            figures,
+            "posterior_corner",
+            "Posterior draws of the engineering constants; dashed: 3 %, 50 % and 97 % "
+            "quantiles; red: the B estimate",
+        )
     )
 
 

@@ -326,7 +326,7 @@ def _case_toml(case):
 def test_full_report_on_plate1(tmp_path):
     # every step, diagnose and (when the package has it) the posterior, on the 8 x 4 mesh
     path, data = make_report(
-        bundled_case_path("plate1"), tmp_path, ReportOptions(quick=True), lambda line: None
+        bundled_case_path("plate1"), tmp_path, ReportOptions(), lambda line: None
     )
     text = path.read_text(encoding="utf-8")
     assert "**Verdict:" in text
