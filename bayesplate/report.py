@@ -479,11 +479,9 @@ def _sample_step(case, model, pairing, options):
     from .sampling import sample
 
     chains = _QUICK_CHAINS if options.quick else _CHAINS
-    # the sampler takes the pairing's name for order and index pairings (the same Pairing)
-    how = pairing if pairing.how == "mac" else pairing.how
     with warnings.catch_warnings(record=True) as caught:  # counted below, not repeated
         warnings.simplefilter("always")
-        r = sample(case, seed=options.seed, model=model, pairing=how, progress=False, **chains)
+        r = sample(case, seed=options.seed, model=model, pairing=pairing, progress=False, **chains)
     e = engineering_from_stiffness(r.samples_b) / _GPA
     keep = np.linspace(0, len(e) - 1, min(len(e), _CORNER_DRAWS)).astype(int)
     return {
