@@ -24,6 +24,7 @@ def atomic_write_text(path, text):
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as handle:
             handle.write(text)
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the usual permissions
         os.replace(tmp, path)
     except BaseException:
         pathlib.Path(tmp).unlink(missing_ok=True)
@@ -51,6 +52,13 @@ def constants_json(mean, sd=None, **extra):
         key: {k: None if v is None else float(v[i]) for k, v in scaled.items()}
         for i, key in enumerate(_CONSTANT_KEYS)
     }
+
+
+def _umask():
+    """The process's file-creation mask (read by setting and restoring it)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
 
 
 def _jsonable(value):
