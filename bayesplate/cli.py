@@ -459,6 +459,173 @@ def _register_report(sub):
 _EXTRA_COMMANDS.append(_register_report)
 
 
+def _sample_dict(case, result, mve):
+    """The JSON document of ``bayesplate sample``."""
+    from .io import constants_json
+
+    est = result.estimate
+    cert = result.certificate
+    certificate = None
+    if cert is not None:
+        certificate = {
+            "max_rel_error": cert.max_rel_error,
+            "tolerance": cert.tolerance,
+            "passed": bool(cert.passed),
+            "n_test": cert.n_test,
+            "basis_size": cert.basis_size,
+        }
+    return {
+        "case": case.name,
+        "constants": result.constants_table(),
+        "ess_min": result.ess_min,
+        "rhat_max": result.rhat_max,
+        "ess_bulk": dict(zip(_CONSTANT_KEYS, result.ess_bulk.tolist(), strict=True)),
+        "rhat": dict(zip(_CONSTANT_KEYS, result.rhat.tolist(), strict=True)),
+        "converged": bool(result.converged),
+        "message": result.message,
+        "n_walkers": result.n_walkers,
+        "n_steps": result.n_steps,
+        "n_burn": result.n_burn,
+        "tau_steps": result.tau,
+        "acceptance": result.acceptance,
+        "n_evaluations": result.n_evaluations,
+        "n_full_solves_sampling": result.n_full,
+        "n_full_solves_setup": result.settings.get("full_solves_setup"),
+        "certificate": certificate,
+        "timings_s": result.timings,
+        "seed_entropy": result.settings.get("seed_entropy"),
+        "estimates": {
+            name: constants_json(r.constants, r.sd)
+            for name, r in (("B", est), ("MVE", mve))
+            if r is not None
+        },
+    }
+
+
+_CONSTANT_KEYS = ("E1_GPa", "E2_GPa", "nu12", "G12_GPa", "G13_GPa", "G23_GPa")
+
+
+def _sample_text(case, result):
+    """Human-readable table of ``bayesplate sample``."""
+    est = result.estimate
+    lines = [
+        f"{case.name}",
+        f"emcee: {result.n_walkers} walkers x {result.n_steps} steps ({result.n_burn} burn-in), "
+        f"acceptance {result.acceptance:.2f}, tau <= {max(result.tau):.1f} steps; "
+        f"{result.message}",
+        f"ESS >= {result.ess_min:.0f}, R-hat <= {result.rhat_max:.3f}; "
+        f"{result.n_evaluations} evaluations, {result.n_full} full solves while sampling; "
+        f"{result.timings.get('total', result.wall_time):.1f} s in all",
+        f"fast model: {result.certificate or 'none (the full model)'}",
+        f"{'constant':>9} {'B (MAP)':>10} {'B sd':>9} {'post mean':>10} {'post sd':>9} "
+        f"{'hdi 3%':>9} {'hdi 97%':>9} {'ESS':>6} {'R-hat':>6}",
+    ]
+    for i, key in enumerate(_CONSTANT_KEYS):
+        s = _GPA_SCALE[i]
+        lines.append(
+            f"{key:>9} {est.constants[i] / s:#10.4g} {est.sd[i] / s:#9.3g} "
+            f"{result.mean[i] / s:#10.4g} {result.sd[i] / s:#9.3g} {result.hdi[0, i] / s:#9.4g} "
+            f"{result.hdi[1, i] / s:#9.4g} {result.ess_bulk[i]:6.0f} {result.rhat[i]:6.3f}"
+        )
+    return "\n".join(lines)
+
+
+def _write_netcdf(idata, path):
+    """Write ArviZ data whole or not at all (temporary file, then rename)."""
+    path = pathlib.Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    try:
+        idata.to_netcdf(str(tmp))
+        tmp.replace(path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def _cmd_sample(args):
+    from .sampling import prepare, sample
+
+    case = _resolve_case(args.case)
+    mesh = tuple(args.mesh) if args.mesh else None
+    model = PlateModel.from_case(case, mesh=mesh)
+    quiet = args.json == "-"
+    if not quiet:
+        logging.getLogger("bayesplate.sampling").setLevel(logging.INFO)  # progress
+    setup = prepare(case, model=model, forward="full" if args.full else "reduced", seed=args.seed,
+                    pairing=args.pairing)  # fmt: skip
+    result = sample(
+        case,
+        seed=args.seed,
+        n_walkers=args.walkers,
+        max_steps=args.max_steps,
+        min_ess=args.min_ess,
+        backend_path=args.backend,
+        progress=not quiet,
+        setup=setup,
+    )
+    mve = None
+    if args.plots or args.json:
+        mve = setup.run_estimator("MVE")
+    if args.out:
+        _write_netcdf(result.idata, args.out)
+    if args.plots:
+        from .plots import sampling_figures
+
+        estimates = {"B": result.estimate, "MVE": mve}
+        figs = sampling_figures(result, estimates, case.reference, title=case.name)
+        for name, fig in figs.items():
+            _save_figure(fig, pathlib.Path(args.plots) / f"{name}.png")
+    if args.json:
+        write_json(_sample_dict(case, result, mve), args.json)
+    if not quiet:
+        print(_sample_text(case, result))
+    return 0 if result.converged else 1
+
+
+def _register_sample(sub):
+    p = sub.add_parser(
+        "sample",
+        help="sample the posterior of the constants with emcee (checks B's covariance)",
+        description="Sample the posterior of the estimators' Gaussian problem (same V_Y, "
+        "prior and pairing as `bayesplate estimate`, paper conventions) with emcee, on a "
+        "certified reduced-basis model around the B estimate (full-model fallback). Stops "
+        "when the chain is longer than 50 autocorrelation times and every constant has "
+        "--min-ess effective samples, or at --max-steps. The exit status is 1 when the "
+        "stopping rule was not met. Progress goes to standard error.",
+    )
+    p.add_argument("case", help="case file (TOML) or the name of a bundled case")
+    p.add_argument("--seed", type=int, default=None, help="seed (default: fresh entropy)")
+    p.add_argument("--walkers", type=int, default=32, help="emcee walkers (default 32)")
+    p.add_argument("--max-steps", type=int, default=5000, help="cap on steps (default 5000)")
+    p.add_argument("--min-ess", type=float, default=2000.0,
+                   help="effective samples per constant to reach (default 2000)")  # fmt: skip
+    p.add_argument("--out", metavar="FILE.nc", help="write the ArviZ data (netCDF)")
+    p.add_argument("--backend", metavar="FILE.h5",
+                   help="keep the chain in this HDF5 file; re-running continues it")  # fmt: skip
+    p.add_argument("--full", action="store_true", help="sample the full model (slow)")
+    p.add_argument(
+        "--pairing",
+        choices=("auto", "mac", "index", "order"),
+        default="auto",
+        help="measured-to-computed modes (default: by shape, else mode numbers, else order)",
+    )
+    p.add_argument(
+        "--mesh",
+        type=int,
+        nargs=2,
+        metavar=("NX", "NY"),
+        help="elements along x and y (default: the case's [model] mesh)",
+    )
+    p.add_argument("--json", metavar="FILE", help="write results as JSON ('-' for stdout)")
+    p.add_argument("--plots", metavar="DIR",
+                   help="write corner.png (with B and MVE ellipses), trace.png, "
+                   "autocorrelation.png into DIR")  # fmt: skip
+    p.set_defaults(func=_cmd_sample)
+
+
+_EXTRA_COMMANDS.append(_register_sample)
+
+
 def main(argv=None):
     """Run the command line; returns the exit status."""
     parser = build_parser()

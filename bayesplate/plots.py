@@ -458,7 +458,7 @@ def _gaussian_ellipse(ax, mean, cov, radius, color, linestyle):
 
 
 def corner_estimates(samples, labels=CONSTANT_LABELS, estimates=None, reference=None,
-                     fig=None, title=None):  # fmt: skip
+                     fig=None, title=None, reference_label="reference constants"):  # fmt: skip
     """Corner plot of posterior samples with Gaussian estimates and reference values.
 
     The sample contours and the ellipses enclose the same probabilities, 39.3 % and 86.5 %
@@ -479,6 +479,8 @@ def corner_estimates(samples, labels=CONSTANT_LABELS, estimates=None, reference=
         Reference values (e.g. the target constants), drawn as lines.
     fig : matplotlib.figure.Figure, optional
     title : str, optional
+    reference_label : str
+        Legend entry of the reference values.
 
     Returns
     -------
@@ -520,7 +522,7 @@ def corner_estimates(samples, labels=CONSTANT_LABELS, estimates=None, reference=
         if top is not None:
             axes[i, i].set_ylim(0, 1.08 * max(top, axes[i, i].get_ylim()[1] / 1.1))
     if reference is not None:
-        handles.append(Line2D([], [], color="tab:red", label="reference constants"))
+        handles.append(Line2D([], [], color="tab:red", label=reference_label))
     fig.legend(handles=handles, loc="upper right", bbox_to_anchor=(0.98, 0.98),
                frameon=False, fontsize=11)  # fmt: skip
     if title:
@@ -557,7 +559,7 @@ def trace_plot(chains, labels=CONSTANT_LABELS, burn=0, fig=None, max_walkers=32)
             ax.axvspan(0, burn, color="0.85", zorder=0)
         ax.set_ylabel(labels[j])
         ax.margins(x=0)
-    axes[-1].set_xlabel("step" + (f" (burn-in of {burn} shaded)" if burn else ""))
+    axes[-1].set_xlabel("step" + (f" (tuning and burn-in: {burn} steps, shaded)" if burn else ""))
     return fig
 
 
@@ -609,7 +611,8 @@ def autocorrelation_plot(acf, tau_history=None, labels=CONSTANT_LABELS, factor=5
     return fig
 
 
-def sampling_figures(result, estimates=None, reference=None, title=None):
+def sampling_figures(result, estimates=None, reference=None, title=None,
+                     reference_label="reference constants"):  # fmt: skip
     """The figures of a sampling run: ``{"corner", "trace", "autocorrelation": Figure}``.
 
     Parameters
@@ -620,6 +623,8 @@ def sampling_figures(result, estimates=None, reference=None, title=None):
     reference : array_like, shape (6,), optional
         Reference constants, SI.
     title : str, optional
+    reference_label : str
+        Legend entry of the reference constants.
     """
     scale = np.array([1e-9, 1e-9, 1.0, 1e-9, 1e-9, 1e-9])
     gauss = {name: (r.constants * scale, r.covariance * np.outer(scale, scale))
@@ -629,8 +634,10 @@ def sampling_figures(result, estimates=None, reference=None, title=None):
     factor = result.settings.get("target_tau_factor", 50.0)
     acf = autocorrelation_plot(result.acf, result.tau_history, factor=factor,
                                tau=result.tau_constants)  # fmt: skip
+    corner = corner_estimates(samples, estimates=gauss, reference=ref, title=title,
+                              reference_label=reference_label)  # fmt: skip
     return {
-        "corner": corner_estimates(samples, estimates=gauss, reference=ref, title=title),
+        "corner": corner,
         "trace": trace_plot(result.chain, burn=result.n_burn),
         "autocorrelation": acf,
     }

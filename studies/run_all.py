@@ -25,6 +25,7 @@ STUDIES = [
     "sensitivity_figures",
     "paper_tables",
     "concealment",
+    "prior_bias",
 ]
 
 
