@@ -265,8 +265,9 @@ def plot(results):
 
     figs = {}
     for r in results["runs"]:
+        base = "initial values" if r.plate == "plate1" else "case's prior mean"
         title = ("Plate 1, test 2" if r.plate == "plate1" else "Frederiksen plate") + (
-            f"\nprior deviations d = {r.d} of the initial values"
+            f"\nprior deviations d = {r.d} of the {base}"
         )
         label = "target" if r.plate == "plate1" else "target (Frederiksen's constants)"
         f = sampling_figures(r.posterior, {"B": r.b, "MVE": r.mve}, r.target, title=title,
