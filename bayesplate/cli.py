@@ -187,6 +187,7 @@ def _cmd_diagnose(args):
         case,
         model=model,
         rng=args.seed,
+        workers=args.workers,
         progress=None if quiet else (lambda msg: print(f"  {msg}", flush=True)),
     )
     if args.plots:
@@ -238,6 +239,17 @@ def _diagnosis_text(d):
     return "\n".join(lines)
 
 
+def _positive_int(text):
+    """An integer of at least 1 (an argparse type)."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: must be a whole number of at least 1")
+    return value
+
+
 def _register_diagnose(sub):
     p = sub.add_parser(
         "diagnose",
@@ -256,6 +268,12 @@ def _register_diagnose(sub):
         help="elements along x and y (default: the case's [model] mesh)",
     )
     p.add_argument("--seed", type=int, default=0, help="seed of the random fit starts")
+    p.add_argument(
+        "--workers",
+        type=_positive_int,
+        default=2,
+        help="processes for the independent fits (default 2; the results do not depend on it)",
+    )
     p.add_argument("--json", metavar="FILE", help="write results as JSON ('-' for stdout)")
     p.add_argument("--plots", metavar="DIR", help="write figures (PNG) into DIR")
     p.set_defaults(func=_cmd_diagnose)

@@ -464,6 +464,7 @@ def _diagnose_step(case, model, pairing, options, progress):
         pairing=pairing,
         progress=lambda msg: progress(f"    {msg}"),
         n_starts=options.n_starts,
+        workers=2,  # the fits are independent: the results do not depend on it
     )
     data = {"diagnosis": diagnosis_to_dict(d), "mode_kinds": d.mode_kinds}
     for key, lm in d.maps.items():

@@ -25,6 +25,7 @@ STUDIES = [
     "sensitivity_figures",
     "paper_tables",
     "concealment",
+    "diagnose_frederiksen",
     "prior_bias",
 ]
 

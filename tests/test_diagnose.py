@@ -47,6 +47,16 @@ def test_control_without_effect_is_consistent(model):
     assert all(c.log_evidence_gain < 3.0 for c in d.candidates)
 
 
+def test_workers_do_not_change_the_diagnosis(model):
+    case = _recordings(_plate1_case(), seed=1)
+    one = diagnose(case, model=model, rng=0, n_starts=1)
+    two = diagnose(case, model=model, rng=0, n_starts=1, workers=2)
+    assert two.verdict == one.verdict and two.nominal.chi2 == one.nominal.chi2
+    assert [(c.name, c.log_evidence_gain) for c in two.candidates] == [
+        (c.name, c.log_evidence_gain) for c in one.candidates
+    ]
+
+
 def test_concealed_point_mass_is_named_and_recovered(model, tmp_path):
     truth = np.array([15.0, 50.0, 30.0])  # 15 g on a 132 g plate at (50, 30) mm
     d = diagnose(_recordings(_plate1_case(), PointMass(), truth, seed=2), model=model, rng=0)

@@ -37,6 +37,8 @@ from .locate import (
     point_mass_map,
     stiffness_loss_map,
 )
+from .parallel import fork_map
+from .scan import RitzBasis, point_mass_scan, stiffness_loss_scan
 
 __all__ = [
     "CandidateResult",
@@ -58,6 +60,7 @@ DEFAULTS = {
     "unidentified_ratio": 0.7,  # posterior sd / prior sd above which a constant is unidentified
     "mesh_error_ratio": 0.3,  # mesh error / sigma above which sigma is inflated
     "refine_margin": 1.0,  # nats: candidates below this on the coarse mesh are not refined
+    "workers": 1,  # processes for independent fits (fork); the CLI uses 2
 }
 
 
@@ -212,7 +215,7 @@ def diagnose(case, model=None, physics=None, rng=None, progress=None, pairing=No
     sigma = 2.0 * Y * sigma_Hz / measured.frequency_Hz  # d lambda = 2 lambda df / f
 
     nominal_problem = JointProblem(model, Y, sigma, mu_b, V_b, modes)
-    nominal = fit_nominal(nominal_problem, coarse, rng, opts["n_starts"])
+    nominal = fit_nominal(nominal_problem, coarse, rng, opts["n_starts"], opts["workers"])
     dof = max(m - nominal.effective_parameters, 1.0)
     p_value = float(chi2_dist.sf(nominal.chi2, dof))
     say(f"nominal fit: chi2 = {nominal.chi2:.1f} on {dof:.1f} dof, p = {p_value:.3g}")
@@ -226,10 +229,11 @@ def diagnose(case, model=None, physics=None, rng=None, progress=None, pairing=No
 
     coarse_lam = coarse.solve(nominal.b, int(modes.max()) + 1).eigenvalues[modes]
     level = {"coarse": coarse, "scale": nominal.eigenvalues / coarse_lam,
-             "margin": opts["refine_margin"]}  # fmt: skip
-    ranked = _rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, maps,
+             "margin": opts["refine_margin"], "workers": opts["workers"]}  # fmt: skip
+    scans = _scans(model, nominal, modes, Y, sigma)
+    ranked = _rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans,
                    physics or all_candidates(), say)  # fmt: skip
-    better = _improved_nominal(nominal_problem, nominal, ranked)
+    better = _improved_nominal(nominal_problem, nominal, ranked, level)
     if better is not None:
         say(f"nominal fit improved from a candidate's constants: chi2 = {better.chi2:.1f}")
         shift = better.log_evidence - nominal.log_evidence
@@ -264,7 +268,7 @@ def diagnose(case, model=None, physics=None, rng=None, progress=None, pairing=No
     )  # fmt: skip
 
 
-def fit_nominal(problem, coarse, rng, n_starts=DEFAULTS["n_starts"]):
+def fit_nominal(problem, coarse, rng, n_starts=DEFAULTS["n_starts"], workers=1):
     """Global fit of the nominal model.
 
     The prior mean and ``n_starts`` random draws from the prior are each fitted on the
@@ -274,24 +278,31 @@ def fit_nominal(problem, coarse, rng, n_starts=DEFAULTS["n_starts"]):
     minimum where the model's mode order differs from the plate's (see tests/test_diagnose.py).
     """
     starts = [np.zeros(6)] + [rng.standard_normal(6) for _ in range(n_starts)]
-    return fit(problem, starts, coarse=coarse, keep=3)
+    return fit(problem, starts, coarse=coarse, keep=3, workers=workers)
 
 
-def _improved_nominal(problem, nominal, ranked):
+def _improved_nominal(problem, nominal, ranked, level):
     """A better nominal optimum, started from candidates that beat it on the prior too.
 
     A candidate's fit starts from the nominal constants and may walk into a better basin of
     the constants alone; its gain would then be credited to the physics. Re-fitting the
-    nominal model from there keeps the gains honest.
+    nominal model from there keeps the gains honest. Each re-fit runs on the corrected
+    coarse mesh first and is refined only when it beats the nominal evidence there.
     """
     total = nominal.chi2 + nominal.chi2_prior
-    best = None
+    best = nominal
     for c in ranked:
         if c.fit.refined and c.fit.chi2 + c.fit.chi2_prior < total - 0.5:
-            trial = fit(problem, [problem.pack(c.fit.b)])
-            if trial.log_evidence > (best or nominal).log_evidence:
+            trial = fit(
+                problem,
+                [problem.pack(c.fit.b)],
+                coarse=level["coarse"],
+                scale=level["scale"],
+                refine=lambda rough, bar=best.log_evidence: rough.log_evidence > bar,
+            )
+            if trial.refined and trial.log_evidence > best.log_evidence:
                 best = trial
-    return best
+    return None if best is nominal else best
 
 
 def _verdict(p_value, warranted, refit_p, alpha, best):
@@ -353,25 +364,30 @@ def _region(model, maps):
     return best[1], [tuple(float(v) for v in p) for p in mirror_positions(model, *best[1])]
 
 
-def _located_starts(physics, model, b, maps, problem):
-    """Starting parameters of located effects from the peaks of their map."""
-    name = physics.name
-    if name == "point_mass":
-        lm, build = maps["point_mass"], lambda p, a: [1e3 * a, *p]
-    elif name == "local_stiffness_loss":
-        params = physics.parameters(model, b)
-        lm = maps["stiffness_loss"]
+def _scans(model, nominal, modes, Y, sigma):
+    """Ritz scans of the located candidates at the nominal fit (see :mod:`.scan`)."""
+    basis = RitzBasis.from_modes(model, model.solve(nominal.b, int(modes.max()) + 21))
+    paired = _paired(nominal, modes)
+    P = absorbable_projector(paired.sensitivities * nominal.b / sigma[:, None])
+    plate_mass_g = 1e3 * model.density * model.thickness * model.mesh.a * model.mesh.b
+    a_mm, b_mm = 1e3 * model.mesh.a, 1e3 * model.mesh.b
+    sizes = [(a_mm * sx, b_mm * sy) for sx, sy in
+             ((0.1, 0.1), (0.2, 0.2), (0.4, 0.4), (0.2, 0.4), (0.4, 0.2))]  # fmt: skip
+    return {
+        "point_mass": point_mass_scan(model, basis, Y, sigma, modes, P,
+                                      np.geomspace(0.003, 1.0, 18) * plate_mass_g),
+        "local_stiffness_loss": stiffness_loss_scan(model, basis, nominal.b, Y, sigma, modes,
+                                                    P, sizes, (0.2, 0.4, 0.6, 0.8, 0.9)),
+    }  # fmt: skip
 
-        def build(p, a):
-            return [*p, params[2].mean, params[3].mean, float(np.clip(1 - 3 * a, 0.1, 0.95))]
-    else:
-        return []
-    order = np.argsort(np.where(lm.physical, lm.chi2_drop, -np.inf))[::-1]
-    return [np.asarray(build(lm.points_mm[i], lm.amplitude[i]), dtype=float)
-            for i in order[:2] if lm.physical[i]]  # fmt: skip
+
+def _located_starts(physics, model, scans, n=3):
+    """Starting parameters of a located effect: the best distinct places of its scan."""
+    scan = scans.get(physics.name)
+    return [] if scan is None else scan.best(model, n)
 
 
-def _rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, maps, physics_list, say):
+def _rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list, say):
     """Fit every candidate jointly with the constants; best evidence gain first.
 
     Every start is fitted on the coarse mesh corrected by the fine-to-coarse eigenvalue
@@ -382,11 +398,10 @@ def _rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, maps, physics_list,
     def promising(rough):
         return rough.log_evidence - nominal.log_evidence > level["margin"]
 
-    results = []
-    for physics in physics_list:
+    def candidate(physics):
         problem = JointProblem(model, Y, sigma, mu_b, V_b, modes, physics)
         thetas = [problem.theta_mean, *physics.starting_points(model, nominal.b),
-                  *_located_starts(physics, model, nominal.b, maps, problem)]  # fmt: skip
+                  *_located_starts(physics, model, scans)]  # fmt: skip
         lo, hi = problem.theta_lower, problem.theta_upper
         starts = [problem.pack(nominal.b, np.clip(t, lo, hi)) for t in thetas]
         result = fit(problem, starts, max_nfev=25, coarse=level["coarse"],
@@ -398,9 +413,16 @@ def _rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, maps, physics_list,
             params = {"direction": physics.direction, **params}
         mirrors = [physics.labelled(model, nominal.b, t)
                    for t in physics.mirror_images(model, result.theta)]  # fmt: skip
-        where = "" if result.refined else " (coarse mesh, not refined)"
-        say(f"{physics.name}: chi2 = {result.chi2:.1f}, evidence gain {gain:+.1f}{where}")
-        results.append(CandidateResult(physics.name, result, gain, params, sds, mirrors))
+        return CandidateResult(physics.name, result, gain, params, sds, mirrors)
+
+    # the candidates with most parameters take longest: they go first to the workers
+    order = sorted(range(len(physics_list)),
+                   key=lambda i: -len(physics_list[i].parameters(model, nominal.b)))  # fmt: skip
+    fitted = fork_map(candidate, [physics_list[i] for i in order], level["workers"])
+    results = [fitted[order.index(i)] for i in range(len(physics_list))]
+    for r in results:
+        where = "" if r.fit.refined else " (coarse mesh, not refined)"
+        say(f"{r.name}: chi2 = {r.fit.chi2:.1f}, evidence gain {r.log_evidence_gain:+.1f}{where}")
     best_by_name = {}
     for r in results:  # the taper is fitted once per direction; keep the better
         if (

@@ -28,6 +28,7 @@ from scipy.optimize import least_squares
 from scipy.stats import norm
 
 from .. import laminate
+from .parallel import fork_map
 
 __all__ = ["JointFit", "JointProblem", "fit"]
 
@@ -248,7 +249,7 @@ class JointProblem:
         return float(np.sum(np.log(hi - lo)))
 
 
-def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None, keep=1):
+def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None, keep=1, workers=1):
     """Best joint fit over several starts, with its Laplace evidence.
 
     Parameters
@@ -268,30 +269,29 @@ def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None, keep
         refined is returned as fitted on the (corrected) coarse mesh, ``refined`` False.
     keep : int
         How many of the best coarse results to refine (the best fine one is returned).
+    workers : int
+        Processes for the local fits from the starts (see :func:`.parallel.fork_map`).
 
     Returns
     -------
     JointFit
     """
     if coarse is None:
-        return _summarise(problem, _best_start(problem, starts, max_nfev))
+        return _summarise(problem, _local_fits(problem, starts, max_nfev, workers)[0])
     rough_problem = problem.on(coarse, scale)
-    rough = _local_fits(rough_problem, starts, max_nfev)
+    rough = _local_fits(rough_problem, starts, max_nfev, workers)
     if refine is not None and not refine(_summarise(rough_problem, rough[0], refined=False)):
         return _summarise(rough_problem, rough[0], refined=False)
-    return _summarise(problem, _best_start(problem, [r.x for r in rough[:keep]], max_nfev))
+    best = _local_fits(problem, [r.x for r in rough[:keep]], max_nfev, workers)[0]
+    return _summarise(problem, best)
 
 
-def _best_start(problem, starts, max_nfev):
-    """The least-squares result with the lowest cost over ``starts``."""
-    return _local_fits(problem, starts, max_nfev)[0]
-
-
-def _local_fits(problem, starts, max_nfev):
+def _local_fits(problem, starts, max_nfev, workers=1):
     """Least-squares results from every start, lowest cost first."""
     lo, hi = problem.bounds()
-    results = []
-    for z0 in starts:
+
+    def local_fit(z0):
+        solves = problem.n_solves
         z0 = np.clip(np.asarray(z0, dtype=float), lo + 1e-9, hi - 1e-9)
         res = least_squares(
             problem.residuals,
@@ -309,7 +309,12 @@ def _local_fits(problem, starts, max_nfev):
             2 * res.cost,
             res.message,
         )
-        results.append(res)
+        res.n_solves = problem.n_solves - solves
+        return res
+
+    solves = problem.n_solves
+    results = fork_map(local_fit, starts, workers)
+    problem.n_solves = solves + sum(r.n_solves for r in results)  # also those of workers
     return sorted(results, key=lambda r: r.cost)
 
 

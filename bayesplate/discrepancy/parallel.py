@@ -1,0 +1,51 @@
+"""Independent fits on several cores, without copying the plate to every process.
+
+The fits of diagnose (the nominal model's starts, the candidates) are independent and each
+holds a plate model of tens of megabytes. Forked worker processes inherit it from the
+parent instead of receiving a pickled copy; only the small task indices go out and the
+results come back. Where ``fork`` is not available (Windows) or one worker is asked for,
+the tasks run in this process, in order, with the same results.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor
+
+__all__ = ["fork_map"]
+
+_TASK = None  # (function, items) of the map in progress, inherited by forked workers
+
+
+def _call(index):
+    function, items = _TASK
+    return function(items[index])
+
+
+def fork_map(function, items, workers=1):
+    """``[function(item) for item in items]``, on up to ``workers`` forked processes.
+
+    Parameters
+    ----------
+    function : callable
+        Any callable (closures included): the workers inherit it by ``fork``.
+    items : sequence
+    workers : int
+
+    Returns
+    -------
+    list
+        In the order of ``items``. Results must be picklable.
+    """
+    global _TASK
+    items = list(items)
+    n = min(int(workers), len(items))
+    if n <= 1 or "fork" not in multiprocessing.get_all_start_methods() or _TASK is not None:
+        return [function(item) for item in items]  # nested maps run serially
+    _TASK = (function, items)
+    try:
+        context = multiprocessing.get_context("fork")
+        with ProcessPoolExecutor(max_workers=n, mp_context=context) as pool:
+            return list(pool.map(_call, range(len(items))))
+    finally:
+        _TASK = None
