@@ -104,14 +104,8 @@ def build_parser():
         help="evaluate at the prior mean (default) or the [reference] constants",
     )
     p.add_argument("--count", type=int, help="number of elastic modes (default: as measured)")
-    p.add_argument(
-        "--mesh",
-        type=int,
-        nargs=2,
-        metavar=("NX", "NY"),
-        help="elements along x and y (default: the case's [model] mesh)",
-    )
-    p.add_argument("--json", metavar="FILE", help="write results as JSON ('-' for stdout)")
+    _add_mesh_option(p)
+    _add_json_option(p)
     p.set_defaults(func=_cmd_modes)
     for register in _EXTRA_COMMANDS:
         register(sub)
@@ -239,6 +233,22 @@ def _diagnosis_text(d):
     return "\n".join(lines)
 
 
+def _add_mesh_option(p):
+    """``--mesh NX NY``, shared by every command that builds the plate model."""
+    p.add_argument(
+        "--mesh",
+        type=int,
+        nargs=2,
+        metavar=("NX", "NY"),
+        help="elements along x and y (default: the case's [model] mesh)",
+    )
+
+
+def _add_json_option(p):
+    """``--json FILE``, shared by every command that writes results."""
+    p.add_argument("--json", metavar="FILE", help="write results as JSON ('-' for stdout)")
+
+
 def _positive_int(text):
     """An integer of at least 1 (an argparse type)."""
     try:
@@ -260,13 +270,7 @@ def _register_diagnose(sub):
         "verdict: consistent, explained or unexplained.",
     )
     p.add_argument("case", help="case file (TOML) or the name of a bundled case")
-    p.add_argument(
-        "--mesh",
-        type=int,
-        nargs=2,
-        metavar=("NX", "NY"),
-        help="elements along x and y (default: the case's [model] mesh)",
-    )
+    _add_mesh_option(p)
     p.add_argument("--seed", type=int, default=0, help="seed of the random fit starts")
     p.add_argument(
         "--workers",
@@ -274,7 +278,7 @@ def _register_diagnose(sub):
         default=2,
         help="processes for the independent fits (default 2; the results do not depend on it)",
     )
-    p.add_argument("--json", metavar="FILE", help="write results as JSON ('-' for stdout)")
+    _add_json_option(p)
     p.add_argument("--plots", metavar="DIR", help="write figures (PNG) into DIR")
     p.set_defaults(func=_cmd_diagnose)
 
@@ -409,14 +413,8 @@ def _register_estimate(sub):
         help="measured-to-computed modes: by shape (MAC) when the case has measured shapes, "
         "else by the case's mode indices if any, else by order",
     )
-    p.add_argument(
-        "--mesh",
-        type=int,
-        nargs=2,
-        metavar=("NX", "NY"),
-        help="elements along x and y (default: the case's [model] mesh)",
-    )
-    p.add_argument("--json", metavar="FILE", help="write results as JSON ('-' for stdout)")
+    _add_mesh_option(p)
+    _add_json_option(p)
     p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
     p.set_defaults(func=_cmd_estimate)
 
@@ -461,13 +459,7 @@ def _register_report(sub):
         help="a first look: half the mesh each way, one random start in diagnose, shorter "
         "posterior chains (nothing skipped)",
     )
-    p.add_argument(
-        "--mesh",
-        type=int,
-        nargs=2,
-        metavar=("NX", "NY"),
-        help="elements along x and y (default: the case's [model] mesh)",
-    )
+    _add_mesh_option(p)
     p.add_argument("--seed", type=int, default=0, help="seed of diagnose and the sampler")
     p.add_argument("--no-diagnose", action="store_true", help="leave out the diagnosis")
     p.add_argument("--no-sample", action="store_true", help="leave out posterior sampling")
@@ -627,14 +619,8 @@ def _register_sample(sub):
         default="auto",
         help="measured-to-computed modes (default: by shape, else mode numbers, else order)",
     )
-    p.add_argument(
-        "--mesh",
-        type=int,
-        nargs=2,
-        metavar=("NX", "NY"),
-        help="elements along x and y (default: the case's [model] mesh)",
-    )
-    p.add_argument("--json", metavar="FILE", help="write results as JSON ('-' for stdout)")
+    _add_mesh_option(p)
+    _add_json_option(p)
     p.add_argument("--plots", metavar="DIR",
                    help="write corner.png (with B and MVE ellipses), trace.png, "
                    "autocorrelation.png into DIR")  # fmt: skip

@@ -27,10 +27,13 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402 - BLAS threads are fixed before numpy loads
 import datetime  # noqa: E402
 import pathlib  # noqa: E402
-import platform  # noqa: E402
+import sys  # noqa: E402
 import time  # noqa: E402
 
 import numpy as np  # noqa: E402
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+import _machine  # noqa: E402  (this folder's shared helper)
 
 REPORT = "benchmark_reduced.md"
 CASE = "frederiksen_t300"
@@ -122,26 +125,8 @@ def measure(mesh=None):
 
 
 def machine():
-    """Processor, core count and library versions."""
-    import scipy
-
-    cpu = "unknown"
-    try:
-        for line in pathlib.Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    nproc = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    return {
-        "cpu": cpu,
-        "nproc": nproc,
-        "python": platform.python_version(),
-        "numpy": np.__version__,
-        "scipy": scipy.__version__,
-        "platform": platform.platform(),
-    }
+    """Processor, core count, memory and library versions (see ``_machine``)."""
+    return _machine.machine()
 
 
 def _table(headers, rows):

@@ -24,7 +24,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402 - BLAS threads are fixed before numpy loads
 import datetime  # noqa: E402
 import pathlib  # noqa: E402
-import platform  # noqa: E402
+import sys  # noqa: E402
 import time  # noqa: E402
 import warnings  # noqa: E402
 
@@ -32,6 +32,9 @@ import matplotlib  # noqa: E402
 
 matplotlib.use("Agg")
 import numpy as np  # noqa: E402
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+import _machine  # noqa: E402  (this folder's shared helper)
 
 REPORT = "benchmark_sampling.md"
 FIGURES = "sampling_frederiksen_{}.png"
@@ -48,28 +51,8 @@ TO_CASE = np.array([1e-9, 1e-9, 1.0, 1e-9, 1e-9, 1e-9])
 
 
 def machine():
-    """Processor, core count and library versions."""
-    import emcee
-    import scipy
-
-    cpu = "unknown"
-    try:
-        for line in pathlib.Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    nproc = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    return {
-        "cpu": cpu,
-        "nproc": nproc,
-        "python": platform.python_version(),
-        "numpy": np.__version__,
-        "scipy": scipy.__version__,
-        "emcee": emcee.__version__,
-        "platform": platform.platform(),
-    }
+    """Processor, core count, memory and library versions (see ``_machine``)."""
+    return _machine.machine("emcee")
 
 
 def run_frederiksen():

@@ -100,6 +100,19 @@ def test_benchmark_quick(tmp_path):
 
 
 @pytest.mark.slow
+def test_benchmark_diagnose_quick(tmp_path):
+    # every run lands in the table with its verdict; one and two workers, both cases
+    bench = _load(ROOT / "benchmarks" / "bench_diagnose.py")
+    rows = bench.main(tmp_path, quick=True)
+    assert [(r["case"], r["workers"]) for r in rows] == [
+        (case, w) for case in bench.cases(quick=True) for w in (1, 2)
+    ]
+    assert rows[0]["verdict"] == rows[1]["verdict"] == "consistent"  # nothing concealed
+    text = (tmp_path / bench.REPORT).read_text()
+    assert text.startswith("Made by `python benchmarks/bench_diagnose.py --quick`")
+
+
+@pytest.mark.slow
 def test_forward_full_convergence(tmp_path):
     # Paper section 6.3: the 50 x 50 mesh "satisfactorily resolves the first 14 modes".
     # Richardson on 25/50/100 puts its largest error at 0.16 % (0.16 sigma); 0.3 sigma bounds

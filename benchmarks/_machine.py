@@ -1,0 +1,53 @@
+"""The machine a benchmark ran on: processor, cores, memory, BLAS and library versions.
+
+Shared by every script of this folder (each puts the folder on ``sys.path`` to import it).
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import pathlib
+import platform
+
+import numpy as np
+
+__all__ = ["machine"]
+
+
+def _proc_field(path, key):
+    """The value of ``key`` in a ``/proc`` text file, or "unknown"."""
+    try:
+        for line in pathlib.Path(path).read_text().splitlines():
+            if line.startswith(key):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return "unknown"
+
+
+def _blas():
+    try:
+        blas = np.show_config(mode="dicts")["Build Dependencies"]["blas"]
+        return f"{blas.get('name', '?')} {blas.get('version', '')}".strip()
+    except Exception:  # noqa: BLE001 - informative only
+        return "unknown"
+
+
+def machine(*libraries):
+    """``{cpu, nproc, memory, blas, platform, python, numpy, scipy, <library>: version}``."""
+    mem = _proc_field("/proc/meminfo", "MemTotal")
+    if mem != "unknown":
+        mem = f"{int(mem.split()[0]) / 1024**2:.1f} GiB"
+    nproc = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    info = {
+        "cpu": _proc_field("/proc/cpuinfo", "model name"),
+        "nproc": nproc,
+        "memory": mem,
+        "blas": _blas(),
+        "platform": platform.platform(),
+        "python": platform.python_version(),
+    }
+    for name in ("numpy", "scipy", *libraries):
+        info[name] = importlib.import_module(name).__version__
+    return info
