@@ -1322,13 +1322,7 @@ class CertifiedModel:
         -------
         ReducedModalResult or ModalResult
         """
-        n = self.n_modes if n_modes is None else int(n_modes)
-        reason = self._fallback_reason(b, n)
-        if reason is None:
-            self.n_reduced += 1
-            return self.reduced.solve(b, n)
-        self._report(reason)
-        return self.model.solve(np.asarray(b, dtype=float), n)
+        return self._dispatch(b, n_modes, self.reduced.solve, lambda full: full)
 
     def eigenvalues(self, b, n_modes=None):
         """Lowest elastic eigenvalues, reduced if certified there (fastest path).
@@ -1345,13 +1339,17 @@ class CertifiedModel:
         numpy.ndarray, shape (n_modes,)
             rad^2/s^2.
         """
+        return self._dispatch(b, n_modes, self.reduced.eigenvalues, lambda full: full.eigenvalues)
+
+    def _dispatch(self, b, n_modes, reduced, from_full):
+        """``reduced(b, n)`` where certified, else ``from_full`` of the full model's solve."""
         n = self.n_modes if n_modes is None else int(n_modes)
         reason = self._fallback_reason(b, n)
         if reason is None:
             self.n_reduced += 1
-            return self.reduced.eigenvalues(b, n)
+            return reduced(b, n)
         self._report(reason)
-        return self.model.solve(np.asarray(b, dtype=float), n).eigenvalues
+        return from_full(self.model.solve(np.asarray(b, dtype=float), n))
 
     def _fallback_reason(self, b, n):
         if not self.certified:
