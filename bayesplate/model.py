@@ -317,7 +317,7 @@ class PlateModel:
             ``interpolation(points) @ vectors`` gives the field at the points.
         """
         element, local = self.mesh.locate(points)
-        values = np.array([self.element.fields(xy[None, :])[field][0] for xy in local])
+        values = self.element.fields(local)[field]  # (p, 32), all points at once
         rows = np.repeat(np.arange(len(element)), values.shape[1])
         cols = self.mesh.element_dofs[element].ravel()
         shape = (len(element), self.mesh.n_dofs)
