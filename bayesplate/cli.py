@@ -14,7 +14,7 @@ import sys
 
 from . import case as case_module
 from .case import CaseError, load_case
-from .io import write_json
+from .io import save_figure, write_json
 from .laminate import stiffness_from_engineering
 from .model import PlateModel
 
@@ -188,20 +188,12 @@ def _cmd_diagnose(args):
         from .plots import diagnosis_figures
 
         for name, fig in diagnosis_figures(model, d).items():
-            _save_figure(fig, pathlib.Path(args.plots) / f"{name}.png")
+            save_figure(fig, pathlib.Path(args.plots) / f"{name}.png")
     if args.json:
         write_json(diagnosis_to_dict(d), args.json)
     if not quiet:
         print(_diagnosis_text(d))
     return 0
-
-
-def _save_figure(fig, path):
-    """Write a figure whole or not at all (temporary file, then rename)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp.png")
-    fig.savefig(tmp, dpi=120, bbox_inches="tight")
-    tmp.replace(path)
 
 
 def _diagnosis_text(d):
@@ -584,7 +576,7 @@ def _cmd_sample(args):
         estimates = {"B": result.estimate, "MVE": mve}
         figs = sampling_figures(result, estimates, case.reference, title=case.name)
         for name, fig in figs.items():
-            _save_figure(fig, pathlib.Path(args.plots) / f"{name}.png")
+            save_figure(fig, pathlib.Path(args.plots) / f"{name}.png")
     if args.json:
         write_json(_sample_dict(case, result, mve), args.json)
     if not quiet:

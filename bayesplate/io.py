@@ -10,25 +10,43 @@ import tempfile
 
 import numpy as np
 
-__all__ = ["atomic_write_text", "constants_json", "write_json"]
+__all__ = [
+    "atomic_write",
+    "atomic_write_text",
+    "constants_json",
+    "jsonable",
+    "save_figure",
+    "write_json",
+]
 
 
-def atomic_write_text(path, text):
-    """Write ``text`` to ``path`` through a temporary file and a rename.
+def atomic_write(path, write, mode="w"):
+    """Call ``write(handle)`` on a temporary file next to ``path``, then rename it to ``path``.
 
     A reader never sees a partial file, and an error leaves any previous file untouched.
+    ``mode`` is ``"w"`` (text, UTF-8) or ``"wb"``.
     """
     path = pathlib.Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(text)
+        with os.fdopen(fd, mode, encoding=None if "b" in mode else "utf-8") as handle:
+            write(handle)
         os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the usual permissions
         os.replace(tmp, path)
     except BaseException:
         pathlib.Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def atomic_write_text(path, text):
+    """Write ``text`` to ``path`` whole or not at all (see :func:`atomic_write`)."""
+    atomic_write(path, lambda handle: handle.write(text))
+
+
+def save_figure(fig, path, dpi=120):
+    """Write a matplotlib figure as PNG whole or not at all."""
+    atomic_write(path, lambda h: fig.savefig(h, format="png", dpi=dpi, bbox_inches="tight"), "wb")
 
 
 _CONSTANT_KEYS = ("E1_GPa", "E2_GPa", "nu12", "G12_GPa", "G13_GPa", "G23_GPa")
@@ -61,17 +79,20 @@ def _umask():
     return mask
 
 
-def _jsonable(value):
+def jsonable(value):
+    """``json.dumps(default=...)``: numpy arrays and scalars, tuples and sets as lists."""
     if isinstance(value, np.ndarray):
         return value.tolist()
     if isinstance(value, np.generic):
         return value.item()
+    if isinstance(value, tuple | set):
+        return list(value)
     raise TypeError(f"{type(value).__name__} is not JSON serialisable")
 
 
 def write_json(obj, target):
     """Write ``obj`` as JSON to the file ``target``, or to standard output for ``"-"``."""
-    text = json.dumps(obj, indent=2, default=_jsonable) + "\n"
+    text = json.dumps(obj, indent=2, default=jsonable) + "\n"
     if str(target) == "-":
         sys.stdout.write(text)
     else:

@@ -34,10 +34,8 @@ import importlib.util
 import json
 import logging
 import math
-import os
 import pathlib
 import sys
-import tempfile
 import threading
 import time
 import warnings
@@ -48,6 +46,7 @@ import numpy as np
 
 from . import __version__
 from .case import Case, load_case
+from .io import atomic_write, atomic_write_text, jsonable, save_figure
 from .laminate import stiffness_from_engineering
 from .model import DEFAULT_MESH, ModalResult, PlateModel
 from .pairing import DEFAULT_EXTRA_MODES, MAC_EXTRA_MODES, Pairing, pair_measured
@@ -127,21 +126,11 @@ class ReportOptions:
 # ----------------------------------------------------------------------------- the cache
 
 
-def _jsonable(value):
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, tuple | set):
-        return list(value)
-    raise TypeError(f"{type(value).__name__} is not JSON serialisable")
-
-
 def _serialise(data):
     """Split a step result into its arrays (npz) and the rest (a JSON string)."""
     arrays = {k: v for k, v in data.items() if isinstance(v, np.ndarray)}
     rest = {k: v for k, v in data.items() if k not in arrays}
-    return arrays, json.dumps(rest, default=_jsonable, sort_keys=True)
+    return arrays, json.dumps(rest, default=jsonable, sort_keys=True)
 
 
 def _deserialise(arrays, text):
@@ -179,7 +168,7 @@ class StepCache:
         blob = json.dumps(
             {"case": self.case_digest, "step": step, "options": options, "version": self.version},
             sort_keys=True,
-            default=_jsonable,
+            default=jsonable,
         )
         return hashlib.sha256(blob.encode()).hexdigest()
 
@@ -210,7 +199,7 @@ class StepCache:
                 "__json__": np.array(text),
                 "__key__": np.array(self.key(step, options)),
             }
-            _atomic_write(self._path(step), lambda handle: np.savez(handle, **stored), "wb")
+            atomic_write(self._path(step), lambda handle: np.savez(handle, **stored), "wb")
         return _deserialise(arrays, text)
 
     def get(self, step, options, compute):
@@ -222,37 +211,6 @@ class StepCache:
         data = self.save(step, options, compute())
         self.computed.append(step)
         return data, False
-
-
-def _umask():
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-_UMASK = _umask()
-
-
-def _atomic_write(path, write, mode="w"):
-    """Call ``write(handle)`` on a temporary file next to `path`, then rename it to `path`."""
-    path = pathlib.Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=path.suffix)
-    try:
-        with os.fdopen(fd, mode, encoding=None if "b" in mode else "utf-8") as handle:
-            write(handle)
-        os.chmod(tmp, 0o666 & ~_UMASK)  # as open() would have made it (mkstemp: 0600)
-        os.replace(tmp, path)
-    except BaseException:
-        pathlib.Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def _save_figure(fig, path):
-    """Write a figure as PNG whole or not at all."""
-    _atomic_write(
-        path, lambda handle: fig.savefig(handle, format="png", dpi=120, bbox_inches="tight"), "wb"
-    )
 
 
 # ----------------------------------------------------------------------------- progress
@@ -1103,12 +1061,12 @@ def write_report(data, out_dir, progress=None):
     say = progress or (lambda line: None)
     figures = {}
     for name, fig in report_figures(data).items():
-        _save_figure(fig, out / f"{name}.png")
+        save_figure(fig, out / f"{name}.png")
         figures[name] = f"{name}.png"
     say(f"{len(figures)} figures written")
     path = out / "report.md"
     text = render_markdown(data, figures)
-    _atomic_write(path, lambda handle: handle.write(text))
+    atomic_write_text(path, text)
     return path
 
 

@@ -71,9 +71,7 @@ def lowest_modes(K, M, n_modes, shift, n_rigid_max=6, ordering=None, rigid_basis
         op = _shift_invert(K - shift * M, ordering)
         # a fixed pseudo-random start: the same matrices give the same numbers every time
         v0 = np.random.default_rng(0).standard_normal(K.shape[0])
-        vals, vecs = spla.eigsh(
-            K, k=k, M=M, sigma=shift, OPinv=op, which="LM", tol=1e-10, v0=v0
-        )
+        vals, vecs = spla.eigsh(K, k=k, M=M, sigma=shift, OPinv=op, which="LM", tol=1e-10, v0=v0)
     order = np.argsort(vals)
     vals, vecs = vals[order], vecs[:, order]
     rigid = np.abs(vals) <= RIGID_TOL * np.max(np.abs(vals))
