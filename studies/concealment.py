@@ -159,6 +159,23 @@ def _row(label, physics, size, theta, d, case, model, seconds):
     }  # fmt: skip
 
 
+def recovery_z(row):
+    """Largest |recovered - truth| / sd over the parameters, at the best mirror image.
+
+    None when the effect was not named. A located effect may be recovered at a mirror image
+    of its true place (the frequencies cannot tell them apart); the image nearest the truth
+    is compared.
+    """
+    if row["recovered"] is None or row["truth"] is None:
+        return None
+    sd = {k: v[1] for k, v in row["recovered"].items() if not isinstance(v[0], str)}
+    images = [{k: v[0] for k, v in row["recovered"].items()}, *row["mirrors"]]
+    return min(
+        max(abs(image[k] - row["truth"][k]) / sd[k] for k in sd if k in row["truth"])
+        for image in images
+    )
+
+
 def _fmt_params(recovered, truth):
     if recovered is None:
         return "-"
@@ -212,6 +229,7 @@ def _findings(rows):
     named = [r for r in rejected if r["chosen"] == r["effect"]]
     better = [r for r in named if r["after"] is not None
               and np.abs(r["after"]).max() < np.abs(r["before"]).max()]  # fmt: skip
+    within = [r for r in named if recovery_z(r) is not None and recovery_z(r) <= 2.0]
     return [
         "",
         "## Targets",
@@ -220,6 +238,10 @@ def _findings(rows):
         f" of {len(controls)}",
         f"- effects rejected by the nominal fit (p < 0.01): {len(rejected)}; named correctly: "
         f"{len(named)}; refit consistent: {sum(r['verdict'] == 'explained' for r in named)}",
+        f"- of those named, parameters within 2 reported sd of the truth (or of a mirror "
+        f"image of it): {len(within)} of {len(named)} (largest |error| / sd per row: "
+        + ", ".join(f"{r['effect']} {r['size']} {recovery_z(r):.1f}" for r in named)
+        + ")",
         f"- of those named, constants closer to the truth after the refit (largest error): "
         f"{len(better)} of {len(named)}",
     ]
