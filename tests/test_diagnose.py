@@ -111,3 +111,25 @@ def test_nominal_fit_is_global_where_a_local_fit_is_trapped():
     assert local.chi2 > 100  # the trap is real
     best = fit_nominal(problem, coarse_model(model), np.random.default_rng(0))
     assert best.chi2 < 30  # chi-square 99th percentile at ~8 dof is ~20; 14 data
+
+
+def test_a_second_optimum_that_fits_as_well_makes_its_constants_unidentified():
+    from types import SimpleNamespace
+
+    from bayesplate import laminate
+    from bayesplate.discrepancy.diagnose import _basins_note, _unidentified
+
+    e = np.array([113e9, 8.5e9, 0.32, 4.45e9, 4.4e9, 2.9e9])
+    sd = 0.01 * e  # well identified by the Laplace curvature of its own basin
+    other = e * np.array([0.95, 1.05, 1.0, 1.0, 1.7, 0.5])  # the G13 / G23 trade
+    V_b = np.diag((0.5 * laminate.stiffness_from_engineering(e)) ** 2)  # a loose prior
+
+    def fit_with(objective_gap):
+        b_other = laminate.stiffness_from_engineering(other)
+        return SimpleNamespace(constants=e, constants_sd=sd, chi2=2.0, chi2_prior=10.0,
+                               alternatives=((b_other, 12.0 + objective_gap),))  # fmt: skip
+
+    assert _unidentified(fit_with(1.0), V_b, 0.7, margin=2.0) == ["E1", "E2", "G13", "G23"]
+    assert "G23 2.9 GPa vs 1.45 GPa" in _basins_note(fit_with(1.0), 2.0)
+    assert _unidentified(fit_with(5.0), V_b, 0.7, margin=2.0) == []  # a worse basin: ignored
+    assert _basins_note(fit_with(5.0), 2.0) is None

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import copy
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -71,6 +71,9 @@ class JointFit:
         The forward solution at the best fit.
     refined : bool
         False when the fit stayed on a corrected coarse mesh (see :func:`fit`).
+    alternatives : tuple of (numpy.ndarray, float)
+        The other local optima reached on the working mesh: their stiffness coefficients
+        ``b`` (Pa) and objective ``chi2 + chi2_prior``, best first.
     """
 
     physics: object
@@ -88,6 +91,7 @@ class JointFit:
     message: str
     modal: object = field(repr=False, default=None)
     refined: bool = True
+    alternatives: tuple = ()
 
     @property
     def constants(self):
@@ -276,14 +280,15 @@ def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None, keep
     -------
     JointFit
     """
-    if coarse is None:
-        return _summarise(problem, _local_fits(problem, starts, max_nfev, workers)[0])
-    rough_problem = problem.on(coarse, scale)
-    rough = _local_fits(rough_problem, starts, max_nfev, workers)
-    if refine is not None and not refine(_summarise(rough_problem, rough[0], refined=False)):
-        return _summarise(rough_problem, rough[0], refined=False)
-    best = _local_fits(problem, [r.x for r in rough[:keep]], max_nfev, workers)[0]
-    return _summarise(problem, best)
+    if coarse is not None:
+        rough_problem = problem.on(coarse, scale)
+        rough = _local_fits(rough_problem, starts, max_nfev, workers)
+        if refine is not None and not refine(_summarise(rough_problem, rough[0], refined=False)):
+            return _summarise(rough_problem, rough[0], refined=False)
+        starts = [r.x for r in rough[:keep]]
+    results = _local_fits(problem, starts, max_nfev, workers)
+    others = tuple((problem.unpack(r.x)[0], 2.0 * r.cost) for r in results[1:])
+    return replace(_summarise(problem, results[0]), alternatives=others)
 
 
 def _local_fits(problem, starts, max_nfev, workers=1):
