@@ -107,7 +107,9 @@ def write_report(out_dir="reports", quick=False):
     done = json.loads(cache.read_text()) if cache.exists() else {}
     n = len(scenarios(quick))
     rows = [done[str(i)] for i in range(n) if str(i) in done]
-    mesh = (12, 6) if quick else load_case(bundled_case_path("frederiksen_t300")).mesh
+    case = load_case(bundled_case_path("frederiksen_t300"))
+    mesh = (12, 6) if quick else case.mesh
+    _with_mirror_images(rows, scenarios(quick), PlateModel.from_case(case, mesh=mesh))
     text = _report(rows, mesh, quick)
     if len(rows) < n:
         text += (
@@ -157,6 +159,23 @@ def _row(label, physics, size, theta, d, case, model, seconds):
         "gains": {c.name: c.log_evidence_gain for c in d.candidates},
         "unidentified": d.unidentified,
     }  # fmt: skip
+
+
+def _with_mirror_images(rows, runs, model):
+    """Put the mirror images of each recovered parameter set in its row (``"mirrors"``).
+
+    Computed here, from the physics, rather than kept from the run: rows made before a
+    physics learnt its mirror images (the taper's ``-e``) are then judged the same way.
+    """
+    physics_of = {(label, size): physics for label, physics, size, _ in runs}
+    for row in rows:
+        physics = physics_of.get((row["effect"], row["size"]))
+        if row["recovered"] is None or physics is None:
+            continue
+        names = [p.name for p in physics.parameters(model, np.zeros(6))]
+        theta = np.array([row["recovered"][n][0] for n in names])
+        row["mirrors"] = [dict(zip(names, map(float, t), strict=True))
+                          for t in physics.mirror_images(model, theta)]  # fmt: skip
 
 
 def recovery_z(row):

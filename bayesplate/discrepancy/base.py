@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Parameter", "Physics", "mirror_positions"]
+__all__ = ["Parameter", "Physics", "mirror_positions", "reflection_symmetric"]
 
 
 @dataclass(frozen=True)
@@ -93,8 +93,7 @@ def mirror_positions(model, x_mm, y_mm):
     """
     a_mm, b_mm = 1e3 * model.mesh.a, 1e3 * model.mesh.b
     images = [(a_mm - x_mm, b_mm - y_mm)]
-    angles = np.mod(model.layup_deg, 90.0)
-    if np.all(np.isclose(angles, 0.0) | np.isclose(angles, 90.0)):
+    if reflection_symmetric(model):
         images = [(a_mm - x_mm, y_mm), (x_mm, b_mm - y_mm)] + images
     tol = 1e-6 * max(a_mm, b_mm)
     distinct = []
@@ -102,3 +101,13 @@ def mirror_positions(model, x_mm, y_mm):
         if all(np.hypot(p[0] - q[0], p[1] - q[1]) > tol for q in [(x_mm, y_mm), *distinct]):
             distinct.append(p)
     return distinct
+
+
+def reflection_symmetric(model):
+    """Whether the layup is unchanged by the reflections ``x -> -x`` and ``y -> -y``.
+
+    A reflection turns a ply at ``theta`` into one at ``-theta``: only 0 and 90 degree plies
+    stay as they were.
+    """
+    angles = np.mod(model.layup_deg, 90.0)
+    return bool(np.all(np.isclose(angles, 0.0) | np.isclose(angles, 90.0)))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import Parameter, Physics
+from .base import Parameter, Physics, reflection_symmetric
 
 __all__ = ["PlyMisalignment"]
 
@@ -31,7 +31,4 @@ class PlyMisalignment(Physics):
 
     def mirror_images(self, model, theta):
         """``-delta`` when the layup is mirror-symmetric."""
-        angles = np.mod(model.layup_deg, 90.0)
-        if np.all(np.isclose(angles, 0.0) | np.isclose(angles, 90.0)):
-            return [-np.asarray(theta)]
-        return []
+        return [-np.asarray(theta)] if reflection_symmetric(model) else []

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import Parameter, Physics
+from .base import Parameter, Physics, reflection_symmetric
 
 __all__ = ["ThicknessTaper"]
 
@@ -45,3 +45,7 @@ class ThicknessTaper(Physics):
         masses = np.array([model.element_mass(thickness_scale=v) for v in levels])
         mass = model.assembler.data(masses[element_level])
         return model.modified(stiffness_terms=terms, mass_data=mass)
+
+    def mirror_images(self, model, theta):
+        """``-e`` (the plate turned end for end) when the layup is mirror-symmetric."""
+        return [-np.asarray(theta)] if reflection_symmetric(model) else []
