@@ -161,18 +161,16 @@ def test_concealment_quick(tmp_path):
 def test_diagnose_frederiksen_quick(tmp_path):
     # The measured plate on half the mesh: Frederiksen's own constants reproduce every
     # measured frequency within 0.20 % (forward-model study), so nothing is missing at the
-    # case's 1 % nor at 0.2 %; at 0.2 % the well-informed E1, E2 and G12 land within 2 % of
-    # his two-specimen estimate (113.0, 8.50, 4.45 GPa).
+    # case's 1 % nor at 0.2 %; every run is checked against a fit from his constants.
     module = _load(ROOT / "studies" / "diagnose_frederiksen.py")
     results = module.main(tmp_path, quick=True)
-    assert {k: d.verdict for k, d in results.items()} == {
-        "1pc": "consistent",
-        "0p2pc": "consistent",
-    }
-    e = results["0p2pc"].nominal.constants
-    np.testing.assert_allclose(e[[0, 1, 3]], [113.0e9, 8.50e9, 4.45e9], rtol=0.02)
+    assert results["1pc"].verdict == results["0p2pc"].verdict == "consistent"
+    for key in ("1pc", "0p2pc"):
+        local = results[f"{key}_published"]
+        assert local.chi2 < 14  # within 1 sigma per frequency on average, at either sigma
     text = (tmp_path / module.REPORT).read_text()
     assert text.count("**Verdict: consistent**") == 2
+    assert text.count("Check of the global stage") == 2
     _assert_pngs(tmp_path, [f"diagnose_frederiksen_{k}_residuals.png" for k in ("1pc", "0p2pc")])
 
 
