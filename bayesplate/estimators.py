@@ -50,6 +50,7 @@ __all__ = [
     "TRACKING",
     "Conventions",
     "CONVENTIONS",
+    "resolve_conventions",
     "EstimateResult",
     "estimate",
     "run",
@@ -515,7 +516,8 @@ def _failed_result(problem, method, state, settings, started):
     )
 
 
-def _conventions(convention):
+def resolve_conventions(convention):
+    """The :class:`Conventions` of a name in :data:`CONVENTIONS`, or the object itself."""
     if isinstance(convention, Conventions):
         return convention
     if convention not in CONVENTIONS:
@@ -581,7 +583,7 @@ def estimate(
     """
     if method not in METHODS:
         raise ValueError(f"method = {method!r}: must be one of {METHODS}")
-    conventions = _conventions(convention)
+    conventions = resolve_conventions(convention)
     model = model or PlateModel.from_case(case)
     mean = np.asarray(case.prior.mean if prior_mean is None else prior_mean, dtype=float)
     sd = np.asarray(case.prior.sd if prior_sd is None else prior_sd, dtype=float)

@@ -68,7 +68,7 @@ from threadpoolctl import threadpool_limits
 
 from . import laminate
 from .case import ENGINEERING_KEYS
-from .estimators import CONVENTIONS, Conventions, b_step, run
+from .estimators import b_step, resolve_conventions, run
 from .model import PlateModel
 from .pairing import Pairing, pair_measured
 from .posterior import GaussianProblem
@@ -633,14 +633,6 @@ class SamplingSetup:
 # ----------------------------------------------------------------------------- setup
 
 
-def _conventions(convention):
-    if isinstance(convention, Conventions):
-        return convention
-    if convention not in CONVENTIONS:
-        raise ValueError(f"convention = {convention!r}: must be one of {tuple(CONVENTIONS)}")
-    return CONVENTIONS[convention]
-
-
 def _pilot_model(case, model, pilot_mesh):
     """The model of the pilot B run: the model itself, or the case on a coarser mesh."""
     if pilot_mesh is None:
@@ -745,7 +737,7 @@ def prepare(
     """
     if forward not in ("reduced", "full"):
         raise ValueError(f"forward = {forward!r}: must be 'reduced' or 'full'")
-    conventions = _conventions(convention)
+    conventions = resolve_conventions(convention)
     own_model = model is None
     model = model or PlateModel.from_case(case)
     mean = np.asarray(case.prior.mean if prior_mean is None else prior_mean, dtype=float)
