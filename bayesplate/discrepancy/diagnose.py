@@ -226,14 +226,16 @@ def diagnose(case, model=None, physics=None, rng=None, progress=None, pairing=No
     unidentified = _unidentified(nominal, V_b, opts["unidentified_ratio"], opts["basin_margin"])
 
     kinds = mode_kinds(model, _paired(nominal, modes))
-    maps = _maps(model, nominal, modes, sigma)
+    # what the constants can absorb, whitened: projected out of the maps and of the scans
+    P = absorbable_projector(_paired(nominal, modes).sensitivities * nominal.b / sigma[:, None])
+    maps = _maps(model, nominal, modes, sigma, P)
     region, mirrors = _region(model, maps)
     located = [int(i) + 1 for i in np.flatnonzero(np.abs(nominal.residual_sigma) > 2.0)]
 
     coarse_lam = coarse.solve(nominal.b, int(modes.max()) + 1).eigenvalues[modes]
     level = {"coarse": coarse, "scale": nominal.eigenvalues / coarse_lam,
              "margin": opts["refine_margin"], "workers": opts["workers"]}  # fmt: skip
-    scans = _scans(model, nominal, modes, Y, sigma)
+    scans = _scans(model, nominal, modes, Y, sigma, P)
     ranked = _rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans,
                    physics or all_candidates(), say)  # fmt: skip
     better = _improved_nominal(nominal_problem, nominal, ranked, level)
@@ -355,32 +357,42 @@ def _unidentified(fit_, V_b, ratio, margin=None):
     Jinv = np.linalg.inv(laminate.stiffness_jacobian(e))
     prior_sd = np.sqrt(np.diag(Jinv @ V_b @ Jinv.T))
     loose = fit_.constants_sd > ratio * prior_sd
-    best = fit_.chi2 + fit_.chi2_prior
-    for b, objective in fit_.alternatives if margin is not None else ():
-        if objective - best < margin and laminate.is_physical(b):
-            other = laminate.engineering_from_stiffness(b)
-            loose |= np.abs(other - e) > 2.0 * fit_.constants_sd
+    for _, _, differs in _rival_optima(fit_, margin) if margin is not None else ():
+        loose |= differs
     return [n for n, flag in zip(CONSTANT_NAMES, loose, strict=True) if flag]
 
 
-def _basins_note(fit_, margin):
-    """A note naming the other optima that fit about as well, or None."""
+def _rival_optima(fit_, margin):
+    """Other optima within ``margin`` of the best objective whose constants differ.
+
+    Returns
+    -------
+    list of (constants, objective, differs)
+        ``differs``: bool (6,), the constants more than two deviations from the best fit's.
+    """
     best = fit_.chi2 + fit_.chi2_prior
-    close = [(b, o) for b, o in fit_.alternatives
-             if o - best < margin and laminate.is_physical(b)]  # fmt: skip
-    differ = [(laminate.engineering_from_stiffness(b), o) for b, o in close
-              if np.any(np.abs(laminate.engineering_from_stiffness(b) - fit_.constants)
-                        > 2.0 * fit_.constants_sd)]  # fmt: skip
-    if not differ:
+    rivals = []
+    for b, objective in fit_.alternatives:
+        if objective - best < margin and laminate.is_physical(b):
+            e = laminate.engineering_from_stiffness(b)
+            differs = np.abs(e - fit_.constants) > 2.0 * fit_.constants_sd
+            if differs.any():
+                rivals.append((e, objective, differs))
+    return rivals
+
+
+def _basins_note(fit_, margin):
+    """A note naming the other optimum that fits about as well, or None."""
+    rivals = _rival_optima(fit_, margin)
+    if not rivals:
         return None
-    e, o = differ[0]
-    which = [n for n, a, c, s in zip(CONSTANT_NAMES, e, fit_.constants, fit_.constants_sd,
-                                     strict=True) if abs(a - c) > 2 * s]  # fmt: skip
+    e, objective, differs = rivals[0]
     values = ", ".join(f"{n} {_case_units(n, fit_.constants)} vs {_case_units(n, e)}"
-                       for n in which)  # fmt: skip
+                       for n, d in zip(CONSTANT_NAMES, differs, strict=True) if d)  # fmt: skip
     return (
         f"the nominal fit has a second optimum that fits about as well (objective "
-        f"{best:.2f} vs {o:.2f}): {values}; these constants are reported as unidentified"
+        f"{fit_.chi2 + fit_.chi2_prior:.2f} vs {objective:.2f}): {values}; these "
+        "constants are reported as unidentified"
     )
 
 
@@ -389,11 +401,10 @@ def _case_units(name, e):
     return f"{e[i]:.3g}" if name == "nu12" else f"{1e-9 * e[i]:.3g} GPa"
 
 
-def _maps(model, nominal, modes, sigma):
+def _maps(model, nominal, modes, sigma, P):
     """Location maps of a local stiffness loss and of a point mass at the nominal fit."""
     paired = _paired(nominal, modes)
     r = nominal.residual_sigma
-    P = absorbable_projector(paired.sensitivities * nominal.b / sigma[:, None])
     return {
         "stiffness_loss": stiffness_loss_map(model, paired, nominal.b, r, sigma, P),
         "point_mass": point_mass_map(model, paired, r, sigma, P),
@@ -414,11 +425,9 @@ def _region(model, maps):
     return best[1], [tuple(float(v) for v in p) for p in mirror_positions(model, *best[1])]
 
 
-def _scans(model, nominal, modes, Y, sigma):
+def _scans(model, nominal, modes, Y, sigma, P):
     """Ritz scans of the located candidates at the nominal fit (see :mod:`.scan`)."""
     basis = RitzBasis.from_modes(model, model.solve(nominal.b, int(modes.max()) + 21))
-    paired = _paired(nominal, modes)
-    P = absorbable_projector(paired.sensitivities * nominal.b / sigma[:, None])
     plate_mass_g = 1e3 * model.density * model.thickness * model.mesh.a * model.mesh.b
     a_mm, b_mm = 1e3 * model.mesh.a, 1e3 * model.mesh.b
     sizes = [(a_mm * sx, b_mm * sy) for sx, sy in

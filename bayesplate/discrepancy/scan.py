@@ -138,6 +138,7 @@ def point_mass_scan(model, basis, Y, sigma, modes, projector, masses_g, stride=2
     w = basis.vectors[mesh.dofs("w", nodes)]  # (p, n)
     s = np.einsum("pn,pn->p", w, w)
     lam = basis.eigenvalues
+    xy = 1e3 * mesh.nodes[nodes]
     thetas, chi2 = [], []
     for mass_g in np.asarray(masses_g, dtype=float):
         m = 1e-3 * mass_g
@@ -146,7 +147,6 @@ def point_mass_scan(model, basis, Y, sigma, modes, projector, masses_g, stride=2
         S = np.eye(lam.size) - c[:, None, None] * w[:, :, None] * w[:, None, :]
         A = (S * lam) @ S
         chi2.append(_misfit(np.linalg.eigvalsh(A), basis, Y, sigma, modes, projector))
-        xy = 1e3 * mesh.nodes[nodes]
         thetas.append(np.column_stack([np.full(nodes.size, mass_g), xy]))
     return Scan(np.vstack(thetas), np.concatenate(chi2), (1, 2))
 
