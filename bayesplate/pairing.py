@@ -27,6 +27,7 @@ __all__ = [
     "DEFAULT_EXTRA_MODES",
     "DEFAULT_MAC_THRESHOLD",
     "MAC_EXTRA_MODES",
+    "NEGLIGIBLE_SHAPE",
     "Pairing",
     "UnpairedModeWarning",
     "mac_matrix",
@@ -47,16 +48,26 @@ DEFAULT_EXTRA_MODES = 2
 DEFAULT_MAC_THRESHOLD = 0.5
 #: Computed modes beyond the measured ones offered to the MAC assignment (missing modes).
 MAC_EXTRA_MODES = 6
+#: Squared norm, relative to the largest of its set, below which a shape counts as zero in
+#: the MAC (a norm ratio of 1e-6: measurement noise is far above it, solver round-off on a
+#: quantity that is zero in exact arithmetic, about 1e-12 of the norm, far below).
+NEGLIGIBLE_SHAPE = 1e-12
 
 
 class UnpairedModeWarning(UserWarning):
     """A measured mode matches no computed mode by shape and is left out of the fit."""
 
 
-def mac_matrix(A, B, weight=None):
+def mac_matrix(A, B, weight=None, negligible=NEGLIGIBLE_SHAPE):
     """Modal assurance criterion between two sets of vectors.
 
     ``MAC_ij = (a_i^T W b_j)^2 / ((a_i^T W a_i) (b_j^T W b_j))``.
+
+    A vector with no content is like no other: its MAC is 0. "No content" is judged
+    relative to its own set, ``a_i^T W a_i <= negligible * max_k a_k^T W a_k``, because a
+    quantity that is zero in exact arithmetic (``w`` of an in-plane mode, about 1e-11 of a
+    bending mode's) comes out of a solver as round-off, and its MAC, once normalised, would
+    be round-off too: different on another CPU, and able to win an assignment.
 
     Parameters
     ----------
@@ -65,21 +76,33 @@ def mac_matrix(A, B, weight=None):
     B : array_like, shape (n, q)
     weight : array_like or sparse matrix, shape (n, n), optional
         ``W``, e.g. the mass matrix; identity when None.
+    negligible : float
+        Squared norm, relative to the largest of the same set, at or below which a vector
+        counts as zero.
 
     Returns
     -------
     numpy.ndarray, shape (p, q)
-        Entries in [0, 1]; 0 against a zero vector (e.g. ``w`` of an in-plane mode).
+        Entries in [0, 1]; exactly 0 against a vector with no content.
     """
     A = np.asarray(A, dtype=float)
     B = np.asarray(B, dtype=float)
     WB = B if weight is None else weight @ B
     WA = A if weight is None else weight @ A
     cross = A.T @ WB
-    na = np.einsum("ij,ij->j", A, WA)
-    nb = np.einsum("ij,ij->j", B, WB)
+    na = _significant(np.einsum("ij,ij->j", A, WA), negligible)
+    nb = _significant(np.einsum("ij,ij->j", B, WB), negligible)
     norms = np.outer(na, nb)
     return np.divide(cross**2, norms, out=np.zeros_like(norms), where=norms > 0)
+
+
+def _significant(squared_norms, negligible):
+    """Squared norms with those at or below `negligible` x the largest set to 0."""
+    squared_norms = np.asarray(squared_norms, dtype=float)
+    if squared_norms.size == 0:
+        return squared_norms
+    floor = negligible * np.max(squared_norms)
+    return np.where(squared_norms > floor, squared_norms, 0.0)
 
 
 def pair_by_order(m):
@@ -326,10 +349,16 @@ def pair_measured(
     mac = shape_mac(measured, model, modal.vectors)
     assigned = assign_by_mac(mac, threshold)
     kept = np.flatnonzero(assigned >= 0)
+    empty = _significant(np.sum(np.asarray(measured.shapes, float) ** 2, axis=1), NEGLIGIBLE_SHAPE)
     for i in np.flatnonzero(assigned < 0):
+        why = (
+            "its shape has no transverse amplitude at the points (an in-plane mode?)"
+            if empty[i] == 0
+            else f"best MAC {mac[i].max():.2f} < {threshold:g}"
+        )
         warnings.warn(
             f"measured mode {i + 1} ({measured.frequency_Hz[i]:.6g} Hz) matches no computed "
-            f"mode by shape (best MAC {mac[i].max():.2f} < {threshold:g}): left out of the fit",
+            f"mode by shape ({why}): left out of the fit",
             UnpairedModeWarning,
             stacklevel=2,
         )

@@ -336,19 +336,10 @@ def test_shape_pairing_recovers_a_test_that_missed_a_mode(plate1):
     # Plate 1's frequencies without mode 5, with shapes (w at 28 points) computed at the
     # target: by order every mode above the gap goes with the wrong computed mode and MVE
     # does not converge; paired by shape (MAC) and followed between iterates it reaches the
-    # target within the same 0.5 % as the complete data.
+    # target within the same 0.5 % as the complete data. Modes 13 and 14 are in-plane (w is
+    # round-off): they match nothing and are left out, on every CPU.
     case, model = plate1
-    modal = model.solve(laminate.stiffness_from_engineering(case.reference), 14)
-    x, y = np.meshgrid(np.linspace(0.01, 0.19, 7), np.linspace(0.01, 0.09, 4))
-    points = np.column_stack([x.ravel(), y.ravel()])
-    shapes = (model.interpolation(points) @ modal.vectors).T
-    keep = np.delete(np.arange(14), 4)
-    missing = case.with_measured(
-        frequency_Hz=case.measured.frequency_Hz[keep],
-        sigma_Hz=case.measured.sigma_Hz[keep],
-        points=points,
-        shapes=shapes[keep],
-    )
+    missing = _missed_mode_case(plate1)
     initial = np.array(PAPER["plate1"]["test2"]["initial"]) * SI
     options = {"model": model, "prior_mean": initial, "prior_sd": initial / 6}
     by_order = estimate(missing, "MVE", pairing="order", **options)
@@ -358,3 +349,53 @@ def test_shape_pairing_recovers_a_test_that_missed_a_mode(plate1):
     assert by_shape.settings["tracking"] == "follow"
     np.testing.assert_allclose(by_shape.constants[IN_PLANE], TARGET1[IN_PLANE], rtol=5e-3)
     assert 5 not in by_shape.modes  # the missed mode stays unpaired at the estimate
+
+
+def _missed_mode_case(plate1, nudge=None):
+    """Plate 1 without mode 5, with w at 28 points computed at the target (`nudge`d)."""
+    case, model = plate1
+    target = case.reference if nudge is None else nudge(case.reference)
+    modal = model.solve(laminate.stiffness_from_engineering(target), 14)
+    x, y = np.meshgrid(np.linspace(0.01, 0.19, 7), np.linspace(0.01, 0.09, 4))
+    points = np.column_stack([x.ravel(), y.ravel()])
+    shapes = (model.interpolation(points) @ modal.vectors).T
+    keep = np.delete(np.arange(14), 4)
+    return case.with_measured(
+        frequency_Hz=case.measured.frequency_Hz[keep],
+        sigma_Hz=case.measured.sigma_Hz[keep],
+        points=points,
+        shapes=shapes[keep],
+    )
+
+
+@pytest.mark.filterwarnings("ignore::bayesplate.pairing.UnpairedModeWarning")
+@pytest.mark.parametrize(("method", "pairing"), [("B", "order"), ("MVE", "order"), ("MVE", "auto")])
+def test_estimates_do_not_depend_on_round_off(plate1, method, pairing):
+    # Issue 16: a result that flips with the CPU's round-off is a defect of the method.
+    # Inputs perturbed at 1e-12 relative (frequencies, deviations, initial values, and the
+    # constants the measured shapes are computed from, so that the solver's round-off in them
+    # changes as between BLAS kernels) must give the same pairing,
+    # the same outcome and constants equal within the estimator's own TOL (1e-3), in every
+    # direction tried. The shapes include plate 1's two in-plane modes, whose w is round-off:
+    # it was their MAC that flipped the shape pairing on AMD (OpenBLAS Zen kernels).
+    case, model = plate1
+    base = _missed_mode_case(plate1) if pairing == "auto" else case
+    initial = np.array(PAPER["plate1"]["test2"]["initial"]) * SI
+    options = {"model": model, "pairing": pairing, "tol": 1e-3}
+    reference = estimate(base, method, prior_mean=initial, prior_sd=initial / 6, **options)
+    rng = np.random.default_rng(16)
+
+    def nudge(a):
+        return np.asarray(a) * (1 + 1e-12 * rng.standard_normal(np.shape(a)))
+
+    for _ in range(4):
+        # the shapes made anew by the solver from nudged constants: its own round-off
+        data = _missed_mode_case(plate1, nudge) if pairing == "auto" else case
+        perturbed = data.with_measured(
+            frequency_Hz=nudge(data.measured.frequency_Hz), sigma_Hz=nudge(data.measured.sigma_Hz)
+        )
+        start = nudge(initial)
+        again = estimate(perturbed, method, prior_mean=start, prior_sd=start / 6, **options)
+        assert again.converged == reference.converged, again.message
+        np.testing.assert_array_equal(again.modes, reference.modes)
+        np.testing.assert_allclose(again.constants, reference.constants, rtol=1e-3)
