@@ -35,6 +35,8 @@ from typing import Any
 
 import numpy as np
 
+from .quantities import CASE_SCALE, ENGINEERING_KEYS, ENGINEERING_NAMES
+
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover - Python 3.10 only
@@ -58,17 +60,14 @@ __all__ = [
     "engineering_from_si",
 ]
 
-ENGINEERING_NAMES = ("E1", "E2", "nu12", "G12", "G13", "G23")
 """Names of the six lamina constants, in the order used by every array of the package."""
 
-ENGINEERING_KEYS = ("E1_GPa", "E2_GPa", "nu12", "G12_GPa", "G13_GPa", "G23_GPa")
 """The same six constants as spelled in a case file (moduli in GPa)."""
 
 MAX_MESH_ELEMENTS = 400
 """Largest number of elements allowed along one side in ``model.mesh``."""
 
 _MM = 1e-3  # m per mm
-_SI_SCALE = np.array([1e9, 1e9, 1.0, 1e9, 1e9, 1e9])  # case units (GPa, -) -> SI (Pa, -)
 _PLY_SUM_RTOL = 1e-6  # relative tolerance on sum(ply thicknesses) == thickness
 _MAX_MODE_INDEX = 1_000_000  # keeps mode indices far inside int64
 _SHOW_WIDTH = 60  # characters of a value quoted in an error message
@@ -477,7 +476,7 @@ def engineering_to_si(values) -> np.ndarray:
     numpy.ndarray, shape (..., 6)
         The same constants with moduli in Pa (a new array).
     """
-    return _engineering_array(values) * _SI_SCALE
+    return _engineering_array(values) * CASE_SCALE
 
 
 def engineering_from_si(values_si) -> np.ndarray:
@@ -493,7 +492,7 @@ def engineering_from_si(values_si) -> np.ndarray:
     numpy.ndarray, shape (..., 6)
         The same constants with moduli in GPa (a new array).
     """
-    return _engineering_array(values_si) / _SI_SCALE
+    return _engineering_array(values_si) / CASE_SCALE
 
 
 def _engineering_array(values) -> np.ndarray:

@@ -284,7 +284,7 @@ _GPA_SCALE = (1e9, 1e9, 1.0, 1e9, 1e9, 1e9)  # SI -> case units (GPa, -)
 def _estimate_dict(case, model, result):
     """The JSON document of ``bayesplate estimate``."""
     from .case import ENGINEERING_KEYS
-    from .laminate import STIFFNESS_NAMES
+    from .quantities import STIFFNESS_NAMES
 
     def constants(r):
         return {

@@ -44,6 +44,7 @@ from .posterior import (
     Prediction,
     prior_in_stiffness,
 )
+from .quantities import engineering_covariance, hz_from_eigenvalue
 
 __all__ = [
     "METHODS",
@@ -378,21 +379,15 @@ def _final_covariance(problem, method, state, conventions):
     return state.cov
 
 
-def _engineering_covariance(b, cov_b):
-    """First-order ``cov_e = J^-1 cov_b J^-T`` with ``J = d b / d e`` at the estimate."""
-    J_inv = np.linalg.inv(laminate.stiffness_jacobian(laminate.engineering_from_stiffness(b)))
-    return J_inv @ cov_b @ J_inv.T
-
-
 def _result(problem, method, state, conventions, settings, n_solves, started):
     try:
         cov_b = _final_covariance(problem, method, state, conventions)
-        cov = _engineering_covariance(state.b, cov_b)
+        cov = engineering_covariance(laminate.engineering_from_stiffness(state.b), cov_b)
     except np.linalg.LinAlgError:  # a singular final step: report no covariance, not raise
         cov_b = cov = np.full((6, 6), np.nan)
     history_b = np.asarray(state.history)
-    f = np.sqrt(np.maximum(state.prediction.g, 0.0)) / (2 * np.pi)
-    measured = np.sqrt(problem.Y) / (2 * np.pi)
+    f = hz_from_eigenvalue(state.prediction.g)
+    measured = hz_from_eigenvalue(problem.Y)
     return EstimateResult(
         method=method,
         b=state.b,
@@ -508,7 +503,7 @@ def _failed_result(problem, method, state, settings, started):
         state.message,
         0,
         nan,
-        np.sqrt(problem.Y) / (2 * np.pi),
+        hz_from_eigenvalue(problem.Y),
         nan,
         problem.pairing.modes + 1,
         wall_time=time.perf_counter() - started,

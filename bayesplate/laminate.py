@@ -5,7 +5,8 @@ Everything here is SI (Pa, m, kg/m^3) and pure array computation.
 The lamina is described by its six stiffness coefficients in material axes,
 ``b = (C11, C22, C12, C66, C44, C55)`` (eqs. 20-21), the parameters the estimators work on.
 The engineering constants are ``e = (E1, E2, nu12, G12, G13, G23)`` in the order of
-:data:`bayesplate.case.ENGINEERING_NAMES`.
+:data:`bayesplate.quantities.ENGINEERING_NAMES`; names, units and covariance
+transforms live in :mod:`bayesplate.quantities`.
 """
 
 from __future__ import annotations
@@ -15,7 +16,6 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = [
-    "STIFFNESS_NAMES",
     "LaminateMatrices",
     "higher_order_coefficient",
     "stiffness_from_engineering",
@@ -30,9 +30,6 @@ __all__ = [
     "constitutive_matrix",
     "inertia_matrix",
 ]
-
-STIFFNESS_NAMES = ("C11", "C22", "C12", "C66", "C44", "C55")
-
 
 def higher_order_coefficient(h):
     """Return Reddy's ``c = -4 / (3 h^2)`` (eq. 14) for thickness ``h`` in m."""

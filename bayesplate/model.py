@@ -19,6 +19,7 @@ from .fem.assembly import Assembler
 from .fem.eigen import lowest_modes
 from .fem.element import TSDTRectangle
 from .fem.mesh import RectangularMesh
+from .quantities import hz_from_eigenvalue
 
 __all__ = ["BOUNDARIES", "DEFAULT_MESH", "ModalResult", "PlateModel"]
 
@@ -53,7 +54,7 @@ class ModalResult:
     @property
     def frequency_Hz(self):
         """Natural frequencies in Hz, shape (n,)."""
-        return np.sqrt(np.maximum(self.eigenvalues, 0.0)) / (2 * np.pi)
+        return hz_from_eigenvalue(self.eigenvalues)
 
     @property
     def n_rigid(self):

@@ -13,7 +13,7 @@ from collections.abc import Mapping
 import numpy as np
 from matplotlib.figure import Figure
 
-from .laminate import STIFFNESS_NAMES
+from .quantities import STIFFNESS_NAMES
 
 __all__ = [
     "CONSTANT_LABELS",

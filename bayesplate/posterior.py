@@ -45,6 +45,7 @@ import numpy as np
 
 from . import laminate
 from .pairing import Pairing
+from .quantities import eigenvalue_from_hz, eigenvalue_sd, stiffness_covariance
 
 __all__ = [
     "OBSERVATION_CONVENTIONS",
@@ -64,7 +65,7 @@ PRIOR_CONVENTIONS = ("variance", "full", "deviation")
 
 def observed_eigenvalues(frequency_Hz):
     """Measured eigenvalues ``Y = (2 pi f)^2`` (eq. 27), rad^2/s^2, shape (m,)."""
-    return (2.0 * np.pi * np.asarray(frequency_Hz, dtype=float)) ** 2
+    return eigenvalue_from_hz(frequency_Hz)
 
 
 def observation_covariance(frequency_Hz, sigma_Hz, convention="variance"):
@@ -83,8 +84,7 @@ def observation_covariance(frequency_Hz, sigma_Hz, convention="variance"):
     numpy.ndarray, shape (m, m)
     """
     _check(convention, OBSERVATION_CONVENTIONS, "observation")
-    f = np.asarray(frequency_Hz, dtype=float)
-    dlam = 8.0 * np.pi**2 * f * np.asarray(sigma_Hz, dtype=float)
+    dlam = eigenvalue_sd(frequency_Hz, sigma_Hz)
     return np.diag(dlam**2 if convention == "variance" else dlam)
 
 
@@ -108,8 +108,7 @@ def prior_in_stiffness(mean_e, sd_e, convention="variance"):
     """
     _check(convention, PRIOR_CONVENTIONS, "prior")
     mean_e = np.asarray(mean_e, dtype=float)
-    J = laminate.stiffness_jacobian(mean_e)
-    full = J @ np.diag(np.asarray(sd_e, dtype=float) ** 2) @ J.T
+    full = stiffness_covariance(mean_e, np.diag(np.asarray(sd_e, dtype=float) ** 2))
     mu_b = laminate.stiffness_from_engineering(mean_e)
     if convention == "full":
         return mu_b, full

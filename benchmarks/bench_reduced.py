@@ -153,7 +153,7 @@ def _verdict(t_solve, t_values):
 
 def write_report(m, info, out_dir, quick=False, date=None):
     """Write the Markdown report; returns its path."""
-    from bayesplate.laminate import STIFFNESS_NAMES
+    from bayesplate.quantities import STIFFNESS_NAMES
 
     fast, reduced = m["fast"], m["fast"].reduced
     cert, val = fast.certificate, m["validation"]

@@ -19,8 +19,9 @@ import numpy as np
 from bayesplate import plots
 from bayesplate.case import bundled_case_path, load_case
 from bayesplate.discrepancy.locate import mode_kinds
-from bayesplate.laminate import STIFFNESS_NAMES, stiffness_from_engineering
+from bayesplate.laminate import stiffness_from_engineering
 from bayesplate.model import PlateModel
+from bayesplate.quantities import STIFFNESS_NAMES
 
 matplotlib.use("Agg")  # files only, never a window
 

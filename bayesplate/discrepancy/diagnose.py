@@ -29,6 +29,7 @@ from .. import laminate
 from ..model import PlateModel
 from ..pairing import pair_measured
 from ..posterior import observed_eigenvalues, prior_in_stiffness
+from ..quantities import ENGINEERING_NAMES, engineering_covariance
 from . import candidates as all_candidates
 from .fit import JointFit, JointProblem, fit
 from .locate import (
@@ -53,7 +54,6 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-CONSTANT_NAMES = ("E1", "E2", "nu12", "G12", "G13", "G23")
 
 DEFAULTS = {
     "alpha": 0.01,  # significance of the chi-square test
@@ -353,13 +353,11 @@ def _unidentified(fit_, V_b, ratio, margin=None):
     basins about equally, so neither value is an estimate (the Laplace deviation, local to
     one basin, would understate the uncertainty).
     """
-    e = fit_.constants
-    Jinv = np.linalg.inv(laminate.stiffness_jacobian(e))
-    prior_sd = np.sqrt(np.diag(Jinv @ V_b @ Jinv.T))
+    prior_sd = np.sqrt(np.diag(engineering_covariance(fit_.constants, V_b)))
     loose = fit_.constants_sd > ratio * prior_sd
     for _, _, differs in _rival_optima(fit_, margin) if margin is not None else ():
         loose |= differs
-    return [n for n, flag in zip(CONSTANT_NAMES, loose, strict=True) if flag]
+    return [n for n, flag in zip(ENGINEERING_NAMES, loose, strict=True) if flag]
 
 
 def _rival_optima(fit_, margin):
@@ -388,7 +386,7 @@ def _basins_note(fit_, margin):
         return None
     e, objective, differs = rivals[0]
     values = ", ".join(f"{n} {_case_units(n, fit_.constants)} vs {_case_units(n, e)}"
-                       for n, d in zip(CONSTANT_NAMES, differs, strict=True) if d)  # fmt: skip
+                       for n, d in zip(ENGINEERING_NAMES, differs, strict=True) if d)  # fmt: skip
     return (
         f"the nominal fit has a second optimum that fits about as well (objective "
         f"{fit_.chi2 + fit_.chi2_prior:.2f} vs {objective:.2f}): {values}; these "
@@ -397,7 +395,7 @@ def _basins_note(fit_, margin):
 
 
 def _case_units(name, e):
-    i = CONSTANT_NAMES.index(name)
+    i = ENGINEERING_NAMES.index(name)
     return f"{e[i]:.3g}" if name == "nu12" else f"{1e-9 * e[i]:.3g} GPa"
 
 

@@ -28,6 +28,7 @@ from scipy.optimize import least_squares
 from scipy.stats import norm
 
 from .. import laminate
+from ..quantities import engineering_covariance, hz_from_eigenvalue
 from .parallel import fork_map
 
 __all__ = ["JointFit", "JointProblem", "fit"]
@@ -101,9 +102,7 @@ class JointFit:
     @property
     def constants_sd(self):
         """First-order deviations of the engineering constants, SI."""
-        Jinv = np.linalg.inv(laminate.stiffness_jacobian(self.constants))
-        cov = Jinv @ self.covariance[:6, :6] @ Jinv.T
-        return np.sqrt(np.diag(cov))
+        return np.sqrt(np.diag(engineering_covariance(self.constants, self.covariance[:6, :6])))
 
     @property
     def theta_sd(self):
@@ -113,7 +112,7 @@ class JointFit:
     @property
     def frequency_Hz(self):
         """Model frequencies paired with the measured ones, Hz."""
-        return np.sqrt(np.maximum(self.eigenvalues, 0.0)) / (2 * np.pi)
+        return hz_from_eigenvalue(self.eigenvalues)
 
 
 class JointProblem:
