@@ -48,6 +48,7 @@ from .quantities import engineering_covariance, hz_from_eigenvalue
 
 __all__ = [
     "METHODS",
+    "STATUSES",
     "TRACKING",
     "Conventions",
     "CONVENTIONS",
@@ -62,6 +63,15 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 METHODS = ("B", "MVE", "MVE-mod")
+#: How a run ended (:attr:`EstimateResult.status`); only the first is a success.
+STATUSES = (
+    "converged",
+    "oscillating",
+    "iteration_cap",
+    "unphysical",
+    "linalg_failed",
+    "solve_failed",
+)
 TRACKING = ("auto", "report", "follow", "off")
 #: The paper's longest converged run took 197 iterations (Table 6), so its cap was >= 197.
 DEFAULT_MAX_ITER = 200
@@ -142,8 +152,9 @@ class EstimateResult:
     iterations : int
         Updates performed.
     converged : bool
+        ``status == "converged"``.
     message : str
-        Why the run ended.
+        Why the run ended, in words.
     n_solves : int
         Forward (eigen) solves.
     frequency_Hz, measured_Hz : numpy.ndarray, shape (m,)
@@ -161,6 +172,8 @@ class EstimateResult:
         Seconds.
     settings : dict
         Tolerance, iteration cap, conventions, pairing.
+    status : str
+        How the run ended, one of :data:`STATUSES`: test this, never the message's text.
     """
 
     method: str
@@ -183,6 +196,13 @@ class EstimateResult:
     stages: tuple = ()
     wall_time: float = 0.0
     settings: dict = field(default_factory=dict)
+    status: str = ""
+
+    def __post_init__(self):
+        if not self.status:
+            object.__setattr__(self, "status", "converged" if self.converged else "")
+        if self.status not in STATUSES:
+            raise ValueError(f"status = {self.status!r}: must be one of {STATUSES}")
 
     @property
     def residual_percent(self):
@@ -293,6 +313,7 @@ class _State:
     swaps: list = field(default_factory=list)
     message: str = ""
     converged: bool = False
+    status: str = ""
 
 
 def _track(state, new, k, tracking, weight):
@@ -328,11 +349,13 @@ def _iterate(problem, method, tol, max_iter, conventions, tracking, weight):
             b_next, cov = _step(problem, method, state, V)
         except np.linalg.LinAlgError as err:
             state.message = f"linear algebra failed at iteration {k}: {err}"
+            state.status = "linalg_failed"
             return state
         if conventions.covariance == "updated":
             V = cov
         if not laminate.is_physical(b_next):
             state.message = f"left the physical region at iteration {k} (not positive definite)"
+            state.status = "unphysical"
             return state
         modes = state.prediction.modes if tracking == "follow" else None
         try:
@@ -340,6 +363,7 @@ def _iterate(problem, method, tol, max_iter, conventions, tracking, weight):
             new = _track(state, new, k, tracking, weight)
         except Exception as err:  # noqa: BLE001 - a failed solve ends the run, never raises
             state.message = f"forward solve failed at iteration {k}: {err}"
+            state.status = "solve_failed"
             return state
         change = _change(b_next, state.b, conventions)
         state.b, state.prediction, state.cov = b_next, new, cov
@@ -347,12 +371,15 @@ def _iterate(problem, method, tol, max_iter, conventions, tracking, weight):
         log.info("%s iteration %d: largest relative change %.3g", method, k, np.max(change))
         if np.all(change <= tol):
             state.converged = True
+            state.status = "converged"
             state.message = f"converged: relative change {np.max(change):.2g} <= TOL {tol:g}"
             return state
         state.message = _oscillation(_space(state.history, conventions), tol)
         if state.message:
+            state.status = "oscillating"
             return state
     state.message = f"iteration cap reached: {max_iter} iterations, TOL {tol:g} not met"
+    state.status = "iteration_cap"
     return state
 
 
@@ -408,6 +435,7 @@ def _result(problem, method, state, conventions, settings, n_solves, started):
         mode_swaps=list(state.swaps),
         wall_time=time.perf_counter() - started,
         settings=settings,
+        status=state.status,
     )
 
 
@@ -464,7 +492,9 @@ def run(
         state = _iterate(problem, method, tol, max_iter, conventions, tracking, weight)
     except Exception as err:  # noqa: BLE001 - e.g. the first solve fails: report, never raise
         b = problem.mu_b
-        state = _State(b, None, problem.V_b, [b], message=f"forward solve failed: {err}")
+        state = _State(
+            b, None, problem.V_b, [b], message=f"forward solve failed: {err}", status="solve_failed"
+        )
         return _failed_result(problem, method, state, settings, started)
     state.message += _swap_note(state.swaps)
     settings["solve_seconds"] = problem.solve_seconds - seconds0
@@ -508,6 +538,7 @@ def _failed_result(problem, method, state, settings, started):
         problem.pairing.modes + 1,
         wall_time=time.perf_counter() - started,
         settings=settings,
+        status=state.status,
     )
 
 

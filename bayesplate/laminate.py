@@ -31,6 +31,7 @@ __all__ = [
     "inertia_matrix",
 ]
 
+
 def higher_order_coefficient(h):
     """Return Reddy's ``c = -4 / (3 h^2)`` (eq. 14) for thickness ``h`` in m."""
     return -4.0 / (3.0 * np.asarray(h, dtype=float) ** 2)

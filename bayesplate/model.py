@@ -301,6 +301,14 @@ class PlateModel:
             b, sol.eigenvalues, vectors, self.sensitivities(vectors), sol.rigid_eigenvalues
         )
 
+    def eigenvalues(self, b, n_modes=14):
+        """Lowest `n_modes` elastic eigenvalues at `b`, rad^2/s^2, shape (n_modes,).
+
+        The :class:`bayesplate.forward.ForwardModel` interface: the full model has no cheaper
+        path than :meth:`solve`.
+        """
+        return self.solve(b, n_modes).eigenvalues
+
     def interpolation(self, points, field="w"):
         """Sparse matrix evaluating one field of a nodal vector at points on the plate.
 

@@ -800,7 +800,7 @@ def _run_on_fast(setup, method, tol, **kwargs):
     p = setup.problem
     free = GaussianProblem(p.Y, p.V_Y, p.mu_b, p.V_b, fast.reduced.solve, p.pairing)
     result = run(free, method, tol=tol, **kwargs)
-    if fast.box.contains(result.b) and "forward solve failed" not in result.message:
+    if fast.box.contains(result.b) and result.status != "solve_failed":
         return result
     log.warning("%s ends outside the fast model's box (%s); again with the full fallback",
                 method, result.message)  # fmt: skip
