@@ -321,7 +321,7 @@ def test_frederiksen_mve_matches_the_paper():
 def test_a_run_without_progress_is_called_oscillating():
     # Quasi-periodic iterates (steps of constant size, no short cycle): the stall rule fires
     # once 2 x 40 iterations show no decrease of the largest relative change.
-    from bayesplate.estimators import _oscillation
+    from bayesplate.estimators.iteration import _oscillation
 
     b0 = laminate.stiffness_from_engineering(np.array([150e9, 10e9, 0.25, 3e9, 3e9, 2e9]))
     history = [b0 * (1 + 0.05 * np.sin(k * 2.399963)) for k in range(81)]

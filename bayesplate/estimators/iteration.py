@@ -1,0 +1,298 @@
+"""The iteration of section 2.4: B or MVE from the prior mean to convergence, or why not.
+
+:func:`run` takes a :class:`bayesplate.posterior.GaussianProblem`; it follows the paired modes
+by MAC between iterates, stops on the relative change of ``b`` (or of the engineering
+constants), and ends a run that cycles, stalls, leaves the physical region, fails to solve or
+reaches its cap with ``converged=False``, a :attr:`~EstimateResult.status` and a message; it
+never raises.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .. import laminate
+from ..pairing import track
+from ..posterior import Prediction
+from ..quantities import engineering_covariance, hz_from_eigenvalue
+from .conventions import CONVENTIONS
+from .result import EstimateResult
+from .steps import b_step, mve_step
+
+__all__ = ["TRACKING", "DEFAULT_MAX_ITER", "run"]
+
+log = logging.getLogger("bayesplate.estimators")
+
+TRACKING = ("auto", "report", "follow", "off")
+#: The paper's longest converged run took 197 iterations (Table 6), so its cap was >= 197.
+DEFAULT_MAX_ITER = 200
+_CYCLE_WINDOW = 8  # iterations over which a cycle is judged
+_STALL_WINDOW = 40  # iterations over which a lack of progress is judged
+
+
+def _relative_change(new, old):
+    return np.abs(new - old) / np.abs(old)
+
+
+def _oscillation(history, tol, window=_CYCLE_WINDOW, stall=_STALL_WINDOW):
+    """A message if the iterates cycle or stop making progress, else "".
+
+    Cycle of period p (2 to 4): over the last `window` iterations every iterate is within
+    `tol` (relative) of the one p steps earlier while consecutive iterates still differ by
+    more than `tol`. Stall: over the last `stall` iterations the largest relative change
+    per iteration has not fallen below its smallest value of the `stall` before.
+    """
+    h = np.asarray(history)
+    steps = np.max(_relative_change(h[1:], h[:-1]), axis=1)
+    if len(h) >= window + 5 and np.all(steps[-window:] > tol):
+        for p in (2, 3, 4):
+            back = np.max(_relative_change(h[p:], h[:-p]), axis=1)[-window:]
+            if np.all(back <= tol):
+                return f"oscillating: the iterates cycle with period {p} (steps {steps[-1]:.2g})"
+    if len(steps) >= 2 * stall and np.min(steps[-stall:]) >= np.min(steps[-2 * stall : -stall]):
+        return f"oscillating: no progress in {stall} iterations (relative change {steps[-1]:.2g})"
+    return ""
+
+
+@dataclass
+class _State:
+    """Mutable bookkeeping of one run."""
+
+    b: np.ndarray
+    prediction: object
+    cov: np.ndarray
+    history: list
+    swaps: list = field(default_factory=list)
+    message: str = ""
+    converged: bool = False
+    status: str = ""
+
+
+def _track(state, new, k, tracking, weight):
+    """Follow the paired modes by MAC; record swaps; re-pair if ``tracking == "follow"``."""
+    if tracking == "off":
+        return new
+    modes = state.prediction.modes
+    moved, _ = track(state.prediction.modal.vectors, new.modal.vectors, modes, weight)
+    for i in np.flatnonzero(moved != modes):
+        state.swaps.append((k, int(i), int(modes[i]) + 1, int(moved[i]) + 1))
+        log.debug("iteration %d: computed mode %d became mode %d", k, modes[i] + 1, moved[i] + 1)
+    if tracking == "follow" and np.any(moved != modes) and np.all(moved >= 0):
+        modal = new.modal
+        return Prediction(modal.eigenvalues[moved], modal.sensitivities[moved], modal, moved)
+    return new
+
+
+def _step(problem, method, state, V):
+    """One B or MVE update from ``state``; returns (b_next, covariance for the result)."""
+    p = state.prediction
+    if method == "B":
+        return b_step(state.b, problem.mu_b, p.g, p.S, problem.Y, problem.V_Y, problem.V_b)
+    return mve_step(state.b, p.g, p.S, problem.Y, problem.V_Y, V)
+
+
+def _iterate(problem, method, tol, max_iter, conventions, tracking, weight):
+    """Run B or MVE from the prior mean; returns the final :class:`_State`."""
+    b = problem.mu_b.copy()
+    state = _State(b, problem.predict(b), problem.V_b, [b])
+    V = problem.V_b
+    for k in range(1, max_iter + 1):
+        try:
+            b_next, cov = _step(problem, method, state, V)
+        except np.linalg.LinAlgError as err:
+            state.message = f"linear algebra failed at iteration {k}: {err}"
+            state.status = "linalg_failed"
+            return state
+        if conventions.covariance == "updated":
+            V = cov
+        if not laminate.is_physical(b_next):
+            state.message = f"left the physical region at iteration {k} (not positive definite)"
+            state.status = "unphysical"
+            return state
+        modes = state.prediction.modes if tracking == "follow" else None
+        try:
+            new = problem.predict(b_next, modes)
+            new = _track(state, new, k, tracking, weight)
+        except Exception as err:  # noqa: BLE001 - a failed solve ends the run, never raises
+            state.message = f"forward solve failed at iteration {k}: {err}"
+            state.status = "solve_failed"
+            return state
+        change = _change(b_next, state.b, conventions)
+        state.b, state.prediction, state.cov = b_next, new, cov
+        state.history.append(b_next)
+        log.info("%s iteration %d: largest relative change %.3g", method, k, np.max(change))
+        if np.all(change <= tol):
+            state.converged = True
+            state.status = "converged"
+            state.message = f"converged: relative change {np.max(change):.2g} <= TOL {tol:g}"
+            return state
+        state.message = _oscillation(_space(state.history, conventions), tol)
+        if state.message:
+            state.status = "oscillating"
+            return state
+    state.message = f"iteration cap reached: {max_iter} iterations, TOL {tol:g} not met"
+    state.status = "iteration_cap"
+    return state
+
+
+def _space(history, conventions):
+    h = np.asarray(history)
+    return laminate.engineering_from_stiffness(h) if conventions.stop_on == "engineering" else h
+
+
+def _change(b_next, b, conventions):
+    """Relative change of section 2.4, on ``b`` or on the engineering constants."""
+    if conventions.stop_on == "engineering":
+        e_next, e = laminate.engineering_from_stiffness(np.array([b_next, b]))
+        return _relative_change(e_next, e)
+    return _relative_change(b_next, b)
+
+
+def _final_covariance(problem, method, state, conventions):
+    """B: ``P`` at the final iterate; MVE: the updated ``V^{k+1}`` (or from fixed ``V_b``)."""
+    p = state.prediction
+    if method == "B":
+        return b_step(state.b, problem.mu_b, p.g, p.S, problem.Y, problem.V_Y, problem.V_b)[1]
+    if conventions.covariance == "fixed" or len(state.history) == 1:
+        return mve_step(state.b, p.g, p.S, problem.Y, problem.V_Y, problem.V_b)[1]
+    return state.cov
+
+
+def _result(problem, method, state, conventions, settings, n_solves, started):
+    try:
+        cov_b = _final_covariance(problem, method, state, conventions)
+        cov = engineering_covariance(laminate.engineering_from_stiffness(state.b), cov_b)
+    except np.linalg.LinAlgError:  # a singular final step: report no covariance, not raise
+        cov_b = cov = np.full((6, 6), np.nan)
+    history_b = np.asarray(state.history)
+    f = hz_from_eigenvalue(state.prediction.g)
+    measured = hz_from_eigenvalue(problem.Y)
+    return EstimateResult(
+        method=method,
+        b=state.b,
+        constants=laminate.engineering_from_stiffness(state.b),
+        covariance_b=cov_b,
+        covariance=cov,
+        sd=np.sqrt(np.maximum(np.diag(cov), 0.0)),
+        history=laminate.engineering_from_stiffness(history_b),
+        history_b=history_b,
+        iterations=len(state.history) - 1,
+        converged=state.converged,
+        message=state.message,
+        n_solves=n_solves,
+        frequency_Hz=f,
+        measured_Hz=measured,
+        residual=f - measured,
+        modes=np.asarray(state.prediction.modes) + 1,
+        mode_swaps=list(state.swaps),
+        wall_time=time.perf_counter() - started,
+        settings=settings,
+        status=state.status,
+    )
+
+
+def run(
+    problem,
+    method="MVE",
+    tol=1e-3,
+    max_iter=DEFAULT_MAX_ITER,
+    conventions=None,
+    tracking="auto",
+    weight=None,
+):
+    """Run B or MVE on a :class:`bayesplate.posterior.GaussianProblem`, from its prior mean.
+
+    Parameters
+    ----------
+    problem : GaussianProblem
+    method : {"B", "MVE"}
+    tol : float
+        TOL of section 2.4.
+    max_iter : int
+        Iteration cap.
+    conventions : Conventions, optional
+        Only ``covariance`` and ``stop_on`` matter here; default ``CONVENTIONS["paper"]``.
+    tracking : {"auto", "report", "follow", "off"}
+        MAC tracking of the paired modes between iterates: report swaps only (pairing by
+        order or index is re-applied at every iterate, as the paper does), re-pair along the
+        tracked modes, or skip. ``"auto"``: follow when the modes were paired by shape
+        (MAC pairing names physical modes, whose order changes as the iterate moves),
+        report otherwise.
+    weight : array_like or sparse matrix, optional
+        MAC weight for tracking (the mass matrix).
+
+    Returns
+    -------
+    EstimateResult
+    """
+    if method not in ("B", "MVE"):
+        raise ValueError(f"method = {method!r}: run() takes 'B' or 'MVE'")
+    if tracking not in TRACKING:
+        raise ValueError(f"tracking = {tracking!r}: must be one of {TRACKING}")
+    if tracking == "auto":
+        tracking = "follow" if problem.pairing.how == "mac" else "report"
+    conventions = conventions or CONVENTIONS["paper"]
+    started, solves0, seconds0 = time.perf_counter(), problem.n_solves, problem.solve_seconds
+    settings = {
+        "tol": tol,
+        "max_iter": max_iter,
+        "conventions": conventions,
+        "tracking": tracking,
+        "pairing": problem.pairing.how,
+    }
+    try:
+        state = _iterate(problem, method, tol, max_iter, conventions, tracking, weight)
+    except Exception as err:  # noqa: BLE001 - e.g. the first solve fails: report, never raise
+        b = problem.mu_b
+        state = _State(
+            b, None, problem.V_b, [b], message=f"forward solve failed: {err}", status="solve_failed"
+        )
+        return _failed_result(problem, method, state, settings, started)
+    state.message += _swap_note(state.swaps)
+    settings["solve_seconds"] = problem.solve_seconds - seconds0
+    return _result(
+        problem, method, state, conventions, settings, problem.n_solves - solves0, started
+    )
+
+
+def _swap_note(swaps):
+    """A note on the mode-order changes MAC tracking saw, for the message ("" if none)."""
+    if not swaps:
+        return ""
+    iterations = sorted({s[0] for s in swaps})
+    return (
+        f"; the paired modes changed order (MAC) in {len(iterations)} iterations, "
+        f"last at iteration {iterations[-1]} (see mode_swaps)"
+    )
+
+
+def _failed_result(problem, method, state, settings, started):
+    """A result for a run whose very first forward solve failed."""
+    m = problem.m
+    nan = np.full(m, np.nan)
+    e = laminate.engineering_from_stiffness(state.b)
+    return EstimateResult(
+        method,
+        state.b,
+        e,
+        problem.V_b,
+        np.full((6, 6), np.nan),
+        np.full(6, np.nan),
+        e[None, :],
+        state.b[None, :],
+        0,
+        False,
+        state.message,
+        0,
+        nan,
+        hz_from_eigenvalue(problem.Y),
+        nan,
+        problem.pairing.modes + 1,
+        wall_time=time.perf_counter() - started,
+        settings=settings,
+        status=state.status,
+    )

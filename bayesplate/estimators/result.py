@@ -1,0 +1,104 @@
+"""The outcome of one estimator run: :class:`EstimateResult`, with its status."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["METHODS", "STATUSES", "EstimateResult"]
+
+METHODS = ("B", "MVE", "MVE-mod")
+#: How a run ended (:attr:`EstimateResult.status`); only the first is a success.
+STATUSES = (
+    "converged",
+    "oscillating",
+    "iteration_cap",
+    "unphysical",
+    "linalg_failed",
+    "solve_failed",
+)
+
+
+@dataclass(frozen=True)
+class EstimateResult:
+    """Outcome of one estimator run.
+
+    Attributes
+    ----------
+    method : str
+        ``"B"``, ``"MVE"`` or ``"MVE-mod"``.
+    b : numpy.ndarray, shape (6,)
+        Estimated ``(C11, C22, C12, C66, C44, C55)``, Pa (the last physical iterate when the
+        run failed).
+    constants : numpy.ndarray, shape (6,)
+        ``(E1, E2, nu12, G12, G13, G23)``, SI.
+    covariance_b : numpy.ndarray, shape (6, 6)
+        B: ``P^k`` of eq. 9 at the final iterate; MVE: the updated ``V_b^{k+1}``; Pa^2.
+    covariance : numpy.ndarray, shape (6, 6)
+        The same carried to the engineering constants (first order), SI.
+    sd : numpy.ndarray, shape (6,)
+        Square roots of the diagonal of `covariance`.
+    history : numpy.ndarray, shape (iterations + 1, 6)
+        Engineering constants of every iterate, the initial values first.
+    history_b : numpy.ndarray, shape (iterations + 1, 6)
+        The same iterates as stiffness coefficients, Pa.
+    iterations : int
+        Updates performed.
+    converged : bool
+        ``status == "converged"``.
+    message : str
+        Why the run ended, in words.
+    n_solves : int
+        Forward (eigen) solves.
+    frequency_Hz, measured_Hz : numpy.ndarray, shape (m,)
+        Paired model frequencies at the estimate and the measured ones.
+    residual : numpy.ndarray, shape (m,)
+        ``frequency_Hz - measured_Hz``, Hz.
+    modes : numpy.ndarray of int, shape (m,)
+        1-based computed elastic mode paired with each measured frequency at the estimate.
+    mode_swaps : list of tuple
+        ``(iteration, measured index, old mode, new mode)`` (0-based indices, 1-based modes)
+        where MAC tracking found a paired mode changing place.
+    stages : tuple of EstimateResult
+        MVE-mod: the two stages; empty otherwise.
+    wall_time : float
+        Seconds.
+    settings : dict
+        Tolerance, iteration cap, conventions, pairing.
+    status : str
+        How the run ended, one of :data:`STATUSES`: test this, never the message's text.
+    """
+
+    method: str
+    b: np.ndarray
+    constants: np.ndarray
+    covariance_b: np.ndarray
+    covariance: np.ndarray
+    sd: np.ndarray
+    history: np.ndarray
+    history_b: np.ndarray
+    iterations: int
+    converged: bool
+    message: str
+    n_solves: int
+    frequency_Hz: np.ndarray
+    measured_Hz: np.ndarray
+    residual: np.ndarray
+    modes: np.ndarray
+    mode_swaps: list = field(default_factory=list)
+    stages: tuple = ()
+    wall_time: float = 0.0
+    settings: dict = field(default_factory=dict)
+    status: str = ""
+
+    def __post_init__(self):
+        if not self.status:
+            object.__setattr__(self, "status", "converged" if self.converged else "")
+        if self.status not in STATUSES:
+            raise ValueError(f"status = {self.status!r}: must be one of {STATUSES}")
+
+    @property
+    def residual_percent(self):
+        """``100 (f - f_meas) / f_meas``, shape (m,)."""
+        return 100.0 * self.residual / self.measured_Hz

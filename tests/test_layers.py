@@ -1,0 +1,99 @@
+"""The package's layers: numerics never import the edge; modules stay small.
+
+Read from the source with :mod:`ast` (every import, including those inside functions), so
+that a lazy import cannot hide an upward arrow.
+"""
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "bayesplate"
+#: The edge: case files, importers, export, figures, report, command line.
+EDGE = ("io", "case", "importers", "plots", "report", "cli")
+#: Pure computation: everything below the edge.
+NUMERICS = (
+    "quantities",
+    "laminate",
+    "fem",
+    "model",
+    "forward",
+    "pairing",
+    "posterior",
+    "estimators",
+    "reduced",
+    "sampling",
+    "discrepancy",
+)
+MAX_LINES = 500
+#: A module longer than MAX_LINES must say why in its docstring with this phrase.
+REASON = "Longer than 500 lines because"
+
+
+def _modules():
+    return sorted(p for p in PACKAGE.rglob("*.py") if "data" not in p.relative_to(PACKAGE).parts)
+
+
+def _top(path):
+    """The top-level room of a module: ``bayesplate/sampling/chain.py`` -> "sampling"."""
+    return path.relative_to(PACKAGE).parts[0].removesuffix(".py")
+
+
+def _imported_rooms(path, package=PACKAGE):
+    """Top-level rooms of bayesplate that `path` imports (absolute or relative)."""
+    tree = ast.parse(path.read_text())
+    package_parts = ("bayesplate",) + path.relative_to(package).parent.parts
+    rooms = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package_parts[: len(package_parts) - node.level + 1]
+                module = ".".join(base + ((node.module,) if node.module else ()))
+                names = [module] if node.module else [f"{module}.{a.name}" for a in node.names]
+            else:
+                names = [node.module or ""]
+        else:
+            continue
+        for name in names:
+            parts = name.split(".")
+            if parts[0] == "bayesplate" and len(parts) > 1:
+                rooms.add(parts[1])
+    return rooms
+
+
+def test_every_module_is_in_a_layer():
+    rooms = {_top(p) for p in _modules()} - {"__init__", "_version"}
+    assert rooms <= set(EDGE) | set(NUMERICS), rooms - set(EDGE) - set(NUMERICS)
+
+
+@pytest.mark.parametrize("path", _modules(), ids=lambda p: str(p.relative_to(PACKAGE)))
+def test_numerics_import_nothing_from_the_edge(path):
+    if _top(path) not in NUMERICS:
+        pytest.skip("edge module: may import anything")
+    upward = _imported_rooms(path) & set(EDGE)
+    assert not upward, f"{path.relative_to(PACKAGE)} imports the edge: {sorted(upward)}"
+
+
+def test_the_layer_check_sees_lazy_and_relative_imports(tmp_path):
+    # the check itself: relative imports inside a function, and absolute ones, are seen
+    fake = tmp_path / "bayesplate" / "sampling" / "probe.py"
+    fake.parent.mkdir(parents=True)
+    fake.write_text(
+        "import bayesplate.cli\n"
+        "def f():\n    from ..io import write_json\n    from .. import report\n"
+        "    from .chain import sample\n"
+    )
+    assert _imported_rooms(fake, tmp_path / "bayesplate") == {"cli", "io", "report", "sampling"}
+
+
+@pytest.mark.parametrize("path", _modules(), ids=lambda p: str(p.relative_to(PACKAGE)))
+def test_modules_are_small_or_say_why(path):
+    text = path.read_text()
+    lines = text.count("\n")
+    if lines <= MAX_LINES:
+        return
+    doc = ast.get_docstring(ast.parse(text)) or ""
+    assert REASON in doc, f"{lines} lines and no '{REASON} ...' in the docstring"
