@@ -23,10 +23,13 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from .assignment import most_probable
+
 __all__ = [
     "DEFAULT_EXTRA_MODES",
     "DEFAULT_MAC_THRESHOLD",
     "MAC_EXTRA_MODES",
+    "PAIRINGS",
     "NEGLIGIBLE_SHAPE",
     "Pairing",
     "UnpairedModeWarning",
@@ -48,6 +51,8 @@ DEFAULT_EXTRA_MODES = 2
 DEFAULT_MAC_THRESHOLD = 0.5
 #: Computed modes beyond the measured ones offered to the MAC assignment (missing modes).
 MAC_EXTRA_MODES = 6
+#: The pairings :func:`pair_measured` knows.
+PAIRINGS = ("auto", "mac", "likelihood", "index", "order")
 #: Squared norm, relative to the largest of its set, below which a shape counts as zero in
 #: the MAC (a norm ratio of 1e-6: measurement noise is far above it, solver round-off on a
 #: quantity that is zero in exact arithmetic, about 1e-12 of the norm, far below).
@@ -187,6 +192,9 @@ class Pairing:
         MAC of every measured shape against every computed mode (``how == "mac"``).
     threshold : float, optional
         The MAC a pair had to reach.
+    assignment : bayesplate.assignment.Assignment, optional
+        ``how == "likelihood"``: the assignment it came from (unobserved modes, spurious
+        peaks, its log-probability).
     """
 
     modes: np.ndarray
@@ -195,6 +203,7 @@ class Pairing:
     measured: np.ndarray | None = None
     mac: np.ndarray | None = field(default=None, repr=False)
     threshold: float | None = None
+    assignment: object = field(default=None, repr=False, compare=False)
 
     def __post_init__(self):
         for name in ("modes", "measured"):
@@ -263,6 +272,14 @@ class Pairing:
             text = "by order: the i-th measured frequency with the i-th computed elastic mode"
         elif self.how == "index":
             text = "by the mode numbers the case file gives (measured.mode)"
+        elif self.how == "likelihood":
+            text = (
+                "by the most probable assignment of frequencies (a computed mode may go "
+                "unobserved, a peak may be spurious)"
+            )
+            if self.assignment is not None:
+                text += f": {self.assignment.describe()}"
+                return text
         else:
             p = self.mac.shape[1] if self.mac is not None else "?"
             text = (
@@ -307,6 +324,8 @@ def pair_measured(
     threshold=DEFAULT_MAC_THRESHOLD,
     extra_modes=MAC_EXTRA_MODES,
     modal=None,
+    prior=None,
+    start=None,
 ):
     """Pair a case's measured modes with computed ones: by shape when it has shapes.
 
@@ -317,9 +336,11 @@ def pair_measured(
         Only used for ``how == "mac"`` (one eigen solve at `b`, unless `modal` is given).
     b : array_like, shape (6,)
         Stiffness coefficients at which to compute the modes (e.g. the prior mean), Pa.
-    how : {"auto", "mac", "index", "order"}
+    how : {"auto", "mac", "likelihood", "index", "order"}
         ``"auto"``: by MAC when the case carries measured shapes, else by the case's mode
-        numbers when it has them, else by order.
+        numbers when it has them, else by order. ``"likelihood"``: by frequency, the most
+        probable assignment of :func:`bayesplate.assignment.assign` (a computed mode may go
+        unobserved, a measured peak may be spurious and is then left out).
     threshold : float
         Smallest MAC of an accepted pair; a measured mode whose assigned computed mode stays
         below it is left unpaired (with an :class:`UnpairedModeWarning`).
@@ -328,6 +349,12 @@ def pair_measured(
         that modes missing from the test do not force wrong pairs.
     modal : ModalResult, optional
         Modes already computed at `b` (at least ``m + extra_modes`` of them to be safe).
+    prior : tuple of array_like, optional
+        ``how == "likelihood"``: ``(mu_b, V_b)``, the prior mean (Pa) and covariance (Pa^2)
+        of ``b`` that :func:`bayesplate.assignment.most_probable` integrates over (the
+        constants' uncertainty); required then.
+    start : Pairing, optional
+        ``how == "likelihood"``: a pairing in use, searched from as well.
 
     Returns
     -------
@@ -336,14 +363,16 @@ def pair_measured(
         assignment used) for ``how == "mac"``.
     """
     measured = case.measured
-    if how not in ("auto", "mac", "index", "order"):
-        raise ValueError(f"pairing = {how!r}: must be 'auto', 'mac', 'index' or 'order'")
+    if how not in PAIRINGS:
+        raise ValueError(f"pairing = {how!r}: must be one of {PAIRINGS}")
     has_shapes = measured.shapes is not None and measured.points is not None
     if how == "auto":
         how = "mac" if has_shapes else "auto"
+    m = measured.size
+    if how == "likelihood":
+        return _pair_by_likelihood(measured, model, b, extra_modes, modal, prior, start)
     if how != "mac":
         return Pairing.from_measurement(measured, how)
-    m = measured.size
     if modal is None:
         modal = model.solve(np.asarray(b, dtype=float), m + int(extra_modes))
     mac = shape_mac(measured, model, modal.vectors)
@@ -365,3 +394,31 @@ def pair_measured(
     if kept.size == 0:
         raise ValueError("MAC pairing: no measured shape matches a computed mode")
     return Pairing(assigned[kept], "mac", DEFAULT_EXTRA_MODES, kept, mac, float(threshold))
+
+
+def _pair_by_likelihood(measured, model, b, extra_modes, modal, prior, start):
+    """:func:`pair_measured` by the most probable assignment of frequencies."""
+    if prior is None:
+        raise ValueError("pairing = 'likelihood' needs the prior (mu_b, V_b) of b")
+    m = measured.size
+    b = np.asarray(b, dtype=float)
+    if modal is None:
+        modal = model.solve(b, m + int(extra_modes))
+    mu_b, V_b = prior
+    initial = None
+    if start is not None and start.assignment is not None:
+        initial = start.assignment.modes
+    a = most_probable(
+        measured.frequency_Hz,
+        measured.sigma_Hz,
+        modal.eigenvalues,
+        modal.sensitivities,
+        b,
+        mu_b,
+        V_b,
+        start=initial,
+    )
+    kept = a.paired
+    if kept.size == 0:
+        raise ValueError("assignment: no measured frequency matches a computed mode")
+    return Pairing(a.modes[kept], "likelihood", DEFAULT_EXTRA_MODES, kept, assignment=a)

@@ -60,11 +60,15 @@ def estimate(
         MVE-mod stage-2 deviations are this multiple of stage 1's (section 6: 2).
     stage2_sd : array_like, shape (6,), optional
         Explicit stage-2 deviations (SI), overriding `stage2_factor`.
-    pairing : {"auto", "mac", "index", "order"} or Pairing
+    pairing : {"auto", "mac", "likelihood", "index", "order"} or Pairing
         Measured-to-computed mode pairing (:func:`bayesplate.pairing.pair_measured`, at the
         prior mean): "auto" pairs by shape (MAC) when the case has measured shapes, else by
-        the case's mode indices if any, else by order. Measured modes left unpaired are left
-        out of the fit.
+        the case's mode indices if any, else by order. "likelihood": the most probable
+        assignment of frequencies (:mod:`bayesplate.assignment`), made at the prior with the
+        prior's spread and remade at each estimate with the estimate's, the estimator run
+        again until the assignment stands (at most :data:`MAX_ASSIGNMENTS` rounds); unobserved
+        computed modes and spurious peaks are in ``settings`` and the message. Measured modes
+        left unpaired are left out of the fit.
     tracking : {"auto", "report", "follow", "off"}
         MAC tracking of paired modes between iterates (see :func:`run`); "auto" follows
         modes paired by shape and keeps order or index pairings as they are.
@@ -79,23 +83,117 @@ def estimate(
     model = model or PlateModel.from_case(case)
     mean = np.asarray(case.prior.mean if prior_mean is None else prior_mean, dtype=float)
     sd = np.asarray(case.prior.sd if prior_sd is None else prior_sd, dtype=float)
-    pair = pairing
-    if not isinstance(pair, Pairing):
-        pair = pair_measured(case, model, laminate.stiffness_from_engineering(mean), pairing)
+    b0 = laminate.stiffness_from_engineering(mean)
+    options = {
+        "conventions": conventions,
+        "tracking": tracking,
+        "weight": model.mass,  # the MAC weight for tracking (ForwardModel interface)
+        "tol": tol,
+        "max_iter": max_iter,
+        "stage1_tol": stage1_tol,
+        "stage2": (stage2_factor, stage2_sd),
+    }
+    if isinstance(pairing, Pairing):
+        return _estimate_paired(case, model, pairing, method, mean, sd, options)
+    how = _resolve_pairing(case.measured, pairing)
+    if how != "likelihood":
+        pair = pair_measured(case, model, b0, how)
+        return _estimate_paired(case, model, pair, method, mean, sd, options)
+    # by the most probable assignment (the constants integrated out over their prior, the
+    # model linearised): made at the prior mean, remade at each estimate, until it stands;
+    # a recurring one ends a cycle
+    prior = prior_in_stiffness(mean, sd, "full")
+    pair = _lowest_first(case, model, b0, prior, method, mean, sd, options)
+    tried = []
+    for _ in range(MAX_ASSIGNMENTS):
+        result = _estimate_paired(case, model, pair, method, mean, sd, options)
+        at = result.b if laminate.is_physical(result.b) else b0
+        again = pair_measured(case, model, at, "likelihood", prior=prior, start=pair)
+        tried.append((again.assignment.log_probability, result, pair))
+        if _same(again, pair):
+            return _assigned(result, pair, len(tried), "")
+        if any(_same(again, p) for _, _, p in tried):
+            break
+        pair = again
+    _, result, pair = max(tried, key=lambda t: t[0])
+    note = f"; the assignment did not settle in {len(tried)} rounds: kept the most probable"
+    return _assigned(result, pair, len(tried), note)
+
+
+#: Rounds of assignment and estimate before giving up on a settled assignment.
+MAX_ASSIGNMENTS = 5
+
+
+#: The first round fits the peaks up to this quantile of the measured band (at least
+#: :data:`FIRST_ROUND_MIN` peaks): low modes keep their order far from the truth, high ones
+#: cross (and in-plane modes move among the bending ones) as the constants change.
+FIRST_ROUND_QUANTILE = 0.5
+FIRST_ROUND_MIN = 6
+
+
+def _lowest_first(case, model, b0, prior, method, mean, sd, options):
+    """The pairing to start from: every peak assigned at the estimate from the lowest ones.
+
+    At a prior far from the truth the linearised marginal prefers wrong assignments of the
+    upper peaks; the lowest are assigned at the prior, fitted, and all are assigned at that
+    estimate.
+    """
+    m = case.measured.size
+    low = np.flatnonzero(np.arange(m) < max(FIRST_ROUND_MIN, int(FIRST_ROUND_QUANTILE * m)))
+    if low.size >= m:
+        return pair_measured(case, model, b0, "likelihood", prior=prior)
+    lower = case.with_measured(case.measured.select(low))
+    first = pair_measured(lower, model, b0, "likelihood", prior=prior)
+    result = _estimate_paired(lower, model, first, method, mean, sd, options)
+    at = result.b if laminate.is_physical(result.b) else b0
+    return pair_measured(case, model, at, "likelihood", prior=prior)
+
+
+def _resolve_pairing(measured, how):
+    """The pairing "auto" stands for: shapes -> MAC, mode numbers -> index, else order."""
+    if how != "auto":
+        return how
+    if measured.shapes is not None and measured.points is not None:
+        return "mac"
+    return "order" if measured.mode is None else "index"
+
+
+def _same(a, b):
+    """Whether two pairings pair the same measured frequencies with the same modes."""
+    return np.array_equal(a.kept(0), b.kept(0)) and np.array_equal(a.modes, b.modes)
+
+
+def _assigned(result, pair, rounds, note):
+    """The result with its assignment in ``settings`` and said in its message."""
+    a = pair.assignment
+    settings = {
+        **result.settings,
+        "assignment": a,
+        "assignment_rounds": rounds,
+        "unobserved_modes": (a.unobserved + 1).tolist(),
+        "spurious_peaks": (a.spurious + 1).tolist(),
+    }
+    message = f"{result.message}; assignment: {a.describe()}{note}"
+    return replace(result, settings=settings, message=message)
+
+
+def _estimate_paired(case, model, pair, method, mean, sd, options):
+    """B, MVE or MVE-mod with a fixed pairing."""
+    conventions, tol, max_iter = options["conventions"], options["tol"], options["max_iter"]
     problem = GaussianProblem.from_case(
         case, model, pair, conventions.observation, conventions.prior, mean, sd
     )
-    weight = model.mass  # the MAC weight for tracking (ForwardModel interface)
-    options = {"conventions": conventions, "tracking": tracking, "weight": weight}
+    run_options = {k: options[k] for k in ("conventions", "tracking", "weight")}
     if method != "MVE-mod":
-        return _noted(run(problem, method, tol, max_iter, **options), mean, sd)
-    stage1 = _noted(run(problem, "MVE", stage1_tol, max_iter, **options), mean, sd)
+        return _noted(run(problem, method, tol, max_iter, **run_options), mean, sd)
+    stage1 = _noted(run(problem, "MVE", options["stage1_tol"], max_iter, **run_options), mean, sd)
     if not stage1.converged:
         return _combine(stage1, None)
     mean2 = stage1.constants
+    stage2_factor, stage2_sd = options["stage2"]
     sd2 = _stage2_sd(mean2, mean, sd, stage2_factor, stage2_sd, conventions)
     mu_b, V_b = prior_in_stiffness(mean2, sd2, conventions.prior)
-    stage2 = run(problem.with_prior(mu_b, V_b), "MVE", tol, max_iter, **options)
+    stage2 = run(problem.with_prior(mu_b, V_b), "MVE", tol, max_iter, **run_options)
     return _combine(stage1, _noted(stage2, mean2, sd2))
 
 

@@ -1,0 +1,324 @@
+"""Which computed mode explains which measured peak: the most probable assignment.
+
+Without measured shapes, a one-point test shows some of the plate's modes and not others (a
+mode with a node at the point is missed) and may show peaks that are not bending modes of the
+plate (in-plane or suspension modes, noise). Pairing by order then shifts every pair above
+the first gap. Here each measured peak ``i`` (frequency ``f_i``, deviation ``s_i``) is either
+one computed mode ``j`` (frequency ``c_j``, predictive deviation ``t_j`` from the constants'
+current uncertainty) or spurious, each computed mode is seen at most once, and a computed
+mode inside the measured band that no peak explains is unobserved. With prior probabilities
+``p_u`` (a mode in the band is unobserved) and ``p_s`` (a peak is spurious), the log-probability
+of an assignment ``a`` is
+
+``log P(a) = sum_paired [log N(f_i; c_j, s_i^2 + t_j^2) + log(1 - p_s)]``
+``          + sum_spurious [log p_s - log B] + sum_in_band [log(1 - p_u) or log p_u]``,
+
+a spurious peak being uniform over ``[0, B]``, ``B`` the highest measured frequency plus
+three deviations, and each computed mode up to the highest measured frequency (the band)
+observed or not (computed modes above it were not looked for). Its maximum is a linear
+assignment problem (Hungarian method, scipy's ``linear_sum_assignment``) on an
+``m x (n + m)`` cost matrix: the ``n`` computed modes, and one "spurious" column per peak.
+
+Pure array computation. The estimators recompute the assignment where the constants move
+(:func:`bayesplate.estimators.estimate`) and keep the pairing fixed within one run, so that
+an iteration cannot cycle between pairings.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+__all__ = [
+    "P_UNOBSERVED",
+    "P_SPURIOUS",
+    "Assignment",
+    "assign",
+    "most_probable",
+    "predictive_sd_Hz",
+]
+
+#: Prior probability that a computed mode inside the measured band is not seen by the test
+#: (a one-point FRF misses the modes with a node at the point: a few in ten).
+P_UNOBSERVED = 0.1
+#: Prior probability that a measured peak is not a bending mode of the plate.
+P_SPURIOUS = 0.05
+_BAND_SIGMAS = 3.0  # the band ends this many deviations above the highest peak
+_FORBIDDEN = 1e12  # cost of a peak's spurious column taken by another peak
+
+
+@dataclass(frozen=True)
+class Assignment:
+    """The most probable assignment of measured peaks to computed modes.
+
+    Attributes
+    ----------
+    modes : numpy.ndarray of int, shape (m,)
+        0-based computed mode explaining each measured peak; -1 where the peak is spurious.
+    unobserved : numpy.ndarray of int, shape (k,)
+        0-based computed modes inside the band that no peak explains.
+    log_probability : float
+        ``log P(a)`` of the module docstring (up to the normalising sum over assignments).
+    band_Hz : float
+        Upper end of the range a spurious peak may lie in (the highest peak plus three
+        deviations), Hz.
+    """
+
+    modes: np.ndarray
+    unobserved: np.ndarray
+    log_probability: float
+    band_Hz: float
+
+    @property
+    def paired(self):
+        """0-based measured peaks that a computed mode explains, shape (m - spurious,)."""
+        return np.flatnonzero(self.modes >= 0)
+
+    @property
+    def spurious(self):
+        """0-based measured peaks left unexplained, shape (spurious,)."""
+        return np.flatnonzero(self.modes < 0)
+
+    @property
+    def in_order(self):
+        """Whether this is pairing by order: peak i with computed mode i, for all peaks."""
+        return bool(np.array_equal(self.modes, np.arange(self.modes.size)))
+
+    def describe(self):
+        """One sentence on what went unobserved and unexplained (1-based numbers)."""
+        parts = []
+        if self.unobserved.size:
+            which = ", ".join(str(j + 1) for j in self.unobserved)
+            parts.append(
+                f"computed mode{'s' if self.unobserved.size > 1 else ''} {which} unobserved"
+            )
+        if self.spurious.size:
+            which = ", ".join(str(i + 1) for i in self.spurious)
+            parts.append(
+                f"measured peak{'s' if self.spurious.size > 1 else ''} {which} unexplained "
+                "(spurious) and left out of the fit"
+            )
+        return "; ".join(parts) if parts else "every peak in order, none missed"
+
+
+def predictive_sd_Hz(frequency_Hz, sensitivities, covariance_b):
+    """Deviation of computed frequencies from the constants' uncertainty (first order).
+
+    ``var(lambda_j) = S_j P S_j^T``, and ``d f = d lambda / (8 pi^2 f)``.
+
+    Parameters
+    ----------
+    frequency_Hz : array_like, shape (n,)
+    sensitivities : array_like, shape (n, 6)
+        ``d lambda / d b``, rad^2/s^2/Pa.
+    covariance_b : array_like, shape (6, 6)
+        Covariance of ``b``, Pa^2.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n,)
+        Hz.
+    """
+    S = np.asarray(sensitivities, dtype=float)
+    var = np.einsum("ij,jk,ik->i", S, np.asarray(covariance_b, dtype=float), S)
+    f = np.asarray(frequency_Hz, dtype=float)
+    return np.sqrt(np.maximum(var, 0.0)) / (8 * np.pi**2 * f)
+
+
+def assign(
+    measured_Hz,
+    sigma_Hz,
+    computed_Hz,
+    computed_sd_Hz=None,
+    p_unobserved=P_UNOBSERVED,
+    p_spurious=P_SPURIOUS,
+):
+    """The most probable assignment of measured peaks to computed modes.
+
+    Parameters
+    ----------
+    measured_Hz, sigma_Hz : array_like, shape (m,)
+        Measured frequencies and their deviations, Hz.
+    computed_Hz : array_like, shape (n,)
+        Computed elastic frequencies, ascending, Hz; ``n`` should exceed ``m`` by the number
+        of modes that may have been missed.
+    computed_sd_Hz : array_like, shape (n,), optional
+        Predictive deviations of the computed frequencies (:func:`predictive_sd_Hz`); zero
+        when None.
+    p_unobserved, p_spurious : float
+        Prior probabilities, in (0, 1).
+
+    Returns
+    -------
+    Assignment
+    """
+    f = np.asarray(measured_Hz, dtype=float)
+    s = np.asarray(sigma_Hz, dtype=float)
+    c = np.asarray(computed_Hz, dtype=float)
+    t = np.zeros_like(c) if computed_sd_Hz is None else np.asarray(computed_sd_Hz, dtype=float)
+    for name, p in (("p_unobserved", p_unobserved), ("p_spurious", p_spurious)):
+        if not 0.0 < p < 1.0:
+            raise ValueError(f"{name} = {p}: must lie strictly between 0 and 1")
+    m, n = f.size, c.size
+    band = float(np.max(f + _BAND_SIGMAS * s))
+    in_band = c <= np.max(f)
+    var = s[:, None] ** 2 + t[None, :] ** 2
+    log_pair = -0.5 * ((f[:, None] - c[None, :]) ** 2 / var + np.log(2 * np.pi * var))
+    log_pair += (
+        np.log1p(-p_spurious)
+        + np.where(in_band, np.log1p(-p_unobserved) - np.log(p_unobserved), 0.0)[None, :]
+    )
+    log_spurious = np.log(p_spurious) - np.log(band)
+    cost = np.full((m, n + m), _FORBIDDEN)
+    cost[:, :n] = -log_pair
+    cost[np.arange(m), n + np.arange(m)] = -log_spurious
+    rows, cols = linear_sum_assignment(cost)
+    modes = np.full(m, -1)
+    paired = cols < n
+    modes[rows[paired]] = cols[paired]
+    log_p = float(-cost[rows, cols].sum() + np.count_nonzero(in_band) * np.log(p_unobserved))
+    unobserved = np.setdiff1d(np.flatnonzero(in_band), modes[modes >= 0])
+    return Assignment(modes, unobserved, log_p, band)
+
+
+def _log_evidence(modes, Y, V_Y, g, S, shift, V_b, in_band, p_unobserved, p_spurious, log_B):
+    """``log P(a)`` with the constants integrated out (linearised), for paired `modes`."""
+    paired = np.flatnonzero(modes >= 0)
+    j = modes[paired]
+    r = Y[paired] - g[j] - shift[j]
+    C = S[j] @ V_b @ S[j].T + V_Y[np.ix_(paired, paired)]
+    L = np.linalg.cholesky(C)
+    z = np.linalg.solve(L, r)
+    log_n = -0.5 * (z @ z) - np.sum(np.log(np.diag(L))) - 0.5 * paired.size * np.log(2 * np.pi)
+    n_spurious = modes.size - paired.size
+    seen_in_band = np.count_nonzero(in_band[j])
+    return float(
+        log_n
+        + paired.size * np.log1p(-p_spurious)
+        + n_spurious * (np.log(p_spurious) - log_B)
+        + seen_in_band * np.log1p(-p_unobserved)
+        + (np.count_nonzero(in_band) - seen_in_band) * np.log(p_unobserved)
+    )
+
+
+def _neighbours(modes, n):
+    """Order-preserving assignments one move away from `modes`.
+
+    A gap opens or closes before a peak; a peak turns spurious (the ones above moving down
+    a mode, or not) or back.
+    """
+    m = modes.size
+    out = []
+    for k in range(m):
+        above = np.arange(k, m)
+        for step in (1, -1):
+            new = modes.copy()
+            paired = above[new[above] >= 0]
+            new[paired] += step
+            out.append(new)
+        new = modes.copy()
+        if new[k] >= 0:
+            new[k] = -1
+            out.append(new.copy())
+            rest = above[1:][new[above[1:]] >= 0]
+            new[rest] -= 1
+            out.append(new)
+        else:
+            below = modes[:k][modes[:k] >= 0]
+            new[k] = below[-1] + 1 if below.size else 0
+            out.append(new.copy())
+            rest = above[1:][new[above[1:]] >= 0]
+            new[rest] += 1
+            out.append(new)
+    return [a for a in out if _valid(a, n)]
+
+
+def _valid(modes, n):
+    paired = modes[modes >= 0]
+    return paired.size > 0 and paired.max() < n and bool(np.all(np.diff(paired) > 0))
+
+
+def most_probable(
+    measured_Hz,
+    sigma_Hz,
+    eigenvalues,
+    sensitivities,
+    b,
+    prior_mean_b,
+    prior_covariance_b,
+    p_unobserved=P_UNOBSERVED,
+    p_spurious=P_SPURIOUS,
+    start=None,
+):
+    """The assignment that best explains the peaks, the constants integrated out.
+
+    The computed eigenvalues are linearised at `b`, ``lambda(b') = g + S (b' - b)``, and
+    ``b'`` has the prior ``N(mu, V_b)``, so that the paired measured eigenvalues are jointly
+    Gaussian, ``N(g + S (mu - b), S V_b S^T + V_Y)``: unlike :func:`assign`, the
+    frequencies' errors are correlated (six constants move all of them together), which is
+    what tells a shifted pairing from the right one when the prior is far off. The
+    probability (the module's, with this marginal in place of the independent Gaussians,
+    in eigenvalues) is maximised by local search over order-preserving assignments from
+    pairing by order and from :func:`assign`'s answer.
+
+    Parameters
+    ----------
+    measured_Hz, sigma_Hz : array_like, shape (m,)
+        Hz.
+    eigenvalues : array_like, shape (n,)
+        Computed elastic eigenvalues at `b`, ascending, rad^2/s^2; ``n > m`` leaves room
+        for missed modes.
+    sensitivities : array_like, shape (n, 6)
+        ``d lambda / d b`` at `b`.
+    b, prior_mean_b : array_like, shape (6,)
+        Linearisation point and prior mean of the stiffness coefficients, Pa.
+    prior_covariance_b : array_like, shape (6, 6)
+        Pa^2.
+    p_unobserved, p_spurious : float
+    start : array_like of int, shape (m,), optional
+        An assignment to search from as well (e.g. the one in use).
+
+    Returns
+    -------
+    Assignment
+        ``log_probability`` is the marginal one.
+    """
+    f = np.asarray(measured_Hz, dtype=float)
+    s = np.asarray(sigma_Hz, dtype=float)
+    g = np.asarray(eigenvalues, dtype=float)
+    S = np.asarray(sensitivities, dtype=float)
+    V_b = np.asarray(prior_covariance_b, dtype=float)
+    Y = (2 * np.pi * f) ** 2
+    V_Y = np.diag((8 * np.pi**2 * f * s) ** 2)
+    shift = S @ (np.asarray(prior_mean_b, dtype=float) - np.asarray(b, dtype=float))
+    band = float(np.max(f + _BAND_SIGMAS * s))
+    log_B = np.log((2 * np.pi * band) ** 2)
+    in_band = g <= (2 * np.pi * np.max(f)) ** 2
+    m, n = f.size, g.size
+
+    def score(modes):
+        args = (Y, V_Y, g, S, shift, V_b, in_band, p_unobserved, p_spurious, log_B)
+        return _log_evidence(modes, *args)
+
+    computed_Hz = np.sqrt(np.maximum(g, 0.0)) / (2 * np.pi)
+    spread = predictive_sd_Hz(computed_Hz, S, V_b)
+    starts = [np.arange(m), assign(f, s, computed_Hz, spread, p_unobserved, p_spurious).modes]
+    if start is not None:
+        starts.append(np.asarray(start, dtype=int))
+    best, best_score = None, -np.inf
+    for modes in starts:
+        if not _valid(modes, n):
+            continue
+        current = score(modes)
+        while True:
+            moves = [(score(a), tuple(a)) for a in _neighbours(modes, n)]
+            top, key = max(moves) if moves else (-np.inf, None)
+            if top <= current + 1e-9:
+                break
+            modes, current = np.array(key), top
+        if current > best_score:
+            best, best_score = modes, current
+    unobserved = np.setdiff1d(np.flatnonzero(in_band), best[best >= 0])
+    return Assignment(best, unobserved, best_score, band)
