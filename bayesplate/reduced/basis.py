@@ -134,8 +134,12 @@ def _project_terms(model, basis, new):
 
 
 def _project_constant(model, basis, new):
-    """``basis.T @ K_0 @ new`` for the stiffness independent of ``b``, or None."""
-    data = getattr(model, "extra_stiffness_data", None)
+    """``basis.T @ K_0 @ new`` for the stiffness independent of ``b``, or None.
+
+    ``K_0`` is the model's :attr:`~bayesplate.model.PlateModel.extra_stiffness_data` (None for
+    the bare plate).
+    """
+    data = model.extra_stiffness_data
     if data is None:
         return None
     return basis.T @ (model.assembler.matrix(data) @ new)

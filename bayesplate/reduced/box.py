@@ -14,6 +14,7 @@ import numpy as np
 from scipy.stats import qmc
 
 from .. import laminate
+from ..quantities import stiffness_covariance
 
 __all__ = ["Box", "prior_stiffness", "stiffness_box"]
 
@@ -145,8 +146,7 @@ def prior_stiffness(prior):
         ``J diag(sd^2) J^T`` with ``J = d b / d e`` at the mean, Pa^2.
     """
     mean_e = np.asarray(prior.mean, dtype=float)
-    J = laminate.stiffness_jacobian(mean_e)
-    cov = J @ np.diag(np.asarray(prior.sd, dtype=float) ** 2) @ J.T
+    cov = stiffness_covariance(mean_e, np.diag(np.asarray(prior.sd, dtype=float) ** 2))
     return laminate.stiffness_from_engineering(mean_e), cov
 
 

@@ -135,9 +135,13 @@ class CertifiedModel:
     ``logging`` and by one :class:`ReducedModelWarning`; repeats are only counted (and logged
     again at 10, 100, 1000, ... occurrences).
 
+    A :class:`bayesplate.forward.ForwardModel`: :attr:`mesh` and :attr:`mass` are the full
+    model's, which both paths' mode shapes live on.
+
     Parameters
     ----------
     model : bayesplate.model.PlateModel
+        The full model.
     reduced : ReducedModel
     certificate : Certificate
     history : sequence of Certificate, optional
@@ -159,6 +163,16 @@ class CertifiedModel:
         self.history = tuple(history) or (certificate,)
         self.fallbacks = {"uncertified": 0, "outside_box": 0, "n_modes": 0}
         self.n_reduced = 0
+
+    @property
+    def mesh(self):
+        """The full model's mesh, on whose unknowns the mode shapes live."""
+        return self.model.mesh
+
+    @property
+    def mass(self):
+        """The full model's mass matrix (CSR, all unknowns), shape (n_dofs, n_dofs)."""
+        return self.model.mass
 
     @property
     def certified(self):

@@ -78,6 +78,9 @@ class ReducedModalResult:
 class ReducedModel:
     """Rayleigh-Ritz model on a fixed M-orthonormal basis; build it with :meth:`build`.
 
+    A :class:`bayesplate.forward.ForwardModel`: :attr:`mesh` and :attr:`mass` are those of the
+    full model the basis was built from, on whose unknowns the mode shapes live.
+
     Attributes
     ----------
     basis : numpy.ndarray, shape (n_dofs, r)
@@ -108,6 +111,8 @@ class ReducedModel:
         Basis size after each batch of snapshots (the rigid-body motions, each half of the
         initial design, each enrichment); the leading columns up to a level form the model
         of that stage.
+    full_model : bayesplate.model.PlateModel
+        The full model the basis was built from (keyword only; referenced, not copied).
     """
 
     basis: np.ndarray = field(repr=False)
@@ -122,6 +127,7 @@ class ReducedModel:
     n_rigid: int
     classes: np.ndarray = field(repr=False)
     levels: tuple = ()
+    full_model: object = field(repr=False, kw_only=True)
 
     def __post_init__(self):
         groups = [np.flatnonzero(self.classes == c) for c in np.unique(self.classes)]
@@ -142,6 +148,16 @@ class ReducedModel:
             self.reference,
             self.classes[elastic],
         )
+
+    @property
+    def mesh(self):
+        """The full model's mesh, on whose unknowns the mode shapes live."""
+        return self.full_model.mesh
+
+    @property
+    def mass(self):
+        """The full model's mass matrix (CSR, all unknowns), shape (n_dofs, n_dofs)."""
+        return self.full_model.mass
 
     @property
     def size(self):
@@ -232,6 +248,7 @@ class ReducedModel:
             n_rigid=rigid.shape[1],
             classes=classes,
             levels=tuple(levels),
+            full_model=model,
         )
 
     def enrich(self, model, points, results=None):
@@ -283,6 +300,7 @@ class ReducedModel:
             n_rigid=self.n_rigid,
             classes=classes,
             levels=(*self.levels, len(classes)),
+            full_model=model,
         )
 
     def leading(self, size):

@@ -44,7 +44,7 @@ def _symmetries(model):
         symmetry group, whose characters label the classes.
     """
     mats = [model.stiffness_term(j) for j in range(6)] + [model.mass]
-    if getattr(model, "extra_stiffness_data", None) is not None:
+    if model.extra_stiffness_data is not None:
         mats.append(model.assembler.matrix(model.extra_stiffness_data))
     x = np.random.default_rng(_SIGN_SEED).standard_normal(model.mesh.n_dofs)
     images = [A @ x for A in mats]
