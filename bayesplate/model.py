@@ -90,6 +90,12 @@ class PlateModel:
         Free-free (the test configuration) or SS-1 simple supports (for verification).
     shear_order : int, optional
         Gauss points per direction for the transverse-shear terms (default: exact, 4).
+
+    Attributes
+    ----------
+    extra_stiffness_data : numpy.ndarray, shape (nnz,), or None
+        CSR data of a stiffness ``K_0`` independent of ``b`` added to ``K(b)`` (a foundation,
+        say; set by :meth:`modified`), or None for the bare plate.
     """
 
     def __init__(

@@ -15,6 +15,7 @@ import pytest
 from bayesplate import laminate
 from bayesplate.case import bundled_case_path, load_case
 from bayesplate.discrepancy.elastic_foundation import ElasticFoundation
+from bayesplate.forward import ForwardModel, Modes
 from bayesplate.model import ModalResult, PlateModel
 from bayesplate.reduced import (
     DEFAULT_TOLERANCE,
@@ -246,6 +247,22 @@ def test_results_carry_the_full_model_fields(certified):
     np.testing.assert_allclose(
         red.normalised_sensitivities().sum(axis=1), 1.0, rtol=1e-10
     )  # Euler: lambda is homogeneous of degree one in b
+
+
+def test_models_implement_the_forward_interface(certified):
+    _, model, fast = certified
+    reduced = fast.reduced
+    for m in (model, reduced, fast):
+        assert isinstance(m, ForwardModel)
+    # the reduced and certified models' mesh and mass are the full model's
+    assert reduced.mesh is model.mesh and fast.mesh is model.mesh
+    for m in (reduced, fast):
+        assert (m.mass != model.mass).nnz == 0
+    b = fast.certificate.points[0]
+    assert isinstance(reduced.solve(b), Modes) and isinstance(fast.solve(b), Modes)
+    # the model of an earlier stage and an enriched one keep the full model
+    assert reduced.leading(reduced.levels[-2]).full_model is model
+    assert reduced.enrich(model, b[None]).full_model is model
 
 
 # ----------------------------------------------------------------------------- determinism
