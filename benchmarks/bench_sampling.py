@@ -65,11 +65,11 @@ def run_frederiksen():
     wall, cpu = time.perf_counter(), time.process_time()
     case = load_case(bundled_case_path("frederiksen_t300"))
     model = PlateModel.from_case(case)
-    setup = prepare(case, model=model, seed=SEED)
+    setup = prepare(case, model=model, rng=SEED)
     load.append(os.getloadavg()[0])
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        result = sample(case, seed=SEED, setup=setup, progress=False, min_ess=MIN_ESS,
+        result = sample(case, rng=SEED, setup=setup, progress=False, min_ess=MIN_ESS,
                         max_rhat=MAX_RHAT)  # fmt: skip
     total_wall, total_cpu = time.perf_counter() - wall, time.process_time() - cpu
     load.append(os.getloadavg()[0])
@@ -111,16 +111,14 @@ def _fast_time(setup, draws):
 
 def agreement(setup, result):
     """Deviations and correlations: sampled, B's P, full-Hessian Laplace; with bands."""
-    from bayesplate.sampling import (
-        covariance_agreement,
-        curvature_covariance,
-        engineering_covariance,
-        linearisation_band,
-    )
+    from bayesplate.laminate import engineering_from_stiffness
+    from bayesplate.quantities import engineering_covariance
+    from bayesplate.sampling import covariance_agreement, curvature_covariance, linearisation_band
 
     est = setup.estimate
     problem = setup.problem_on_fast_model()
-    H = engineering_covariance(est.b, curvature_covariance(problem, est.b, est.covariance_b))
+    H = engineering_covariance(engineering_from_stiffness(est.b),
+                               curvature_covariance(problem, est.b, est.covariance_b))  # fmt: skip
     a = covariance_agreement(result, est.covariance)
     a["sd_hessian"] = np.sqrt(np.diag(H))
     a["linearisation"] = linearisation_band(problem, est.b, est.covariance_b)
@@ -136,8 +134,8 @@ def run_plate1():
     from bayesplate.sampling import prepare, sample
 
     case = load_case(bundled_case_path("plate1"))
-    setup = prepare(case, seed=SEED)
-    result = sample(case, seed=SEED, setup=setup, progress=False, min_ess=MIN_ESS)
+    setup = prepare(case, rng=SEED)
+    result = sample(case, rng=SEED, setup=setup, progress=False, min_ess=MIN_ESS)
     return setup, result
 
 

@@ -30,7 +30,8 @@ from bayesplate.model import PlateModel
 from bayesplate.pairing import Pairing
 from bayesplate.posterior import GaussianProblem
 from bayesplate.reduced import Box, fast_model
-from bayesplate.sampling import FAST_DEFAULTS, PILOT_TOL, posterior_box, prepare, sample
+from bayesplate.sampling import posterior_box, prepare, sample
+from bayesplate.sampling.setup import FAST_DEFAULTS, PILOT_TOL
 
 if sys.version_info >= (3, 11):
     import tomllib

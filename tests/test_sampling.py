@@ -21,6 +21,7 @@ from bayesplate.pairing import Pairing
 from bayesplate.posterior import GaussianProblem, prior_in_stiffness
 from bayesplate.reduced import Box
 from bayesplate.sampling import (
+    CASE_UNITS,
     ScreenedDEMove,
     WhitenedLogPosterior,
     covariance_agreement,
@@ -74,9 +75,9 @@ def _linear_problem(rng, m=10):
 
 def _ess_b(result):
     """Bulk ESS of each stiffness coefficient (walkers as chains)."""
-    from bayesplate.sampling import _arviz
+    from bayesplate.sampling.stopping import load_arviz
 
-    az = _arviz()
+    az = load_arviz()
     draws = result.samples_b.reshape(-1, result.n_walkers, 6)
     return np.array([az.ess(draws[:, :, j].T) for j in range(6)])
 
@@ -105,7 +106,7 @@ def test_known_gaussian_posterior_within_monte_carlo_error(rng):
     # closed-form posterior.
     problem, mean, P = _linear_problem(rng)
     sd = np.sqrt(np.diag(P))
-    result = sample_problem(problem, mean + 0.7 * sd, np.diag(2 * sd**2), seed=1,
+    result = sample_problem(problem, mean + 0.7 * sd, np.diag(2 * sd**2), rng=1,
                             progress=False, min_ess=2000)  # fmt: skip
     assert result.converged and result.rhat_max < 1.01
     ess = _check_gaussian(result, mean, P)
@@ -121,38 +122,57 @@ def test_truncated_proposals_leave_the_posterior_invariant(rng):
     lower, upper = mean - 10 * sd, mean + 10 * sd
     upper[0] = mean[0] + 2.2 * sd[0]
     box = Box(lower, upper)
-    result = sample_problem(problem, mean, P, seed=2, progress=False, min_ess=2000, box=box)
+    result = sample_problem(problem, mean, P, rng=2, progress=False, min_ess=2000, box=box)
     _check_gaussian(result, mean, P)
     outside = np.mean(result.samples_b[:, 0] > upper[0])
     assert 0.005 < outside < 0.03  # 1.4 % expected; zero would mean a truncated posterior
 
 
-def test_same_seed_same_chain_and_a_generator_is_a_seed(rng):
+def test_same_rng_same_chain_and_a_generator_is_a_seed(rng):
     problem, mean, P = _linear_problem(rng)
     kwargs = {"progress": False, "max_steps": 150, "min_ess": np.inf}
-    a = sample_problem(problem, mean, P, seed=7, **kwargs)
-    b = sample_problem(problem, mean, P, seed=7, **kwargs)
-    c = sample_problem(problem, mean, P, seed=np.random.default_rng(7), **kwargs)
-    d = sample_problem(problem, mean, P, seed=8, **kwargs)
+    a = sample_problem(problem, mean, P, rng=7, **kwargs)
+    b = sample_problem(problem, mean, P, rng=7, **kwargs)
+    c = sample_problem(problem, mean, P, rng=np.random.default_rng(7), **kwargs)
+    d = sample_problem(problem, mean, P, rng=8, **kwargs)
     np.testing.assert_array_equal(a.chain, b.chain)
     np.testing.assert_array_equal(a.chain, c.chain)
     assert not np.array_equal(a.chain, d.chain)
+    assert a.settings["moves"] == ["LaplaceMove", "ScreenedDEMove"]
+    assert a.settings["move_weights"] == [0.9, 0.1]
+
+
+def test_seed_keyword_still_works_with_a_deprecation_warning(rng):
+    # ``seed`` was the name of ``rng`` before: the same int, the same chain, for one release
+    problem, mean, P = _linear_problem(rng)
+    kwargs = {"progress": False, "max_steps": 150, "min_ess": np.inf}
+    a = sample_problem(problem, mean, P, rng=7, **kwargs)
+    with pytest.warns(DeprecationWarning, match="rng"):
+        b = sample_problem(problem, mean, P, seed=7, **kwargs)
+    np.testing.assert_array_equal(a.chain, b.chain)
+    with pytest.raises(TypeError, match="not both"):
+        sample_problem(problem, mean, P, rng=7, seed=7, **kwargs)
+
+
+def test_case_units_multiply_as_before():
+    # results are multiplied by CASE_UNITS: 1 / CASE_SCALE is the old literal to the last bit
+    assert CASE_UNITS.tobytes() == np.array([1e-9, 1e-9, 1.0, 1e-9, 1e-9, 1e-9]).tobytes()
 
 
 def test_resuming_a_backend_continues_the_same_chain(rng, tmp_path):
     # 90 tuning steps, then 40 + 40 in two runs against 80 in one: the same numbers.
     problem, mean, P = _linear_problem(rng)
     kwargs = {"progress": False, "min_ess": np.inf, "check_every": 20}
-    whole = sample_problem(problem, mean, P, seed=3, max_steps=170, **kwargs)
+    whole = sample_problem(problem, mean, P, rng=3, max_steps=170, **kwargs)
     path = tmp_path / "chain.h5"
-    first = sample_problem(problem, mean, P, seed=3, max_steps=130, backend_path=path, **kwargs)
+    first = sample_problem(problem, mean, P, rng=3, max_steps=130, backend_path=path, **kwargs)
     assert first.n_steps == 130 and not first.settings["resumed"]
-    second = sample_problem(problem, mean, P, seed=99, max_steps=170, backend_path=path, **kwargs)
+    second = sample_problem(problem, mean, P, rng=99, max_steps=170, backend_path=path, **kwargs)
     assert second.settings["resumed"] and second.n_steps == 170
     np.testing.assert_array_equal(second.chain, whole.chain)
     other, _, _ = _linear_problem(np.random.default_rng(5))
     with pytest.raises(ValueError, match="another problem"):
-        sample_problem(other, mean, P, seed=3, max_steps=200, backend_path=path, **kwargs)
+        sample_problem(other, mean, P, rng=3, max_steps=200, backend_path=path, **kwargs)
 
 
 def test_a_map_like_pool_gives_the_same_chain(rng):
@@ -164,7 +184,7 @@ def test_a_map_like_pool_gives_the_same_chain(rng):
             return list(map(f, xs))
 
     problem, mean, P = _linear_problem(rng)
-    kwargs = {"progress": False, "max_steps": 160, "min_ess": np.inf, "seed": 4}
+    kwargs = {"progress": False, "max_steps": 160, "min_ess": np.inf, "rng": 4}
     plain = sample_problem(problem, mean, P, **kwargs)
     pooled = sample_problem(problem, mean, P, pool=Serial(), **kwargs)
     assert Serial.calls > 0
@@ -201,10 +221,10 @@ def test_screening_changes_no_decision(rng):
 def plate1():
     case = load_case(bundled_case_path("plate1"))
     model = PlateModel.from_case(case)
-    setup = prepare(case, model=model, seed=SEED)
+    setup = prepare(case, model=model, rng=SEED)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # no full-model fallback while sampling
-        result = sample(case, seed=SEED, setup=setup, progress=False, min_ess=2000)
+        result = sample(case, rng=SEED, setup=setup, progress=False, min_ess=2000)
     return case, model, setup, result
 
 
@@ -338,7 +358,7 @@ def test_plate1_summary_and_json_table(plate1):
 
 def test_cli_sample_writes_json_netcdf_and_figures(tmp_path):
     from bayesplate.cli import main
-    from bayesplate.sampling import _arviz
+    from bayesplate.sampling.stopping import load_arviz
 
     out = tmp_path / "posterior.nc"
     js = tmp_path / "posterior.json"
@@ -348,7 +368,7 @@ def test_cli_sample_writes_json_netcdf_and_figures(tmp_path):
     doc = json.loads(js.read_text())
     assert doc["ess_min"] >= 800 and doc["rhat_max"] < 1.01
     assert set(doc["constants"]["E1_GPa"]) >= {"mean", "sd", "hdi_3%", "hdi_97%"}
-    idata = _arviz().from_netcdf(out)
+    idata = load_arviz().from_netcdf(out)
     assert "log_likelihood" in idata.groups()
     for name in ("corner", "trace", "autocorrelation"):
         assert (tmp_path / "figs" / f"{name}.png").stat().st_size > 10_000
@@ -367,8 +387,8 @@ def test_frederiksen_covariance_linearised_against_sampled():
     # correlated with it), shown in reports/benchmark_sampling.md and pinned here so that
     # it stays shown.
     case = load_case(bundled_case_path("frederiksen_t300"))
-    setup = prepare(case, seed=SEED)
-    result = sample(case, seed=SEED, setup=setup, progress=False, min_ess=2000)
+    setup = prepare(case, rng=SEED)
+    result = sample(case, rng=SEED, setup=setup, progress=False, min_ess=2000)
     est = setup.estimate
     assert setup.certificate.passed
     assert result.converged and result.ess_min >= 2000 and result.rhat_max < 1.01

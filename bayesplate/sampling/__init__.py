@@ -1,0 +1,91 @@
+"""Posterior sampling with emcee on the estimators' own Gaussian problem (issue 4).
+
+The target is ``ln f(b | Y)`` of :class:`bayesplate.posterior.GaussianProblem`: the same
+``V_Y``, prior and pairing as the estimators (``CONVENTIONS["paper"]`` by default), -inf
+outside the physical region. Only the forward model is swapped for a fast one; the
+log-density is still :meth:`GaussianProblem.log_posterior` of a problem built from the
+same arrays (:class:`WhitenedLogPosterior`).
+
+Fast model
+    A certified reduced-basis model (:func:`bayesplate.reduced.fast_model`) over the
+    *posterior* box (:func:`posterior_box`): a pilot B estimate +- 6 linearised deviations,
+    and, in the coefficients the data barely inform, the prior's 3-sigma range as well; cut
+    to physical laminae. Not the prior's 3-sigma box throughout: the posterior is 5 to 20
+    times narrower than the prior in the well-identified coefficients, and the prior box of
+    the Frederiksen case needs 37 full solves to certify (``reports/benchmark_reduced.md``),
+    which alone spends the two minutes the whole posterior may take. The pilot B run (TOL
+    1e-2, within ~0.1 deviations of the converged estimate) uses the case mesh or, above
+    400 elements, a mesh halved in each direction (within ~0.7 deviations on the
+    Frederiksen plate). The certificate (held-out points against the full model, relative
+    frequency error below 1e-4) is kept in the result; where it fails, or a walker steps
+    out of the box, the full model is used with a
+    :class:`bayesplate.reduced.ReducedModelWarning`, and the result counts those
+    evaluations. The sampler needs eigenvalues only (the fastest reduced path); the MAP and
+    its covariance ``P`` come from B iterated to TOL 1e-7 on the same fast model.
+
+Parameterisation and moves
+    Walkers move in whitened log coordinates (:class:`WhitenedLogPosterior`): the
+    logarithms of the positive coefficients and C12 itself, whitened by ``P`` at the MAP;
+    the density carries the Jacobian. Two emcee moves are mixed: :class:`LaplaceMove`
+    (90 %), an independence Metropolis-Hastings proposal (Student-t, 10 degrees of
+    freedom, scale 1.1) tuned on the ensemble, and :class:`ScreenedDEMove` (10 %), emcee's
+    differential evolution, local and adaptive, for where the posterior is not Gaussian.
+    Tuning: three rounds of 30 steps, after each of which the proposal takes the mean and
+    covariance of the ensemble; then it is frozen and the tuning steps are discarded. The
+    independence proposals are truncated to the fast model's box; DE proposals outside it
+    are first screened with an upper bound of the posterior from the reduced model's Ritz
+    values (upper bounds of the eigenvalues everywhere), so that most of them are rejected
+    without a full solve, exactly as the evaluation would. Every move leaves the posterior
+    invariant whatever ``P`` and the tuning are; they only set the efficiency.
+
+Stopping
+    Every ``check_every`` steps after tuning the integrated autocorrelation time ``tau`` of
+    each coordinate is estimated (``get_autocorr_time(tol=0)`` on the chain after tuning);
+    the run stops once that chain is longer than ``target_tau_factor`` (50) times the
+    largest ``tau``, the smallest bulk ESS of the engineering constants (after a further
+    burn-in of 3 ``tau``) reaches ``min_ess`` and the largest R-hat is below ``max_rhat``
+    (1.01), or at ``max_steps``.
+
+Output
+    :class:`SamplingResult` with an ArviZ ``InferenceData``: ``posterior`` in the engineering
+    constants in case-file units (``E1_GPa``, ..., ``nu12``), ``log_likelihood`` (the
+    pointwise log-likelihood of each measured eigenvalue, for WAIC/LOO), ``sample_stats``
+    (``lp``), ``observed_data`` (``Y``, rad^2/s^2) and ``constant_data`` (frequencies, Hz),
+    indexed by the measured mode number (``mode``). Walkers are ArviZ chains.
+
+Modules
+    :mod:`~bayesplate.sampling.density` (the target), :mod:`~bayesplate.sampling.moves`,
+    :mod:`~bayesplate.sampling.setup` (problem, pilot, box, fast model, MAP),
+    :mod:`~bayesplate.sampling.chain` (walkers, tuning, run loop),
+    :mod:`~bayesplate.sampling.stopping`, :mod:`~bayesplate.sampling.storage` (HDF backend),
+    :mod:`~bayesplate.sampling.result`, :mod:`~bayesplate.sampling.pipeline` (:func:`sample`),
+    :mod:`~bayesplate.sampling.checks` (the linearised covariance against the posterior),
+    :mod:`~bayesplate.sampling.seeding` (the ``rng`` argument).
+"""
+
+from .chain import sample_problem
+from .checks import covariance_agreement, curvature_covariance, linearisation_band
+from .density import EigenvalueForward, WhitenedLogPosterior
+from .moves import LaplaceMove, ScreenedDEMove, default_moves
+from .pipeline import sample
+from .result import CASE_UNITS, HDI_PROB, SamplingResult
+from .setup import SamplingSetup, posterior_box, prepare
+
+__all__ = [
+    "CASE_UNITS",
+    "HDI_PROB",
+    "EigenvalueForward",
+    "LaplaceMove",
+    "SamplingResult",
+    "SamplingSetup",
+    "ScreenedDEMove",
+    "WhitenedLogPosterior",
+    "covariance_agreement",
+    "curvature_covariance",
+    "default_moves",
+    "linearisation_band",
+    "posterior_box",
+    "prepare",
+    "sample",
+    "sample_problem",
+]

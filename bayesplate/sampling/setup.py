@@ -1,0 +1,322 @@
+"""What the sampler needs first: the problem, its fast model over the posterior box, the MAP.
+
+:func:`prepare` builds a :class:`SamplingSetup`: the estimators' Gaussian problem (same
+conventions, prior and pairing), a pilot B run (on a halved mesh above
+:data:`PILOT_MAX_ELEMENTS` elements) placing the posterior box (:func:`posterior_box`), the
+certified reduced-basis model over it (:func:`bayesplate.reduced.fast_model`), and B
+iterated to :data:`MAP_TOL` on that fast model: the MAP and its covariance ``P``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .. import laminate
+from ..estimators import resolve_conventions, run
+from ..model import PlateModel
+from ..pairing import Pairing, pair_measured
+from ..posterior import GaussianProblem
+from ..quantities import LOG_STIFFNESS
+from ..reduced import Box, fast_model
+from .density import EigenvalueForward
+from .seeding import resolve_rng
+
+__all__ = [
+    "FAST_DEFAULTS",
+    "MAP_TOL",
+    "PILOT_MAX_ELEMENTS",
+    "PILOT_TOL",
+    "SamplingSetup",
+    "posterior_box",
+    "prepare",
+]
+
+log = logging.getLogger(__name__)
+
+#: Meshes above this many elements get a pilot B run on a mesh halved in each direction.
+PILOT_MAX_ELEMENTS = 400
+#: Pilot B: a relative change of 1e-2 leaves it within ~0.1 deviations of the converged
+#: estimate (Frederiksen plate: 0.12 after 5 iterations), far inside a 6-deviation box.
+PILOT_TOL = 1e-2
+#: B to this relative change is the MAP to ~1e-6 posterior deviations (linear convergence,
+#: ratio ~0.37 per iteration on the bundled plates).
+MAP_TOL = 1e-7
+#: Default fast-model settings for a posterior box: 10 design points besides the centre
+#: (6 needed a second round on the Frederiksen plate, 10 passed in one: 17 full solves),
+#: rounds of 4 random + 2 probe held-out points (see :func:`bayesplate.reduced.fast_model`).
+FAST_DEFAULTS = {"n_snapshots": 10, "n_test": 4, "n_probe": 2}
+
+
+@dataclass(frozen=True, eq=False)
+class SamplingSetup:
+    """The problem, its fast model and its MAP: everything :func:`sample` needs first.
+
+    Attributes
+    ----------
+    problem : GaussianProblem
+        On the full model, with the estimators' conventions, prior and pairing (no extra
+        modes beyond the paired ones: the sampler does not track modes).
+    model : PlateModel
+        The full model.
+    fast : bayesplate.reduced.CertifiedModel or None
+        None when the full model is sampled.
+    estimate : EstimateResult
+        B on the sampler's forward model: the MAP and ``P``.
+    pilot : EstimateResult or None
+        The pilot B run that placed the box.
+    box : bayesplate.reduced.Box or None
+    timings : dict
+        Seconds: ``pilot``, ``build``, ``map``.
+    n_full_solves : int
+        Full finite-element solves spent (pilot on the case mesh, build, certification).
+    """
+
+    problem: GaussianProblem = field(repr=False)
+    model: object = field(repr=False)
+    fast: object
+    estimate: object = field(repr=False)
+    pilot: object = field(repr=False)
+    box: object
+    timings: dict
+    n_full_solves: int
+
+    @property
+    def certificate(self):
+        """The fast model's certificate, or None."""
+        return None if self.fast is None else self.fast.certificate
+
+    def forward_with_sensitivities(self):
+        """``forward(b, n_modes)`` of the sampler's model with sensitivities (for B, MVE)."""
+        return self.model.solve if self.fast is None else self.fast.solve
+
+    def sampling_forward(self):
+        """``forward(b, n_modes)`` the sampler uses: the fast model's eigenvalues path.
+
+        An :class:`~bayesplate.sampling.density.EigenvalueForward` holding the certified
+        model's reduced part (its eigenvalues bound the full model's from above, for
+        screening proposals off the box) when its certificate passed; the full model's
+        ``solve`` when no fast model is used.
+        """
+        if self.fast is None:
+            return self.model.solve
+        reduced = self.fast.reduced if self.fast.certified else None
+        return EigenvalueForward(self.fast, reduced)
+
+    def problem_on_fast_model(self, mu_b=None, V_b=None):
+        """The same problem (or another prior) on the sampler's model with sensitivities."""
+        p = self.problem
+        mu_b = p.mu_b if mu_b is None else mu_b
+        V_b = p.V_b if V_b is None else V_b
+        return GaussianProblem(p.Y, p.V_Y, mu_b, V_b, self.forward_with_sensitivities(), p.pairing)
+
+    def run_estimator(self, method="MVE", tol=1e-3, **kwargs):
+        """B or MVE (:func:`bayesplate.estimators.run`) on the sampler's model.
+
+        Iterates outside the certified box use the reduced model uncertified; the result is
+        recomputed with the full-model fallback if it ends outside the box.
+        """
+        return _run_on_fast(self, method, tol, **kwargs)
+
+
+def _pilot_model(case, model, pilot_mesh):
+    """The model of the pilot B run: the model itself, or the case on a coarser mesh."""
+    if pilot_mesh is None:
+        return model
+    if pilot_mesh == "auto":
+        mesh = model.mesh
+        if mesh.nx * mesh.ny <= PILOT_MAX_ELEMENTS:
+            return model
+        pilot_mesh = (math.ceil(mesh.nx / 2), math.ceil(mesh.ny / 2))
+    return PlateModel.from_case(case, mesh=tuple(pilot_mesh))
+
+
+def posterior_box(estimate, mu_b, V_b, n_sigma=6.0, weak=0.25, prior_sigma=3.0, floor=0.1):
+    """The fast model's box: where the posterior can be, from a (pilot) B estimate.
+
+    ``b`` +- ``n_sigma`` deviations of ``P`` in every coefficient; where the data barely
+    inform a coefficient (its deviation in ``P`` above ``weak`` times the prior's), the
+    posterior is not Gaussian and reaches as far as the prior (Frederiksen G13: 9
+    deviations of ``P`` above the MAP), so the box also covers the prior mean +-
+    ``prior_sigma`` prior deviations there. Cut to physical laminae as
+    :meth:`bayesplate.reduced.Box.from_covariance`: positive coefficients above ``floor``
+    times the estimate, ``|C12|`` below 0.99 ``sqrt(C11 C22)`` at the lower corner.
+
+    Parameters
+    ----------
+    estimate : EstimateResult
+    mu_b : array_like, shape (6,)
+        Prior mean of ``b``, Pa.
+    V_b : array_like, shape (6, 6)
+        Prior covariance of ``b``, Pa^2.
+    n_sigma, weak, prior_sigma, floor : float
+
+    Returns
+    -------
+    Box
+    """
+    b = np.asarray(estimate.b, dtype=float)
+    sd = np.sqrt(np.diag(estimate.covariance_b))
+    sd0 = np.sqrt(np.diag(np.asarray(V_b, dtype=float)))
+    lower, upper = b - n_sigma * sd, b + n_sigma * sd
+    wide = sd > weak * sd0
+    mu = np.asarray(mu_b, dtype=float)
+    lower[wide] = np.minimum(lower[wide], mu[wide] - prior_sigma * sd0[wide])
+    upper[wide] = np.maximum(upper[wide], mu[wide] + prior_sigma * sd0[wide])
+    positive = LOG_STIFFNESS
+    lower[positive] = np.maximum(lower[positive], floor * b[positive])
+    cap = 0.99 * math.sqrt(lower[0] * lower[1])
+    lower[2], upper[2] = max(lower[2], -cap), min(upper[2], cap)
+    return Box(lower, upper)
+
+
+def prepare(
+    case,
+    *,
+    model=None,
+    forward="reduced",
+    rng=None,
+    convention="paper",
+    prior_mean=None,
+    prior_sd=None,
+    pairing="auto",
+    box_sigma=6.0,
+    box=None,
+    pilot_mesh="auto",
+    fast=None,
+    fast_options=None,
+    seed=None,
+):
+    """The sampler's problem, fast model and MAP for a case.
+
+    Parameters
+    ----------
+    case : bayesplate.case.Case
+    model : PlateModel, optional
+        Full model; default ``PlateModel.from_case(case)``.
+    forward : {"reduced", "full"}
+        Sample with the certified fast model (falling back to the full one where it is not
+        certified) or with the full model throughout.
+    rng : int, numpy.random.Generator or None
+        Seed of the fast model's designs.
+    convention : str or Conventions
+        As for :func:`bayesplate.estimators.estimate` (default ``"paper"``).
+    prior_mean, prior_sd : array_like, shape (6,), optional
+        Engineering prior (SI) replacing the case's.
+    pairing : {"auto", "mac", "index", "order"} or Pairing
+        As for :func:`bayesplate.estimators.estimate` (:func:`bayesplate.pairing.pair_measured`
+        at the prior mean); the sampler computes no modes beyond the paired ones.
+    box_sigma : float
+        Half-width of the posterior box in deviations of the pilot B estimate.
+    box : Box, optional
+        Explicit box for the fast model (no pilot run).
+    pilot_mesh : "auto", None or (nx, ny)
+        Mesh of the pilot B run: ``"auto"`` halves meshes above 400 elements (only when the
+        model is the case's own); None runs it on ``model``.
+    fast : bayesplate.reduced.CertifiedModel, optional
+        A fast model already built (e.g. shared by several priors); no pilot, no build.
+    fast_options : dict, optional
+        Keywords of :func:`bayesplate.reduced.fast_model` (default ``FAST_DEFAULTS``).
+    seed : int, numpy.random.Generator or None
+        Deprecated name of ``rng`` (a DeprecationWarning; removed in the next release).
+
+    Returns
+    -------
+    SamplingSetup
+    """
+    rng = resolve_rng(rng, seed, "prepare")
+    if forward not in ("reduced", "full"):
+        raise ValueError(f"forward = {forward!r}: must be 'reduced' or 'full'")
+    conventions = resolve_conventions(convention)
+    own_model = model is None
+    model = model or PlateModel.from_case(case)
+    mean = np.asarray(case.prior.mean if prior_mean is None else prior_mean, dtype=float)
+    sd = np.asarray(case.prior.sd if prior_sd is None else prior_sd, dtype=float)
+    if not isinstance(pairing, Pairing):
+        b_prior = laminate.stiffness_from_engineering(mean)
+        pairing = pair_measured(case, model, b_prior, pairing)
+    pair = replace(pairing, extra=0)
+    problem = GaussianProblem.from_case(
+        case, model, pair, conventions.observation, conventions.prior, mean, sd
+    )
+    timings = {"pilot": 0.0, "build": 0.0, "map": 0.0}
+    pilot, solves = None, 0
+    if forward == "reduced" and fast is None:
+        if box is None:
+            started = time.perf_counter()
+            pilot_model = _pilot_model(case, model, pilot_mesh if own_model else None)
+            pilot_problem = GaussianProblem.from_case(
+                case, pilot_model, pair, conventions.observation, conventions.prior, mean, sd
+            )
+            pilot = run(pilot_problem, "B", tol=PILOT_TOL, conventions=conventions)
+            solves += pilot.n_solves if pilot_model is model else 0
+            box = posterior_box(pilot, problem.mu_b, problem.V_b, box_sigma)
+            timings["pilot"] = time.perf_counter() - started
+            log.info("pilot B (%s): %s", _mesh_text(pilot_model), pilot.message)
+        started = time.perf_counter()
+        options = {**FAST_DEFAULTS, **(fast_options or {})}
+        center = box.center if pilot is None else pilot.b
+        fast = fast_model(model, center, box, pair.n_modes(), rng=rng, **options)
+        timings["build"] = time.perf_counter() - started
+        solves += 1 + options["n_snapshots"] + sum(c.n_test for c in fast.history)
+        log.info("fast model: %s", fast.certificate)
+    setup = SamplingSetup(problem, model, fast if forward == "reduced" else None, None,
+                          pilot, None if fast is None else fast.box, timings, solves)  # fmt: skip
+    started = time.perf_counter()
+    estimate = _map(setup, conventions)
+    timings["map"] = time.perf_counter() - started
+    if not estimate.converged:
+        log.warning("B (the MAP) did not converge: %s", estimate.message)
+    _check_box(setup.box, estimate)
+    return replace(setup, estimate=estimate)
+
+
+def _map(setup, conventions):
+    """B to ``MAP_TOL`` on the sampler's model: the MAP and ``P`` (eq. 9)."""
+    return _run_on_fast(setup, "B", MAP_TOL, conventions=conventions)
+
+
+def _run_on_fast(setup, method, tol, **kwargs):
+    """B or MVE on the sampler's model, early iterates on the reduced model even off-box.
+
+    The estimators start from the prior mean, outside the posterior box; their early
+    iterates only set the path, not the fixed point, so they use the reduced model beyond
+    its certified box too (no full solves, no warnings). The fixed point is then checked to
+    lie in the box; if it does not, the run is repeated with the full-model fallback.
+    """
+    fast = setup.fast
+    if fast is None or not fast.certified:
+        return run(setup.problem_on_fast_model(), method, tol=tol, **kwargs)
+    p = setup.problem
+    free = GaussianProblem(p.Y, p.V_Y, p.mu_b, p.V_b, fast.reduced.solve, p.pairing)
+    result = run(free, method, tol=tol, **kwargs)
+    if fast.box.contains(result.b) and result.status != "solve_failed":
+        return result
+    log.warning("%s ends outside the fast model's box (%s); again with the full fallback",
+                method, result.message)  # fmt: skip
+    return run(setup.problem_on_fast_model(), method, tol=tol, **kwargs)
+
+
+def _mesh_text(model):
+    return f"{model.mesh.nx} x {model.mesh.ny} mesh"
+
+
+def _check_box(box, estimate):
+    """Log how far the MAP is from the box's edges, in linearised deviations.
+
+    An edge closer than ``box_sigma`` deviations is a physical cut (a floor of
+    :meth:`Box.from_covariance`, where the likelihood usually falls steeply: G23 of the
+    Frederiksen plate loses 600 in log-likelihood at the floor, 2.5 deviations below the
+    MAP). Walkers beyond an edge are full-model fallbacks, warned about by the fast model
+    and counted in the result.
+    """
+    if box is None:
+        return
+    sd = np.sqrt(np.diag(estimate.covariance_b))
+    low, high = (estimate.b - box.lower) / sd, (box.upper - estimate.b) / sd
+    log.info("the MAP is %s (lower) / %s (upper) deviations from the fast model's box "
+             "edges", np.round(low, 1), np.round(high, 1))  # fmt: skip
