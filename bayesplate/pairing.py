@@ -39,6 +39,7 @@ __all__ = [
     "assign_by_mac",
     "track",
     "pair_measured",
+    "resolve_pairing",
     "shape_mac",
 ]
 
@@ -293,6 +294,30 @@ class Pairing:
         return text
 
 
+def resolve_pairing(measured, how="auto"):
+    """The pairing a name stands for, for a measurement.
+
+    Parameters
+    ----------
+    measured : bayesplate.case.Measurement
+    how : {"auto", "mac", "likelihood", "index", "order"}
+        ``"auto"``: by shape (MAC) when the measurement has shapes, else by its mode numbers
+        when it has them, else by order.
+
+    Returns
+    -------
+    str
+        One of ``"mac"``, ``"likelihood"``, ``"index"``, ``"order"``.
+    """
+    if how not in PAIRINGS:
+        raise ValueError(f"pairing = {how!r}: must be one of {PAIRINGS}")
+    if how != "auto":
+        return how
+    if measured.shapes is not None and measured.points is not None:
+        return "mac"
+    return "order" if measured.mode is None else "index"
+
+
 def shape_mac(measurement, model, vectors):
     """MAC of measured shapes against computed modes at the measurement points.
 
@@ -363,11 +388,7 @@ def pair_measured(
         assignment used) for ``how == "mac"``.
     """
     measured = case.measured
-    if how not in PAIRINGS:
-        raise ValueError(f"pairing = {how!r}: must be one of {PAIRINGS}")
-    has_shapes = measured.shapes is not None and measured.points is not None
-    if how == "auto":
-        how = "mac" if has_shapes else "auto"
+    how = resolve_pairing(measured, how)
     m = measured.size
     if how == "likelihood":
         return _pair_by_likelihood(measured, model, b, extra_modes, modal, prior, start)

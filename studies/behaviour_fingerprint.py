@@ -62,7 +62,10 @@ def chain():
     from bayesplate.sampling import sample
 
     case = load_case(bundled_case_path("plate1"))
-    r = sample(case, seed=7, n_walkers=16, max_steps=200, min_ess=100.0, progress=False)
+    import inspect
+
+    seed = {"rng": 7} if "rng" in inspect.signature(sample).parameters else {"seed": 7}
+    r = sample(case, **seed, n_walkers=16, max_steps=200, min_ess=100.0, progress=False)
     samples = np.ascontiguousarray(np.asarray(r.samples_b, dtype=float))
     return {
         "samples_b_sha256": hashlib.sha256(samples.tobytes()).hexdigest(),

@@ -20,6 +20,7 @@ NUMERICS = (
     "model",
     "forward",
     "pairing",
+    "assignment",
     "posterior",
     "estimators",
     "reduced",

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from .. import laminate
 from ..model import PlateModel
-from ..pairing import Pairing, pair_measured
+from ..pairing import Pairing, pair_measured, resolve_pairing
 from ..posterior import GaussianProblem, prior_in_stiffness
 from .conventions import resolve_conventions
 from .iteration import DEFAULT_MAX_ITER, run
@@ -95,29 +95,59 @@ def estimate(
     }
     if isinstance(pairing, Pairing):
         return _estimate_paired(case, model, pairing, method, mean, sd, options)
-    how = _resolve_pairing(case.measured, pairing)
+    how = resolve_pairing(case.measured, pairing)
     if how != "likelihood":
         pair = pair_measured(case, model, b0, how)
         return _estimate_paired(case, model, pair, method, mean, sd, options)
-    # by the most probable assignment (the constants integrated out over their prior, the
-    # model linearised): made at the prior mean, remade at each estimate, until it stands;
-    # a recurring one ends a cycle
-    prior = prior_in_stiffness(mean, sd, "full")
-    pair = _lowest_first(case, model, b0, prior, method, mean, sd, options)
+    # by the most probable assignment (the constants integrated out over the prior's spread
+    # centred where the model is linearised: a profile fit with its Occam factor, not the
+    # evidence under a far prior mean, which would rather drop the peaks that disagree with
+    # it), remade at each estimate until it stands. Far from the truth an assignment made at
+    # the prior is unreliable, so two starts: A, pairing by order (kept when its estimate
+    # confirms it); B, the lowest peaks assigned at the prior and fitted first. The settled
+    # one more probable at its own estimate wins.
+    _, V = prior_in_stiffness(mean, sd, "full")
+    settle = (case, model, b0, V, method, mean, sd, options)
+    a = _settle(*settle, pair_measured(case, model, b0, "order"), None)
+    if a.settled and a.pair.assignment.in_order:
+        return _assigned(a.result, a.pair, a.rounds, "")
+    b = _settle(*settle, *_lowest_first(*settle))
+    best = max((b, a), key=lambda x: (x.settled, x.result.converged, x.log_probability))
+    note = (
+        ""
+        if best.settled
+        else (f"; the assignment did not settle in {best.rounds} rounds: kept the most probable")
+    )
+    return _assigned(best.result, best.pair, a.rounds + b.rounds, note)
+
+
+@dataclass
+class _Settled:
+    """Where the rounds of assignment and estimate from one start ended."""
+
+    result: object
+    pair: Pairing  # with its assignment, made at result.b
+    log_probability: float
+    rounds: int
+    settled: bool
+
+
+def _settle(case, model, b0, V, method, mean, sd, options, pair, start):
+    """Estimate with `pair` (from `start`), reassign at the estimate, until it stands."""
     tried = []
     for _ in range(MAX_ASSIGNMENTS):
-        result = _estimate_paired(case, model, pair, method, mean, sd, options)
+        result = _estimate_paired(case, model, pair, method, mean, sd, options, start)
         at = result.b if laminate.is_physical(result.b) else b0
-        again = pair_measured(case, model, at, "likelihood", prior=prior, start=pair)
-        tried.append((again.assignment.log_probability, result, pair))
+        start = at if result.converged else start  # the next round goes on from here
+        again = pair_measured(case, model, at, "likelihood", prior=(at, V), start=pair)
+        tried.append(_Settled(result, again, again.assignment.log_probability, 0, False))
         if _same(again, pair):
-            return _assigned(result, pair, len(tried), "")
-        if any(_same(again, p) for _, _, p in tried):
+            return replace(tried[-1], rounds=len(tried), settled=True)
+        if any(_same(again, t.pair) for t in tried[:-1]):
             break
         pair = again
-    _, result, pair = max(tried, key=lambda t: t[0])
-    note = f"; the assignment did not settle in {len(tried)} rounds: kept the most probable"
-    return _assigned(result, pair, len(tried), note)
+    pool = [t for t in tried if t.result.converged] or tried
+    return replace(max(pool, key=lambda t: t.log_probability), rounds=len(tried))
 
 
 #: Rounds of assignment and estimate before giving up on a settled assignment.
@@ -131,31 +161,23 @@ FIRST_ROUND_QUANTILE = 0.5
 FIRST_ROUND_MIN = 6
 
 
-def _lowest_first(case, model, b0, prior, method, mean, sd, options):
-    """The pairing to start from: every peak assigned at the estimate from the lowest ones.
+def _lowest_first(case, model, b0, V, method, mean, sd, options):
+    """The pairing to start from, and where: every peak assigned at the lowest ones' estimate.
 
     At a prior far from the truth the linearised marginal prefers wrong assignments of the
     upper peaks; the lowest are assigned at the prior, fitted, and all are assigned at that
-    estimate.
+    estimate, where the next run starts (None: at the prior mean).
     """
     m = case.measured.size
     low = np.flatnonzero(np.arange(m) < max(FIRST_ROUND_MIN, int(FIRST_ROUND_QUANTILE * m)))
     if low.size >= m:
-        return pair_measured(case, model, b0, "likelihood", prior=prior)
+        return pair_measured(case, model, b0, "likelihood", prior=(b0, V)), None
     lower = case.with_measured(case.measured.select(low))
-    first = pair_measured(lower, model, b0, "likelihood", prior=prior)
+    first = pair_measured(lower, model, b0, "likelihood", prior=(b0, V))
     result = _estimate_paired(lower, model, first, method, mean, sd, options)
     at = result.b if laminate.is_physical(result.b) else b0
-    return pair_measured(case, model, at, "likelihood", prior=prior)
-
-
-def _resolve_pairing(measured, how):
-    """The pairing "auto" stands for: shapes -> MAC, mode numbers -> index, else order."""
-    if how != "auto":
-        return how
-    if measured.shapes is not None and measured.points is not None:
-        return "mac"
-    return "order" if measured.mode is None else "index"
+    start = at if result.converged else None
+    return pair_measured(case, model, at, "likelihood", prior=(at, V)), start
 
 
 def _same(a, b):
@@ -164,7 +186,7 @@ def _same(a, b):
 
 
 def _assigned(result, pair, rounds, note):
-    """The result with its assignment in ``settings`` and said in its message."""
+    """The result with its assignment (`pair`'s) in ``settings`` and said in its message."""
     a = pair.assignment
     settings = {
         **result.settings,
@@ -174,16 +196,17 @@ def _assigned(result, pair, rounds, note):
         "spurious_peaks": (a.spurious + 1).tolist(),
     }
     message = f"{result.message}; assignment: {a.describe()}{note}"
-    return replace(result, settings=settings, message=message)
+    return replace(result, settings=settings, message=message, pairing=pair)
 
 
-def _estimate_paired(case, model, pair, method, mean, sd, options):
-    """B, MVE or MVE-mod with a fixed pairing."""
+def _estimate_paired(case, model, pair, method, mean, sd, options, start=None):
+    """B, MVE or MVE-mod with a fixed pairing, from `start` (default the prior mean)."""
     conventions, tol, max_iter = options["conventions"], options["tol"], options["max_iter"]
     problem = GaussianProblem.from_case(
         case, model, pair, conventions.observation, conventions.prior, mean, sd
     )
     run_options = {k: options[k] for k in ("conventions", "tracking", "weight")}
+    run_options["start"] = start
     if method != "MVE-mod":
         return _noted(run(problem, method, tol, max_iter, **run_options), mean, sd)
     stage1 = _noted(run(problem, "MVE", options["stage1_tol"], max_iter, **run_options), mean, sd)
@@ -193,6 +216,7 @@ def _estimate_paired(case, model, pair, method, mean, sd, options):
     stage2_factor, stage2_sd = options["stage2"]
     sd2 = _stage2_sd(mean2, mean, sd, stage2_factor, stage2_sd, conventions)
     mu_b, V_b = prior_in_stiffness(mean2, sd2, conventions.prior)
+    run_options["start"] = None  # stage 2 starts from stage 1's estimate, its prior mean
     stage2 = run(problem.with_prior(mu_b, V_b), "MVE", tol, max_iter, **run_options)
     return _combine(stage1, _noted(stage2, mean2, sd2))
 

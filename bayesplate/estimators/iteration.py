@@ -95,9 +95,9 @@ def _step(problem, method, state, V):
     return mve_step(state.b, p.g, p.S, problem.Y, problem.V_Y, V)
 
 
-def _iterate(problem, method, tol, max_iter, conventions, tracking, weight):
+def _iterate(problem, method, tol, max_iter, conventions, tracking, weight, start=None):
     """Run B or MVE from the prior mean; returns the final :class:`_State`."""
-    b = problem.mu_b.copy()
+    b = (problem.mu_b if start is None else np.asarray(start, dtype=float)).copy()
     state = _State(b, problem.predict(b), problem.V_b, [b])
     V = problem.V_b
     for k in range(1, max_iter + 1):
@@ -192,6 +192,7 @@ def _result(problem, method, state, conventions, settings, n_solves, started):
         wall_time=time.perf_counter() - started,
         settings=settings,
         status=state.status,
+        pairing=problem.pairing,
     )
 
 
@@ -203,6 +204,7 @@ def run(
     conventions=None,
     tracking="auto",
     weight=None,
+    start=None,
 ):
     """Run B or MVE on a :class:`bayesplate.posterior.GaussianProblem`, from its prior mean.
 
@@ -224,6 +226,9 @@ def run(
         report otherwise.
     weight : array_like or sparse matrix, optional
         MAC weight for tracking (the mass matrix).
+    start : array_like, shape (6,), optional
+        First iterate (Pa); default the prior mean. B's prior mean stays the problem's: only
+        the path changes, not the fixed point (MVE's fixed point does not depend on it).
 
     Returns
     -------
@@ -245,7 +250,7 @@ def run(
         "pairing": problem.pairing.how,
     }
     try:
-        state = _iterate(problem, method, tol, max_iter, conventions, tracking, weight)
+        state = _iterate(problem, method, tol, max_iter, conventions, tracking, weight, start)
     except Exception as err:  # noqa: BLE001 - e.g. the first solve fails: report, never raise
         b = problem.mu_b
         state = _State(
@@ -295,4 +300,5 @@ def _failed_result(problem, method, state, settings, started):
         wall_time=time.perf_counter() - started,
         settings=settings,
         status=state.status,
+        pairing=problem.pairing,
     )

@@ -68,6 +68,9 @@ class EstimateResult:
         Tolerance, iteration cap, conventions, pairing.
     status : str
         How the run ended, one of :data:`STATUSES`: test this, never the message's text.
+    pairing : bayesplate.pairing.Pairing or None
+        The measured-to-computed pairing the run used (for ``"likelihood"``, the settled
+        assignment, with its unobserved modes and spurious peaks).
     """
 
     method: str
@@ -91,6 +94,7 @@ class EstimateResult:
     wall_time: float = 0.0
     settings: dict = field(default_factory=dict)
     status: str = ""
+    pairing: object = field(default=None, repr=False, compare=False)
 
     def __post_init__(self):
         if not self.status:

@@ -17,9 +17,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .. import laminate
+from ..estimators import estimate as estimate_case
 from ..estimators import resolve_conventions, run
 from ..model import PlateModel
-from ..pairing import Pairing, pair_measured
+from ..pairing import Pairing, pair_measured, resolve_pairing
 from ..posterior import GaussianProblem
 from ..quantities import LOG_STIFFNESS
 from ..reduced import Box, fast_model
@@ -207,9 +208,11 @@ def prepare(
         As for :func:`bayesplate.estimators.estimate` (default ``"paper"``).
     prior_mean, prior_sd : array_like, shape (6,), optional
         Engineering prior (SI) replacing the case's.
-    pairing : {"auto", "mac", "index", "order"} or Pairing
+    pairing : {"auto", "mac", "likelihood", "index", "order"} or Pairing
         As for :func:`bayesplate.estimators.estimate` (:func:`bayesplate.pairing.pair_measured`
-        at the prior mean); the sampler computes no modes beyond the paired ones.
+        at the prior mean; ``"likelihood"``: the assignment B settles on, on the working
+        model, then kept fixed through the chain); the sampler computes no modes beyond the paired
+        ones.
     box_sigma : float
         Half-width of the posterior box in deviations of the pilot B estimate.
     box : Box, optional
@@ -237,8 +240,16 @@ def prepare(
     mean = np.asarray(case.prior.mean if prior_mean is None else prior_mean, dtype=float)
     sd = np.asarray(case.prior.sd if prior_sd is None else prior_sd, dtype=float)
     if not isinstance(pairing, Pairing):
-        b_prior = laminate.stiffness_from_engineering(mean)
-        pairing = pair_measured(case, model, b_prior, pairing)
+        how = resolve_pairing(case.measured, pairing)
+        if how == "likelihood":  # the assignment B settles on (a coarser mesh's error
+            # in the upper modes would call their peaks spurious: the working model)
+            pairing = estimate_case(
+                case, "B", model=model, tol=PILOT_TOL, convention=conventions,
+                prior_mean=mean, prior_sd=sd, pairing="likelihood",
+            ).pairing  # fmt: skip
+        else:
+            b_prior = laminate.stiffness_from_engineering(mean)
+            pairing = pair_measured(case, model, b_prior, how)
     pair = replace(pairing, extra=0)
     problem = GaussianProblem.from_case(
         case, model, pair, conventions.observation, conventions.prior, mean, sd
