@@ -4,9 +4,9 @@ The forward model is a finite-element model of Reddy's third-order shear deforma
 (Daghia, de Miranda, Ubertini, Viola, Composite Structures 80 (2007) 461-473).
 """
 
-from .case import Case, CaseError, bundled_case_path, load_case
 from .discrepancy.diagnose import diagnose
 from .estimators import EstimateResult, estimate
+from .io import Case, CaseError, bundled_case_path, load_case
 from .laminate import engineering_from_stiffness, stiffness_from_engineering
 from .model import ModalResult, PlateModel
 

@@ -60,8 +60,8 @@ def measure(nx, ny):
     and the smallest time of each stage kept; the peak memory is read after the first run,
     before anything else is allocated, so it is that of one forward run.
     """
-    from bayesplate.case import bundled_case_path, load_case
     from bayesplate.fem.eigen import _shift_invert
+    from bayesplate.io import bundled_case_path, load_case
     from bayesplate.laminate import stiffness_from_engineering
     from bayesplate.model import PlateModel
 

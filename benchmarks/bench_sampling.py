@@ -57,7 +57,7 @@ def machine():
 
 def run_frederiksen():
     """The timed posterior, then the per-evaluation times; a dict for the report."""
-    from bayesplate.case import bundled_case_path, load_case
+    from bayesplate.io import bundled_case_path, load_case
     from bayesplate.model import PlateModel
     from bayesplate.sampling import prepare, sample
 
@@ -130,7 +130,7 @@ def agreement(setup, result):
 
 def run_plate1():
     """Plate 1 (its own prior, 8 x 4 mesh): the same comparison, untimed."""
-    from bayesplate.case import bundled_case_path, load_case
+    from bayesplate.io import bundled_case_path, load_case
     from bayesplate.sampling import prepare, sample
 
     case = load_case(bundled_case_path("plate1"))

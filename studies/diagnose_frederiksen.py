@@ -20,10 +20,9 @@ import time
 import matplotlib
 import numpy as np
 
-from bayesplate.case import bundled_case_path, load_case
 from bayesplate.discrepancy.diagnose import diagnose
 from bayesplate.discrepancy.fit import JointProblem, fit
-from bayesplate.io import atomic_write_text
+from bayesplate.io import atomic_write_text, bundled_case_path, load_case
 from bayesplate.laminate import stiffness_from_engineering
 from bayesplate.model import PlateModel
 from bayesplate.posterior import observed_eigenvalues, prior_in_stiffness

@@ -27,8 +27,8 @@ from matplotlib.figure import Figure
 from scipy.optimize import linear_sum_assignment
 
 from bayesplate import plots
-from bayesplate.case import bundled_case_path, load_case
 from bayesplate.discrepancy.locate import mode_kinds
+from bayesplate.io import bundled_case_path, load_case
 from bayesplate.laminate import stiffness_from_engineering
 from bayesplate.model import PlateModel
 

@@ -25,9 +25,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from bayesplate.case import bundled_case_path, load_case
 from bayesplate.estimators import CONVENTIONS, DEFAULT_MAX_ITER, estimate
-from bayesplate.io import atomic_write_text
+from bayesplate.io import atomic_write_text, bundled_case_path, load_case
 from bayesplate.model import PlateModel
 
 if sys.version_info >= (3, 11):

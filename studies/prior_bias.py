@@ -24,8 +24,7 @@ from dataclasses import dataclass
 import matplotlib
 import numpy as np
 
-from bayesplate.case import bundled_case_path, load_case
-from bayesplate.io import atomic_write_text
+from bayesplate.io import atomic_write_text, bundled_case_path, load_case
 from bayesplate.model import PlateModel
 from bayesplate.pairing import Pairing
 from bayesplate.posterior import GaussianProblem

@@ -17,8 +17,8 @@ import matplotlib
 import numpy as np
 
 from bayesplate import plots
-from bayesplate.case import bundled_case_path, load_case
 from bayesplate.discrepancy.locate import mode_kinds
+from bayesplate.io import bundled_case_path, load_case
 from bayesplate.laminate import stiffness_from_engineering
 from bayesplate.model import PlateModel
 from bayesplate.quantities import STIFFNESS_NAMES

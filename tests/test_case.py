@@ -1,4 +1,4 @@
-"""Tests of bayesplate.case: reading, validating and converting case files."""
+"""Tests of bayesplate.io's case files: reading, validating and converting case files."""
 
 import copy
 import math
@@ -9,9 +9,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from bayesplate.case import (
-    ENGINEERING_KEYS,
-    ENGINEERING_NAMES,
+from bayesplate.io import (
     Case,
     CaseError,
     Measurement,
@@ -24,6 +22,7 @@ from bayesplate.case import (
     load_case,
     parse_case,
 )
+from bayesplate.quantities import ENGINEERING_KEYS, ENGINEERING_NAMES
 
 BUNDLED = ["angleply", "crossply", "frederiksen_t300", "plate1", "plate2"]
 DELETE = object()

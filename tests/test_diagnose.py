@@ -13,8 +13,8 @@ import pytest
 from bayesplate import PlateModel, bundled_case_path, load_case, stiffness_from_engineering
 from bayesplate.cli import main
 from bayesplate.discrepancy import PointMass
-from bayesplate.discrepancy.diagnose import diagnose, diagnosis_to_dict
-from bayesplate.io import write_json
+from bayesplate.discrepancy.diagnose import diagnose
+from bayesplate.io import diagnosis_to_dict, write_json
 
 MESH = (12, 6)
 NOISE = 0.002

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from bayesplate import laminate
-from bayesplate.case import bundled_case_path, load_case
 from bayesplate.cli import main as cli_main
 from bayesplate.estimators import CONVENTIONS, b_step, estimate, mve_step, run
+from bayesplate.io import bundled_case_path, load_case
 from bayesplate.model import PlateModel
 from bayesplate.pairing import Pairing
 from bayesplate.posterior import GaussianProblem, prior_in_stiffness

@@ -1,4 +1,4 @@
-"""Tests of bayesplate.importers and `bayesplate import`: modal test files -> case files."""
+"""Tests of the importers in bayesplate.io and `bayesplate import`: test files -> case files."""
 
 import math
 import re
@@ -13,18 +13,20 @@ import pyuff
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from bayesplate.case import CaseError, bundled_case_path, load_case
 from bayesplate.cli import main
-from bayesplate.importers import (
+from bayesplate.io import (
+    CaseError,
     ModalData,
+    bundled_case_path,
     bundled_plate_names,
     bundled_plate_path,
     case_from_modal_data,
+    load_case,
     read_frequency_csv,
     read_modal_data,
-    read_uff_modes,
     write_case,
 )
+from bayesplate.io.uff import read_uff_modes
 from bayesplate.laminate import stiffness_from_engineering
 from bayesplate.model import PlateModel
 

@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bayesplate.case import bundled_case_path, load_case
+from bayesplate.io import bundled_case_path, load_case
 from bayesplate.laminate import stiffness_from_engineering
 from bayesplate.model import PlateModel
 from bayesplate.pairing import (

@@ -7,7 +7,7 @@ import pytest
 from scipy.stats import multivariate_normal
 
 from bayesplate import laminate
-from bayesplate.case import bundled_case_path, load_case
+from bayesplate.io import bundled_case_path, load_case
 from bayesplate.pairing import Pairing
 from bayesplate.posterior import (
     GaussianProblem,

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from bayesplate import laminate
-from bayesplate.case import bundled_case_path, load_case
 from bayesplate.discrepancy.elastic_foundation import ElasticFoundation
 from bayesplate.forward import ForwardModel, Modes
+from bayesplate.io import bundled_case_path, load_case
 from bayesplate.model import ModalResult, PlateModel
 from bayesplate.reduced import (
     DEFAULT_TOLERANCE,

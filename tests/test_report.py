@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from matplotlib.figure import Figure
 
-from bayesplate.case import Measurement, bundled_case_path, load_case
 from bayesplate.estimators import estimate
+from bayesplate.io import Measurement, bundled_case_path, load_case
 from bayesplate.laminate import stiffness_from_engineering
 from bayesplate.model import PlateModel
 from bayesplate.pairing import (

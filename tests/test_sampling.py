@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 
-from bayesplate.case import bundled_case_path, load_case
 from bayesplate.estimators import estimate
+from bayesplate.io import bundled_case_path, load_case
 from bayesplate.model import PlateModel
 from bayesplate.pairing import Pairing
 from bayesplate.posterior import GaussianProblem, prior_in_stiffness

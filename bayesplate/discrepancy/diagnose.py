@@ -47,7 +47,6 @@ __all__ = [
     "Diagnosis",
     "coarse_model",
     "diagnose",
-    "diagnosis_to_dict",
     "fit_nominal",
     "mesh_error",
 ]
@@ -488,56 +487,3 @@ def _rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list
         ):
             best_by_name[r.name] = r
     return sorted(best_by_name.values(), key=lambda r: -r.log_evidence_gain)
-
-
-def _fit_summary(fit_, dof, p_value):
-    """Chi-square, constants and residuals of one fit, for JSON."""
-    from ..io import constants_json
-
-    return {
-        "chi2": fit_.chi2,
-        "dof": dof,
-        "p_value": p_value,
-        "residual_sigma": fit_.residual_sigma,
-        "frequency_Hz": fit_.frequency_Hz,
-        "constants": constants_json(fit_.constants, fit_.constants_sd),
-    }
-
-
-def diagnosis_to_dict(d):
-    """The diagnosis as plain data, in the units of the case files (see the issue's keys)."""
-    nominal = _fit_summary(d.nominal, d.dof, d.p_value)
-    nominal["mode_p_value"] = d.mode_p_values
-    refit = None
-    if d.chosen is not None:
-        refit = _fit_summary(d.chosen.fit, d.refit_dof, d.refit_p_value)
-        refit["parameters"] = d.chosen.parameters
-        refit["parameters_sd"] = d.chosen.parameters_sd
-        refit["mirror_images"] = d.chosen.mirror_images
-    return {
-        "verdict": d.verdict,
-        "measured_Hz": d.measured_Hz,
-        "sigma_Hz": d.sigma_Hz,
-        "mesh_error_Hz": d.mesh_error_Hz,
-        "nominal": nominal,
-        "located": {
-            "modes": d.located_modes,
-            "mode_kinds": d.mode_kinds,
-            "region_mm": None if d.region_mm is None else list(d.region_mm),
-            "region_mirrors_mm": [list(p) for p in d.region_mirrors_mm],
-        },
-        "candidates": [
-            {
-                "physics": c.name,
-                "log_evidence_gain": c.log_evidence_gain,
-                "chi2": c.fit.chi2,
-                "parameters": c.parameters,
-                "parameters_sd": c.parameters_sd,
-            }
-            for c in d.candidates
-        ],  # fmt: skip
-        "chosen": None if d.chosen is None else d.chosen.name,
-        "refit": refit,
-        "unidentified": d.unidentified,
-        "notes": d.notes,
-    }

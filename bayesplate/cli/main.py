@@ -1,0 +1,59 @@
+"""The ``bayesplate`` command: the parser and the entry point.
+
+Every subcommand takes a case file (see ``bayesplate cases`` for the bundled ones); output is
+a human-readable table by default and JSON with ``--json FILE`` (``-`` for standard output).
+Units: frequencies in Hz, moduli in GPa, lengths in mm.
+
+Each subcommand is one module of :mod:`bayesplate.cli` with ``register(subparsers)`` and
+``run(args)``; heavy imports (the estimators' runs, sampling, plots, the report) happen
+inside ``run``, so ``bayesplate --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+
+from ..io import CaseError
+from . import cases, diagnose, estimate, import_case, modes, report, sample
+
+__all__ = ["main", "build_parser"]
+
+#: The subcommands' modules, in the order of ``bayesplate --help``.
+_COMMANDS = (cases, modes, import_case, diagnose, estimate, report, sample)
+
+
+def build_parser():
+    """The argument parser of the ``bayesplate`` command."""
+    parser = argparse.ArgumentParser(
+        prog="bayesplate",
+        description="Elastic constants of laminated plates from natural frequencies. "
+        "Start with `bayesplate cases` (bundled test cases), then "
+        "`bayesplate report frederiksen_t300 --quick` (everything about one case in a folder).",
+    )
+    parser.add_argument("-v", "--verbose", action="store_true", help="log progress")
+    sub = parser.add_subparsers(dest="command", required=True)
+    for command in _COMMANDS:
+        command.register(sub)
+    return parser
+
+
+def main(argv=None):
+    """Run the command line; returns the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(
+        level=logging.INFO if args.verbose else logging.WARNING, format="%(message)s"
+    )
+    if getattr(args, "count", None) is not None and args.count < 1:
+        parser.error(f"--count {args.count}: must be a positive integer")
+    try:
+        return args.func(args)
+    except CaseError as err:
+        print(f"bayesplate: error: {err}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

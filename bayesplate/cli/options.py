@@ -1,0 +1,61 @@
+"""What the subcommands share: the case argument, ``--mesh``, ``--json`` and their reading."""
+
+from __future__ import annotations
+
+import argparse
+import pathlib
+
+from ..io import bundled_case_names, bundled_case_path, load_case
+
+__all__ = [
+    "add_case_argument",
+    "add_json_option",
+    "add_mesh_option",
+    "mesh_of",
+    "positive_int",
+    "resolve_case",
+]
+
+
+def add_case_argument(p):
+    """The positional ``case``: a case file or the name of a bundled case."""
+    p.add_argument("case", help="case file (TOML) or the name of a bundled case")
+
+
+def add_mesh_option(p):
+    """``--mesh NX NY``, shared by every command that builds the plate model."""
+    p.add_argument(
+        "--mesh",
+        type=int,
+        nargs=2,
+        metavar=("NX", "NY"),
+        help="elements along x and y (default: the case's [model] mesh)",
+    )
+
+
+def add_json_option(p):
+    """``--json FILE``, shared by every command that writes results."""
+    p.add_argument("--json", metavar="FILE", help="write results as JSON ('-' for stdout)")
+
+
+def positive_int(text):
+    """An integer of at least 1 (an argparse type)."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: must be a whole number of at least 1")
+    return value
+
+
+def mesh_of(args):
+    """The ``--mesh`` option as ``(nx, ny)``, or None to use the case's mesh."""
+    return tuple(args.mesh) if args.mesh else None
+
+
+def resolve_case(name_or_path):
+    """Load a case from a path, or from the bundled cases by name (``plate1``)."""
+    if not pathlib.Path(name_or_path).exists() and name_or_path in bundled_case_names():
+        name_or_path = bundled_case_path(name_or_path)
+    return load_case(name_or_path)

@@ -1,0 +1,304 @@
+"""The case file: read a TOML case file, validate it, return a :class:`Case` in SI units.
+
+A case file (TOML, see ``shared/spec/case-format.md``) describes one vibration test of one
+plate. This is the only module of the package that reads case files (the plate sheets of
+:mod:`bayesplate.io.case_writer` are read there).
+
+:func:`parse_case` checks the file's own keys and values (millimetres, GPa), so a message
+quotes what the user wrote, e.g. ``plate.thickness_mm = -3.0: must be a positive number``;
+the :class:`Case` it builds checks its invariants again in SI.
+"""
+
+from __future__ import annotations
+
+import importlib.resources
+import os
+import pathlib
+import sys
+from collections.abc import Mapping
+
+import numpy as np
+
+from ..quantities import ENGINEERING_KEYS
+from .case import Case, Measurement, Plate, Prior
+from .checks import (
+    _angles,
+    _check_frequencies,
+    _integers,
+    _list,
+    _mesh,
+    _number,
+    _numbers,
+    _ply_thicknesses,
+    _positive,
+    _string,
+    _table,
+    check_engineering_constants,
+    engineering_to_si,
+)
+from .errors import CaseError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - Python 3.10 only
+    import tomli as tomllib
+
+__all__ = ["load_case", "parse_case", "bundled_case_path", "bundled_case_names"]
+
+_MM = 1e-3  # m per mm
+_MAX_MODE_INDEX = 1_000_000  # keeps mode indices far inside int64
+
+_TOP_KEYS = ("name", "source", "plate", "measured", "prior", "model", "reference")
+_TOP_REQUIRED = ("name", "plate", "measured", "prior")
+_PLATE_KEYS = (
+    "length_mm",
+    "width_mm",
+    "thickness_mm",
+    "density_kg_m3",
+    "layup_deg",
+    "ply_thickness_mm",
+)
+_MEASURED_KEYS = ("frequency_Hz", "sigma_rel", "sigma_Hz", "mode", "points_mm", "shapes")
+_PRIOR_ENTRY_KEYS = ("mean", "sd")
+_PRIOR_ENTRY = "a table { mean = ..., sd = ... }"
+_MODEL_KEYS = ("mesh",)
+
+
+def load_case(path) -> Case:
+    """Read and validate a case file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The TOML case file.
+
+    Returns
+    -------
+    Case
+        The validated case, in SI units, with ``case.path`` set.
+
+    Raises
+    ------
+    CaseError
+        If the file cannot be read, is not valid TOML (the message names the line) or breaks
+        a rule of the case format; the message starts with the file name.
+    """
+    path = os.fspath(path)
+    try:
+        with open(path, "rb") as stream:
+            data = tomllib.load(stream)
+    except OSError as err:
+        rule = f"cannot read the case file ({err.strerror or type(err).__name__})"
+        raise CaseError(None, rule=rule, path=path) from err
+    except UnicodeDecodeError as err:
+        raise CaseError(None, rule="not a UTF-8 text file", path=path) from err
+    except tomllib.TOMLDecodeError as err:
+        raise CaseError(None, rule=f"TOML syntax error: {err}", path=path) from err
+    return parse_case(data, path=path)
+
+
+def parse_case(data: Mapping, path=None) -> Case:
+    """Validate an already-parsed case mapping and convert it to SI units.
+
+    Parameters
+    ----------
+    data : mapping
+        The case as read from TOML: tables are mappings, arrays are lists.
+    path : str or os.PathLike, optional
+        The file the mapping came from; stored in ``case.path`` and named in errors.
+
+    Returns
+    -------
+    Case
+        The validated case.
+
+    Raises
+    ------
+    CaseError
+        On the first broken rule found.
+    """
+    try:
+        return _parse(data, path)
+    except CaseError as err:
+        if path is None or err.path is not None:
+            raise
+        raise err.with_path(path) from None
+
+
+def bundled_case_names() -> list[str]:
+    """Names of the case files shipped with the package, sorted.
+
+    Returns
+    -------
+    list of str
+        E.g. ``["angleply", "crossply", "frederiksen_t300", "plate1", "plate2"]``.
+    """
+    files = _bundled_cases_dir().iterdir()
+    return sorted(f.name[: -len(".toml")] for f in files if f.name.endswith(".toml"))
+
+
+def bundled_case_path(name: str) -> pathlib.Path:
+    """Path of a case file shipped with the package.
+
+    Parameters
+    ----------
+    name : str
+        Case name without extension, e.g. ``"frederiksen_t300"``.
+
+    Returns
+    -------
+    pathlib.Path
+        ``bayesplate/data/cases/<name>.toml``.
+
+    Raises
+    ------
+    CaseError
+        If there is no such case; the message lists the available names.
+    """
+    names = bundled_case_names()
+    if name not in names:
+        rule = f"no such bundled case; available: {', '.join(names)}"
+        raise CaseError("bundled case", name, rule)
+    return pathlib.Path(str(_bundled_cases_dir().joinpath(f"{name}.toml")))
+
+
+def _bundled_cases_dir():
+    try:
+        package = importlib.resources.files("bayesplate")
+    except (NotADirectoryError, TypeError):
+        # bayesplate as a namespace package (no __init__.py) on a path with non-directory
+        # entries, e.g. an editable-install hook: the package is the parent of this one.
+        package = pathlib.Path(__file__).resolve().parent.parent
+    return package.joinpath("data").joinpath("cases")
+
+
+# ----------------------------------------------------------------------------- parsing
+
+
+def _parse(data: Mapping, path) -> Case:
+    top = _table(data, "", _TOP_KEYS, _TOP_REQUIRED)
+    name = _string(top["name"], "name", nonempty=True)
+    source = _string(top.get("source", ""), "source")
+    plate, extent_mm = _parse_plate(top["plate"])
+    measured = _parse_measured(top["measured"], extent_mm)
+    prior = _parse_prior(top["prior"])
+    mesh = _parse_model(top["model"]) if "model" in top else None
+    reference = _parse_reference(top["reference"]) if "reference" in top else None
+    return Case(name, source, plate, measured, prior, mesh, reference, path)
+
+
+def _parse_plate(raw) -> tuple[Plate, tuple[float, float]]:
+    """Return the plate and its (length, width) in mm, for checking points."""
+    table = _table(raw, "plate", _PLATE_KEYS, _PLATE_KEYS[:5])
+    length, width, thickness, density = (
+        _positive(table[key], f"plate.{key}") for key in _PLATE_KEYS[:4]
+    )
+    layup = _angles(table["layup_deg"], "plate.layup_deg")
+    plies = None
+    if "ply_thickness_mm" in table:
+        plies_mm = _ply_thicknesses(
+            table["ply_thickness_mm"], len(layup), thickness, "plate.ply_thickness_mm"
+        )
+        plies = tuple(t * _MM for t in plies_mm)
+    plate = Plate(length * _MM, width * _MM, thickness * _MM, density, tuple(layup), plies)
+    return plate, (length, width)
+
+
+def _parse_measured(raw, extent_mm: tuple[float, float]) -> Measurement:
+    table = _table(raw, "measured", _MEASURED_KEYS, ("frequency_Hz",))
+    frequency = _numbers(table["frequency_Hz"], "measured.frequency_Hz")
+    _check_frequencies(frequency, "measured.frequency_Hz")
+    sigma = _parse_sigma(table, frequency)
+    mode = None
+    if "mode" in table:
+        mode = _integers(table["mode"], "measured.mode", 1, _MAX_MODE_INDEX)
+    points, shapes = _parse_shapes(table, extent_mm)
+    return Measurement(frequency, sigma, mode, points, shapes)
+
+
+def _parse_sigma(table: Mapping, frequency: np.ndarray) -> np.ndarray:
+    if "sigma_rel" in table and "sigma_Hz" in table:
+        rule = "give sigma_rel or sigma_Hz, not both"
+        raise CaseError("measured.sigma_rel", table["sigma_rel"], rule)
+    if "sigma_Hz" in table:
+        return _numbers(table["sigma_Hz"], "measured.sigma_Hz")
+    if "sigma_rel" not in table:
+        rule = "required: give sigma_rel (fraction of each frequency) or sigma_Hz (list)"
+        raise CaseError("measured.sigma_rel", rule=rule)
+    sigma_rel = _number(table["sigma_rel"], "measured.sigma_rel")
+    if not 0 < sigma_rel < 1:
+        raise CaseError("measured.sigma_rel", table["sigma_rel"], "must be > 0 and < 1")
+    return sigma_rel * frequency
+
+
+def _parse_shapes(table: Mapping, extent_mm) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """Return measurement points (p, 2) in m and shapes (m, p), or (None, None)."""
+    if ("points_mm" in table) != ("shapes" in table):
+        given, other = ("points_mm", "shapes") if "points_mm" in table else ("shapes", "points_mm")
+        rule = f"needs measured.{other} too (mode shapes are amplitudes at points)"
+        raise CaseError(f"measured.{given}", table[given], rule)
+    if "points_mm" not in table:
+        return None, None
+    points_mm = _points(table["points_mm"], "measured.points_mm", extent_mm)
+    shapes = _matrix(table["shapes"], "measured.shapes", len(points_mm))
+    return points_mm * _MM, shapes
+
+
+def _points(raw, key: str, extent_mm) -> np.ndarray:
+    items = _list(raw, key, "[x, y] pairs")
+    if not items:
+        raise CaseError(key, raw, "must list at least one [x, y] point")
+    return np.array([_point(item, f"{key}[{i}]", extent_mm) for i, item in enumerate(items)])
+
+
+def _point(raw, key: str, extent_mm) -> list[float]:
+    pair = _list(raw, key, "two numbers [x, y]")
+    if len(pair) != 2:
+        raise CaseError(key, raw, "must be a pair [x, y] of numbers")
+    xy = []
+    for j, (value, axis, size, size_key) in enumerate(
+        zip(pair, "xy", extent_mm, ("length_mm", "width_mm"), strict=True)
+    ):
+        coordinate = _number(value, f"{key}[{j}]")
+        if not 0 <= coordinate <= size:
+            rule = f"{axis} must lie on the plate: 0 <= {axis} <= plate.{size_key} = {size:g}"
+            raise CaseError(f"{key}[{j}]", value, rule)
+        xy.append(coordinate)
+    return xy
+
+
+def _matrix(raw, key: str, ncols: int) -> np.ndarray:
+    rows = _list(raw, key, "rows (lists of numbers)")
+    out = np.empty((len(rows), ncols))
+    for i, row in enumerate(rows):
+        values = _numbers(row, f"{key}[{i}]")
+        if values.size != ncols:
+            rule = f"must have one value per point of points_mm ({ncols}), got {values.size}"
+            raise CaseError(f"{key}[{i}]", row, rule)
+        out[i] = values
+    return out
+
+
+def _parse_prior(raw) -> Prior:
+    table = _table(raw, "prior", ENGINEERING_KEYS, ENGINEERING_KEYS)
+    mean, sd = np.empty(6), np.empty(6)
+    for i, key in enumerate(ENGINEERING_KEYS):
+        entry = _table(
+            table[key], f"prior.{key}", _PRIOR_ENTRY_KEYS, _PRIOR_ENTRY_KEYS, _PRIOR_ENTRY
+        )
+        mean[i] = _number(entry["mean"], f"prior.{key}.mean")
+        sd[i] = _positive(entry["sd"], f"prior.{key}.sd")
+    check_engineering_constants(mean, "prior", keys=ENGINEERING_KEYS, key_suffix=".mean")
+    return Prior(engineering_to_si(mean), engineering_to_si(sd))
+
+
+def _parse_model(raw) -> tuple[int, int] | None:
+    table = _table(raw, "model", _MODEL_KEYS)
+    return _mesh(table["mesh"], "model.mesh") if "mesh" in table else None
+
+
+def _parse_reference(raw) -> np.ndarray:
+    table = _table(raw, "reference", ENGINEERING_KEYS, ENGINEERING_KEYS)
+    values = np.array([_number(table[key], f"reference.{key}") for key in ENGINEERING_KEYS])
+    check_engineering_constants(values, "reference", keys=ENGINEERING_KEYS)
+    return engineering_to_si(values)

@@ -1,0 +1,292 @@
+"""The value rules of the case format: each check returns the clean value or raises.
+
+The same small checks serve both layers of validation: :mod:`bayesplate.io.case_file` applies
+them to the file's own keys and values (millimetres, GPa), so a message quotes what the user
+wrote, and the dataclasses of :mod:`bayesplate.io.case` apply them again in SI on
+construction. Every failure is a :class:`~bayesplate.io.errors.CaseError` naming the key.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+import numbers
+from collections.abc import Mapping
+
+import numpy as np
+
+from ..quantities import ENGINEERING_NAMES, from_case_units, to_case_units
+from .errors import CaseError
+
+__all__ = [
+    "MAX_MESH_ELEMENTS",
+    "check_engineering_constants",
+    "engineering_to_si",
+    "engineering_from_si",
+]
+
+MAX_MESH_ELEMENTS = 400
+"""Largest number of elements allowed along one side in ``model.mesh``."""
+
+_PLY_SUM_RTOL = 1e-6  # relative tolerance on sum(ply thicknesses) == thickness
+
+
+# ----------------------------------------------------------------------------- public checks
+
+
+def check_engineering_constants(
+    values, key_prefix: str = "prior", *, keys=ENGINEERING_NAMES, key_suffix: str = ""
+) -> None:
+    """Refuse engineering constants that no orthotropic lamina can have.
+
+    E1, E2, G12, G13 and G23 must be positive and nu12 finite, and the in-plane compliance
+    must be positive definite: 1 - nu12^2 E2/E1 > 0, i.e. nu12^2 < E1/E2. The checks do not
+    depend on the unit of the moduli, so SI and case units (GPa) both work.
+
+    Parameters
+    ----------
+    values : array_like, shape (6,)
+        Constants in the order of :data:`ENGINEERING_NAMES`.
+    key_prefix : str
+        Start of the key named in an error, e.g. ``"prior"`` or ``"reference"``.
+    keys : sequence of str, length 6
+        Names of the six constants in errors; :data:`ENGINEERING_KEYS` for case-file units.
+    key_suffix : str
+        End of the key named in an error, e.g. ``".mean"``.
+
+    Raises
+    ------
+    CaseError
+        Naming the first offending constant, e.g.
+        ``prior.nu12.mean = 3.0: nu12^2 must be < E1/E2 = 2 (positive-definite ...)``.
+    """
+    names = [_join(key_prefix, key) + key_suffix for key in keys]
+    v = _array(values, key_prefix or "values", ndim=1, finite=False)
+    _check_length(v, 6, key_prefix or "values", "value per engineering constant")
+    for i, name in enumerate(names):
+        if not math.isfinite(v[i]):
+            raise CaseError(name, v[i], "must be a finite number")
+        if i != 2 and not v[i] > 0:
+            raise CaseError(name, v[i], "must be a positive number")
+    ratio = v[0] / v[1]
+    if not v[2] ** 2 < ratio:
+        rule = f"nu12^2 must be < E1/E2 = {ratio:.4g} (positive-definite lamina stiffness)"
+        raise CaseError(names[2], v[2], rule)
+
+
+def engineering_to_si(values) -> np.ndarray:
+    """Convert engineering constants from case units (GPa, nu12 as is) to SI (Pa).
+
+    Parameters
+    ----------
+    values : array_like, shape (..., 6)
+        Constants in the order of :data:`ENGINEERING_NAMES`, moduli in GPa.
+
+    Returns
+    -------
+    numpy.ndarray, shape (..., 6)
+        The same constants with moduli in Pa (a new array).
+    """
+    return from_case_units(_engineering_array(values))
+
+
+def engineering_from_si(values_si) -> np.ndarray:
+    """Convert engineering constants from SI (Pa, nu12 as is) to case units (GPa).
+
+    Parameters
+    ----------
+    values_si : array_like, shape (..., 6)
+        Constants in the order of :data:`ENGINEERING_NAMES`, moduli in Pa.
+
+    Returns
+    -------
+    numpy.ndarray, shape (..., 6)
+        The same constants with moduli in GPa (a new array).
+    """
+    return to_case_units(_engineering_array(values_si))
+
+
+def _engineering_array(values) -> np.ndarray:
+    array = np.asarray(values, dtype=float)
+    if array.ndim == 0 or array.shape[-1] != 6:
+        raise ValueError(
+            f"expected shape (..., 6) in the order {', '.join(ENGINEERING_NAMES)}, "
+            f"got shape {array.shape}"
+        )
+    return array
+
+
+def _mesh(raw, key: str) -> tuple[int, int]:
+    items = _list(raw, key, "two integers [nx, ny]")
+    if len(items) != 2:
+        raise CaseError(key, raw, "must be two integers [nx, ny]")
+    nx, ny = (_integer(v, f"{key}[{i}]", 1, MAX_MESH_ELEMENTS) for i, v in enumerate(items))
+    return nx, ny
+
+
+# ----------------------------------------------------------------------------- value rules
+
+
+def _join(prefix: str, key) -> str:
+    return f"{prefix}.{key}" if prefix else str(key)
+
+
+def _table(raw, key: str, allowed, required=(), what: str = "a table") -> Mapping:
+    """Check that `raw` is a mapping with only `allowed` keys and all `required` ones."""
+    if not isinstance(raw, Mapping):
+        raise CaseError(key or "case", raw, f"must be {what}")
+    for name, value in raw.items():
+        if name not in allowed:
+            raise CaseError(_join(key, name), value, _unknown_key_rule(name, allowed))
+    for name in required:
+        if name not in raw:
+            raise CaseError(_join(key, name), rule="required key is missing")
+    return raw
+
+
+def _unknown_key_rule(name, allowed) -> str:
+    close = difflib.get_close_matches(str(name), allowed, n=1)
+    hint = f" (did you mean {close[0]}?)" if close else ""
+    return f"unknown key{hint}; allowed: {', '.join(allowed)}"
+
+
+def _string(raw, key: str, nonempty: bool = False) -> str:
+    if not isinstance(raw, str):
+        raise CaseError(key, raw, "must be a string")
+    if nonempty and not raw.strip():
+        raise CaseError(key, raw, "must be a non-empty string")
+    return raw
+
+
+def _require_type(value, cls: type, key: str) -> None:
+    if not isinstance(value, cls):
+        raise CaseError(key, value, f"must be a {cls.__name__}")
+
+
+def _is_number(raw) -> bool:
+    return isinstance(raw, numbers.Real) and not isinstance(raw, (bool, np.bool_))
+
+
+def _number(raw, key: str) -> float:
+    """Return `raw` as a finite float; refuse bools, strings and anything else."""
+    if not _is_number(raw):
+        raise CaseError(key, raw, "must be a number")
+    try:
+        value = float(raw)
+    except OverflowError:  # an integer beyond the float range
+        value = math.inf
+    if not math.isfinite(value):
+        raise CaseError(key, raw, "must be a finite number")
+    return value
+
+
+def _positive(raw, key: str) -> float:
+    value = _number(raw, key)
+    if value <= 0:
+        raise CaseError(key, raw, "must be a positive number")
+    return value
+
+
+def _integer(raw, key: str, low: int, high: int) -> int:
+    if not isinstance(raw, numbers.Integral) or isinstance(raw, (bool, np.bool_)):
+        raise CaseError(key, raw, "must be an integer")
+    if not low <= raw <= high:
+        raise CaseError(key, raw, f"must be an integer between {low} and {high}")
+    return int(raw)
+
+
+def _list(raw, key: str, what: str) -> list:
+    if isinstance(raw, np.ndarray):
+        raw = raw.tolist()
+    if not isinstance(raw, (list, tuple)):
+        raise CaseError(key, raw, f"must be a list of {what}")
+    return list(raw)
+
+
+def _numbers(raw, key: str) -> np.ndarray:
+    items = _list(raw, key, "numbers")
+    return np.array([_number(item, f"{key}[{i}]") for i, item in enumerate(items)], dtype=float)
+
+
+def _integers(raw, key: str, low: int, high: int) -> np.ndarray:
+    items = _list(raw, key, "integers")
+    values = [_integer(item, f"{key}[{i}]", low, high) for i, item in enumerate(items)]
+    return np.array(values, dtype=np.int64)
+
+
+def _angles(raw, key: str) -> list[float]:
+    angles = _numbers(raw, key)
+    if angles.size == 0:
+        raise CaseError(key, raw, "must list at least one ply angle")
+    return angles.tolist()
+
+
+def _ply_thicknesses(raw, n_plies: int, thickness: float, key: str) -> list[float]:
+    """Check one positive thickness per ply summing to `thickness` (any one unit)."""
+    items = _list(raw, key, "numbers")
+    if len(items) != n_plies:
+        rule = f"must have one entry per ply of layup_deg ({n_plies}), got {len(items)}"
+        raise CaseError(key, raw, rule)
+    values = [_positive(item, f"{key}[{i}]") for i, item in enumerate(items)]
+    total = math.fsum(values)
+    if not abs(total - thickness) <= _PLY_SUM_RTOL * thickness:
+        rule = f"must sum to the plate thickness {thickness:.10g} within 1e-6 (sum {total:.10g})"
+        raise CaseError(key, raw, rule)
+    return values
+
+
+def _array(raw, key: str, ndim: int, finite: bool = True) -> np.ndarray:
+    """Return a read-only float copy of `raw` with `ndim` dimensions (and finite entries)."""
+    try:
+        array = np.array(raw, dtype=float)
+    except (TypeError, ValueError):
+        raise CaseError(key, raw, "must be an array of numbers") from None
+    if array.ndim != ndim:
+        raise CaseError(key, raw, f"must be a {ndim}-dimensional array")
+    bad = np.argwhere(~np.isfinite(array))
+    if finite and bad.size:
+        index = "".join(f"[{i}]" for i in bad[0])
+        raise CaseError(f"{key}{index}", array[tuple(bad[0])], "must be a finite number")
+    array.setflags(write=False)
+    return array
+
+
+def _check_length(array: np.ndarray, size: int, key: str, what: str) -> None:
+    if len(array) != size:
+        raise CaseError(key, array, f"must have one {what} ({size}), got {len(array)}")
+
+
+def _check_positive_each(array: np.ndarray, key: str) -> None:
+    for i, value in enumerate(array):
+        if not value > 0:
+            raise CaseError(f"{key}[{i}]", value, "must be a positive number")
+
+
+def _check_frequencies(frequency: np.ndarray, key: str) -> None:
+    """Positive and ascending; equal neighbours are legal (repeated modes)."""
+    if frequency.size == 0:
+        raise CaseError(key, frequency, "must list at least one frequency")
+    _check_positive_each(frequency, key)
+    for i in range(1, frequency.size):
+        if frequency[i] < frequency[i - 1]:
+            rule = f"must be >= the previous frequency {frequency[i - 1]:g} (ascending order)"
+            raise CaseError(f"{key}[{i}]", frequency[i], rule)
+
+
+def _mode_array(raw, n_frequencies: int) -> np.ndarray:
+    key = "measured.mode"
+    mode = np.array(raw)
+    if mode.ndim != 1 or not (mode.size == 0 or np.issubdtype(mode.dtype, np.integer)):
+        raise CaseError(key, raw, "must be a list of integers")
+    mode = mode.astype(np.int64)
+    _check_length(mode, n_frequencies, key, "entry per frequency")
+    first_seen: dict[int, int] = {}
+    for i, value in enumerate(mode.tolist()):
+        if value < 1:
+            raise CaseError(f"{key}[{i}]", value, "must be an integer >= 1 (1 = lowest elastic)")
+        if value in first_seen:
+            rule = f"mode indices must be distinct (also at {key}[{first_seen[value]}])"
+            raise CaseError(f"{key}[{i}]", value, rule)
+        first_seen[value] = i
+    mode.setflags(write=False)
+    return mode

@@ -1,0 +1,296 @@
+"""Results out: plain-data documents of every result, written whole or not at all.
+
+- Files: :func:`atomic_write` (and its text, figure, JSON and netCDF forms) writes through a
+  temporary file and a rename, so a reader never sees a partial file.
+- Documents: one ``*_to_dict`` per result type (:func:`estimate_to_dict`,
+  :func:`sampling_to_dict`, :func:`diagnosis_to_dict`) gives the JSON document of the
+  command line (and the report) in case-file units: moduli in GPa, the keys of
+  :data:`bayesplate.quantities.ENGINEERING_KEYS`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import pathlib
+import sys
+import tempfile
+
+import numpy as np
+
+from ..quantities import CASE_SCALE, ENGINEERING_KEYS, STIFFNESS_NAMES, to_case_units
+
+__all__ = [
+    "atomic_write",
+    "atomic_write_text",
+    "constants_json",
+    "diagnosis_to_dict",
+    "estimate_to_dict",
+    "jsonable",
+    "sampling_to_dict",
+    "save_figure",
+    "write_json",
+    "write_netcdf",
+]
+
+
+def atomic_write(path, write, mode="w"):
+    """Call ``write(handle)`` on a temporary file next to ``path``, then rename it to ``path``.
+
+    A reader never sees a partial file, and an error leaves any previous file untouched.
+    ``mode`` is ``"w"`` (text, UTF-8) or ``"wb"``.
+    """
+    path = pathlib.Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, mode, encoding=None if "b" in mode else "utf-8") as handle:
+            write(handle)
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the usual permissions
+        os.replace(tmp, path)
+    except BaseException:
+        pathlib.Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def atomic_write_text(path, text):
+    """Write ``text`` to ``path`` whole or not at all (see :func:`atomic_write`)."""
+    atomic_write(path, lambda handle: handle.write(text))
+
+
+def save_figure(fig, path, dpi=120):
+    """Write a matplotlib figure as PNG whole or not at all."""
+    atomic_write(path, lambda h: fig.savefig(h, format="png", dpi=dpi, bbox_inches="tight"), "wb")
+
+
+def write_netcdf(idata, path):
+    """Write ArviZ data (netCDF) whole or not at all (temporary file, then rename)."""
+    path = pathlib.Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    try:
+        idata.to_netcdf(str(tmp))
+        tmp.replace(path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+# SI -> case units as a factor: 1 / 1e9 is exactly the double 1e-9, so this is the array
+# [1e-9, 1e-9, 1, 1e-9, 1e-9, 1e-9] that the JSON documents have always been scaled by
+# (multiplying by 1e-9 and dividing by 1e9 can differ in the last bit).
+_TO_CASE_UNITS = 1.0 / CASE_SCALE
+
+
+def constants_json(mean, sd=None, **extra):
+    """Engineering constants in case-file units: ``{"E1_GPa": {"mean", "sd", ...}, ...}``.
+
+    Parameters
+    ----------
+    mean, sd : array_like, shape (6,)
+        SI values (Pa, dimensionless nu12); ``sd`` may be None.
+    **extra : array_like, shape (6,)
+        Further SI fields per constant (e.g. ``hdi_3%``).
+    """
+    fields = {"mean": mean, "sd": sd, **extra}
+    scaled = {k: None if v is None else np.asarray(v, dtype=float) * _TO_CASE_UNITS
+              for k, v in fields.items()}  # fmt: skip
+    return {
+        key: {k: None if v is None else float(v[i]) for k, v in scaled.items()}
+        for i, key in enumerate(ENGINEERING_KEYS)
+    }
+
+
+def _umask():
+    """The process's file-creation mask (read by setting and restoring it)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def jsonable(value):
+    """``json.dumps(default=...)``: numpy arrays and scalars, tuples and sets as lists."""
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, tuple | set):
+        return list(value)
+    raise TypeError(f"{type(value).__name__} is not JSON serialisable")
+
+
+def write_json(obj, target):
+    """Write ``obj`` as JSON to the file ``target``, or to standard output for ``"-"``."""
+    text = json.dumps(obj, indent=2, default=jsonable) + "\n"
+    if str(target) == "-":
+        sys.stdout.write(text)
+    else:
+        atomic_write_text(target, text)
+
+
+# ----------------------------------------------------------------------------- documents
+
+
+def estimate_to_dict(result, case, model):
+    """The JSON document of an estimate (``bayesplate estimate --json``).
+
+    Parameters
+    ----------
+    result : bayesplate.estimators.EstimateResult
+        The estimate.
+    case : bayesplate.io.Case
+        The case it was computed for (its name).
+    model : bayesplate.forward.ForwardModel
+        The model it was computed with (its mesh).
+
+    Returns
+    -------
+    dict
+        Constants ``{"E1_GPa": {"mean", "sd"}, ...}`` in case units, stiffness in GPa,
+        frequencies and residuals in Hz, per-stage constants for a two-stage method.
+    """
+
+    def constants(r):
+        mean, sd = to_case_units(r.constants), to_case_units(r.sd)
+        return {
+            key: {"mean": float(mean[i]), "sd": float(sd[i])}
+            for i, key in enumerate(ENGINEERING_KEYS)
+        }
+
+    conventions = result.settings.get("conventions")
+    out = {
+        "case": case.name,
+        "method": result.method,
+        "convention": None if conventions is None else vars(conventions),
+        "mesh": [model.mesh.nx, model.mesh.ny],
+        "converged": bool(result.converged),
+        "iterations": int(result.iterations),
+        "message": result.message,
+        "n_solves": int(result.n_solves),
+        "wall_time_s": float(result.wall_time),
+        "constants": constants(result),
+        "stiffness_GPa": dict(zip(STIFFNESS_NAMES, (result.b / 1e9).tolist(), strict=True)),
+        "frequency_Hz": result.frequency_Hz,
+        "measured_Hz": result.measured_Hz,
+        "residual_Hz": result.residual,
+        "modes": result.modes,
+        "mode_swaps": [list(s) for s in result.mode_swaps],
+    }
+    if result.stages:
+        out["stages"] = [
+            {
+                "converged": bool(s.converged),
+                "iterations": int(s.iterations),
+                "message": s.message,
+                "constants": constants(s),
+            }
+            for s in result.stages
+        ]
+    return out
+
+
+def sampling_to_dict(result, case, mve=None):
+    """The JSON document of a sampled posterior (``bayesplate sample --json``).
+
+    Parameters
+    ----------
+    result : bayesplate.sampling.SamplingResult
+        The sampled posterior, with its B estimate (``result.estimate``).
+    case : bayesplate.io.Case
+        The case it was sampled for (its name).
+    mve : bayesplate.estimators.EstimateResult, optional
+        The MVE estimate, reported beside B.
+
+    Returns
+    -------
+    dict
+        Posterior summary per constant in case units, convergence diagnostics, costs, the
+        reduced model's certificate and the estimates ``{"B": ..., "MVE": ...}``.
+    """
+    est = result.estimate
+    cert = result.certificate
+    certificate = None
+    if cert is not None:
+        certificate = {
+            "max_rel_error": cert.max_rel_error,
+            "tolerance": cert.tolerance,
+            "passed": bool(cert.passed),
+            "n_test": cert.n_test,
+            "basis_size": cert.basis_size,
+        }
+    return {
+        "case": case.name,
+        "constants": result.constants_table(),
+        "ess_min": result.ess_min,
+        "rhat_max": result.rhat_max,
+        "ess_bulk": dict(zip(ENGINEERING_KEYS, result.ess_bulk.tolist(), strict=True)),
+        "rhat": dict(zip(ENGINEERING_KEYS, result.rhat.tolist(), strict=True)),
+        "converged": bool(result.converged),
+        "message": result.message,
+        "n_walkers": result.n_walkers,
+        "n_steps": result.n_steps,
+        "n_burn": result.n_burn,
+        "tau_steps": result.tau,
+        "acceptance": result.acceptance,
+        "n_evaluations": result.n_evaluations,
+        "n_full_solves_sampling": result.n_full,
+        "n_full_solves_setup": result.settings.get("full_solves_setup"),
+        "certificate": certificate,
+        "timings_s": result.timings,
+        "seed_entropy": result.settings.get("seed_entropy"),
+        "estimates": {
+            name: constants_json(r.constants, r.sd)
+            for name, r in (("B", est), ("MVE", mve))
+            if r is not None
+        },
+    }
+
+
+def _fit_summary(fit_, dof, p_value):
+    """Chi-square, constants and residuals of one fit, for JSON."""
+    return {
+        "chi2": fit_.chi2,
+        "dof": dof,
+        "p_value": p_value,
+        "residual_sigma": fit_.residual_sigma,
+        "frequency_Hz": fit_.frequency_Hz,
+        "constants": constants_json(fit_.constants, fit_.constants_sd),
+    }
+
+
+def diagnosis_to_dict(d):
+    """The diagnosis as plain data, in the units of the case files (see the issue's keys)."""
+    nominal = _fit_summary(d.nominal, d.dof, d.p_value)
+    nominal["mode_p_value"] = d.mode_p_values
+    refit = None
+    if d.chosen is not None:
+        refit = _fit_summary(d.chosen.fit, d.refit_dof, d.refit_p_value)
+        refit["parameters"] = d.chosen.parameters
+        refit["parameters_sd"] = d.chosen.parameters_sd
+        refit["mirror_images"] = d.chosen.mirror_images
+    return {
+        "verdict": d.verdict,
+        "measured_Hz": d.measured_Hz,
+        "sigma_Hz": d.sigma_Hz,
+        "mesh_error_Hz": d.mesh_error_Hz,
+        "nominal": nominal,
+        "located": {
+            "modes": d.located_modes,
+            "mode_kinds": d.mode_kinds,
+            "region_mm": None if d.region_mm is None else list(d.region_mm),
+            "region_mirrors_mm": [list(p) for p in d.region_mirrors_mm],
+        },
+        "candidates": [
+            {
+                "physics": c.name,
+                "log_evidence_gain": c.log_evidence_gain,
+                "chi2": c.fit.chi2,
+                "parameters": c.parameters,
+                "parameters_sd": c.parameters_sd,
+            }
+            for c in d.candidates
+        ],  # fmt: skip
+        "chosen": None if d.chosen is None else d.chosen.name,
+        "refit": refit,
+        "unidentified": d.unidentified,
+        "notes": d.notes,
+    }

@@ -1,0 +1,101 @@
+"""Measured modes as imported from a modal test file, before they meet a plate sheet.
+
+A modal test ends in one of two files, read by :func:`read_modal_data`:
+
+- a Universal File (UFF, ``.uff``/``.unv``/``.uf``) as exported by modal software:
+  :func:`bayesplate.io.uff.read_uff_modes`;
+- a plain CSV table of frequencies, one row per mode:
+  :func:`bayesplate.io.csv_table.read_frequency_csv`.
+
+Both return a :class:`ModalData`; :func:`bayesplate.io.case_writer.case_from_modal_data`
+turns it into a case file.
+"""
+
+from __future__ import annotations
+
+import os
+import pathlib
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import CaseError
+
+__all__ = ["ModalData", "read_modal_data"]
+
+UFF_SUFFIXES = (".uff", ".unv", ".uf")
+"""File name suffixes read as Universal Files."""
+
+
+@dataclass(frozen=True, eq=False)
+class ModalData:
+    """Measured modes as imported, before they meet a plate sheet.
+
+    Parameters
+    ----------
+    frequency_Hz : numpy.ndarray, shape (m,)
+        Natural frequencies, Hz, ascending.
+    points_mm : numpy.ndarray, shape (p, 2), optional
+        (x, y) of the measured nodes in the plate frame, mm; None without coordinates.
+    shapes : numpy.ndarray, shape (m, p), optional
+        Real out-of-plane (z) amplitude of each mode at each point (arbitrary scale).
+    damping : numpy.ndarray, shape (m,), optional
+        Modal viscous damping ratios as given by the file (not used for fitting).
+    sigma_Hz : numpy.ndarray, shape (m,), optional
+        One standard deviation of each frequency, Hz, when the file gives it.
+    mode : numpy.ndarray of int, shape (m,), optional
+        1-based elastic-mode index of each frequency, when the file gives it.
+    source : str
+        The file the data came from.
+    notes : tuple of str
+        What the reader had to assume (e.g. the length unit); logged as warnings and written
+        as comments into the case file.
+    """
+
+    frequency_Hz: np.ndarray
+    points_mm: np.ndarray | None = None
+    shapes: np.ndarray | None = None
+    damping: np.ndarray | None = None
+    sigma_Hz: np.ndarray | None = None
+    mode: np.ndarray | None = None
+    source: str = ""
+    notes: tuple[str, ...] = ()
+
+    @property
+    def size(self) -> int:
+        """Number of modes m."""
+        return int(np.size(self.frequency_Hz))
+
+    @property
+    def n_points(self) -> int:
+        """Number of measurement points p (0 without shapes)."""
+        return 0 if self.points_mm is None else len(self.points_mm)
+
+
+def read_modal_data(path) -> ModalData:
+    """Read a UFF (``.uff``, ``.unv``, ``.uf``) or CSV (``.csv``) file of measured modes.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+
+    Returns
+    -------
+    ModalData
+
+    Raises
+    ------
+    CaseError
+        For another suffix, or anything the chosen reader refuses.
+    """
+    suffix = pathlib.Path(path).suffix.lower()
+    if suffix == ".csv":
+        from .csv_table import read_frequency_csv
+
+        return read_frequency_csv(path)
+    if suffix in UFF_SUFFIXES:
+        from .uff import read_uff_modes  # pyuff is imported only for a UFF file
+
+        return read_uff_modes(path)
+    rule = f"unknown kind of file: expected {', '.join(UFF_SUFFIXES)} (UFF) or .csv"
+    raise CaseError("input", os.fspath(path), rule)
