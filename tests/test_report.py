@@ -290,7 +290,7 @@ def test_failure_in_a_step_writes_no_cache_entry(tmp_path, monkeypatch):
     def broken(*args, **kwargs):
         raise RuntimeError("solver failed")
 
-    monkeypatch.setattr(bayesplate.report, "_estimate_step", broken)
+    monkeypatch.setattr(bayesplate.report.steps, "estimate_step", broken)
     with pytest.raises(RuntimeError, match="solver failed"):
         make_report(bundled_case_path("plate1"), tmp_path, FAST, lambda line: None)
     assert sorted(p.name for p in (tmp_path / ".cache").iterdir()) == ["pairing.npz"]

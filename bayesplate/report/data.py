@@ -1,0 +1,94 @@
+"""What a report shows, as plain data: :class:`ReportData` and the questions asked of it.
+
+Besides the container, the answers that the steps, the figures and the text must agree on:
+the estimators shown (:data:`ESTIMATORS`), whether the posterior can be sampled, and the
+estimate at which the modes are drawn.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+from dataclasses import dataclass, field
+
+from .. import __version__
+from ..case import Case
+from ..estimators import METHODS
+from ..laminate import stiffness_from_engineering
+from ..model import PlateModel
+from ..pairing import DEFAULT_EXTRA_MODES, Pairing
+from .options import ReportOptions
+
+__all__ = ["ESTIMATORS", "ReportData", "sampling_available"]
+
+#: The estimators run and shown, in order: :data:`bayesplate.estimators.METHODS`.
+ESTIMATORS = METHODS
+
+
+def sampling_available():
+    """Whether the package has :mod:`bayesplate.sampling` (the posterior section)."""
+    return importlib.util.find_spec("bayesplate.sampling") is not None
+
+
+@dataclass
+class ReportData:
+    """Everything a report shows, as plain data (see :mod:`bayesplate.report` for the steps).
+
+    Attributes
+    ----------
+    case : Case
+    case_file : str
+        The case file read.
+    options : ReportOptions
+    mesh : tuple of int
+        The working mesh.
+    results : dict
+        Step name -> its result (dict of JSON values and arrays).
+    reused, computed : list of str
+        Steps taken from the cache and steps computed.
+    seconds : dict
+        Step name -> wall time of this run (small for reused steps).
+    notes : list of str
+        Why a section is missing, warnings met on the way.
+    """
+
+    case: Case
+    case_file: str
+    options: ReportOptions
+    mesh: tuple
+    results: dict = field(default_factory=dict)
+    reused: list = field(default_factory=list)
+    computed: list = field(default_factory=list)
+    seconds: dict = field(default_factory=dict)
+    notes: list = field(default_factory=list)
+    version: str = __version__
+    label: str = ""
+    model: object = field(default=None, repr=False)
+
+    def plate_model(self):
+        """The working :class:`bayesplate.model.PlateModel` (built when first needed)."""
+        if self.model is None:
+            self.model = PlateModel.from_case(self.case, mesh=self.mesh)
+        return self.model
+
+    def pairing(self):
+        """The :class:`bayesplate.pairing.Pairing` every step used."""
+        p = self.results["pairing"]
+        measured = p.get("measured")
+        return Pairing(
+            p["modes"], p["how"], DEFAULT_EXTRA_MODES, measured, p.get("mac"), p.get("threshold")
+        )
+
+
+def _estimate_for_modes(data):
+    """The estimate at which modes are drawn: B (the posterior mode) if it converged."""
+    for method in ("B", "MVE-mod", "MVE"):
+        if data.results[method]["converged"]:
+            return method
+    return "prior"
+
+
+def _b_at(data, at):
+    """Stiffness coefficients ``b`` (Pa), shape (6,), at estimate `at` or the prior mean."""
+    if at == "prior":
+        return stiffness_from_engineering(data.case.prior.mean)
+    return data.results[at]["b"]

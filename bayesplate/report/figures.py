@@ -1,0 +1,118 @@
+"""The report's figures, drawn from its plain data (:func:`report_figures`).
+
+Residuals at each estimate, sensitivities, mode shapes, the MAC matrix (with measured
+shapes), the posterior corner plot and diagnose's figures; all drawn by
+:mod:`bayesplate.plots` (imported when first needed: matplotlib is slow to import), none
+saved here.
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+
+from ..model import ModalResult
+from ..quantities import ENGINEERING_NAMES, ENGINEERING_UNITS, to_case_units
+from .data import ESTIMATORS, _estimate_for_modes
+
+__all__ = ["report_figures"]
+
+_SHAPE_GRID = (81, 41)  # points along the long and short side (interpolation is per point)
+_SHORT_KINDS = {"bending along x": "bend x", "bending along y": "bend y"}
+
+
+def report_figures(data):
+    """The figures of a report: ``{name: matplotlib Figure}``, in the order shown."""
+    from .. import plots
+
+    r, figs = data.results, {}
+    kept = data.pairing().kept(data.case.measured.size)
+    series = {
+        m: r[m]["frequency_Hz"]
+        for m in ESTIMATORS
+        if m in r and np.all(np.isfinite(r[m]["frequency_Hz"]))
+    }
+    if series:
+        figs["residuals"] = plots.estimate_residuals(
+            data.case.measured.frequency_Hz[kept],
+            data.case.measured.sigma_Hz[kept],
+            series,
+            labels=[str(i + 1) for i in kept],
+            title="residuals at each estimate",
+        )
+    figs.update(_modes_figures(data, plots))
+    if "sample" in r:
+        figs.update(_sample_figures(r["sample"], plots))
+    if "diagnose" in r:
+        view = _diagnosis_view(r["diagnose"])
+        for name, fig in plots.diagnosis_figures(data.plate_model(), view).items():
+            figs[f"diagnose_{name}"] = fig
+    return figs
+
+
+def _modes_figures(data, plots):
+    """Sensitivity bars, mode shapes and (with measured shapes) the MAC matrix."""
+    modes, figs = data.results["modes"], {}
+    at, n = _estimate_for_modes(data), len(modes["frequency_Hz"])
+    figs["sensitivities"] = plots.sensitivity_bars(
+        modes["normalised_sensitivities"],
+        notes=[_SHORT_KINDS.get(k, k) for k in modes["kinds"]],
+        title=f"normalised sensitivities of the first {n} elastic modes at the {at} estimate",
+    )
+    k = modes["vectors"].shape[1]
+    shapes = ModalResult(
+        modes["b"], modes["eigenvalues"][:k], modes["vectors"], np.zeros((k, 6)), np.zeros(0)
+    )
+    figs["mode_shapes"] = plots.mode_shapes(data.plate_model(), shapes, n=k, points=_SHAPE_GRID)
+    pairing, m = data.pairing(), data.case.measured.size
+    if pairing.mac is not None:
+        pairs = np.full(m, -1)
+        pairs[pairing.kept(m)] = pairing.modes
+        figs["mac"] = plots.mac_matrix_plot(
+            pairing.mac,
+            pairs,
+            measured_Hz=data.case.measured.frequency_Hz,
+            title="MAC of measured shapes against computed modes (prior mean); pairs outlined",
+        )
+    return figs
+
+
+def _sample_figures(result, plots):
+    """Corner plot of the posterior draws (see :func:`bayesplate.report.steps.sample_step`)."""
+    labels = [f"{n} ({u})" for n, u in zip(ENGINEERING_NAMES, ENGINEERING_UNITS, strict=True)]
+    truths = None if result["map"] is None else to_case_units(result["map"])
+    fig = plots.posterior_corner(
+        result["draws"], labels, truths=truths, title="posterior (emcee); red: the B estimate (MAP)"
+    )
+    return {"posterior_corner": fig}
+
+
+def _diagnosis_view(result):
+    """What :func:`bayesplate.plots.diagnosis_figures` reads, from a cached diagnosis."""
+    from ..discrepancy.locate import LocationMap
+
+    d = result["diagnosis"]
+    maps = {}
+    for key in ("stiffness_loss", "point_mass"):
+        fields = [result[f"map_{key}_{n}"] for n in ("points_mm", "chi2_drop", "amplitude")]
+        physical = result[f"map_{key}_physical"].astype(bool)
+        maps[key] = LocationMap(
+            *fields, physical, tuple(int(n) for n in result[f"map_{key}_shape"])
+        )
+    refit = d["refit"]
+    chosen = (
+        None
+        if refit is None
+        else SimpleNamespace(
+            fit=SimpleNamespace(residual_sigma=np.asarray(refit["residual_sigma"]))
+        )
+    )
+    return SimpleNamespace(
+        verdict=d["verdict"],
+        nominal=SimpleNamespace(residual_sigma=np.asarray(d["nominal"]["residual_sigma"])),
+        chosen=chosen,
+        measured_Hz=np.asarray(d["measured_Hz"]),
+        mode_kinds=list(result["mode_kinds"]),
+        maps=maps,
+    )

@@ -1,0 +1,143 @@
+"""The report's steps: each computes one result of a case as plain data (arrays, JSON values).
+
+Every function takes the case, the working model and what the step needs, and returns a dict
+that :class:`bayesplate.report.cache.StepCache` can store; none of them reads or writes files.
+The order they run in and their caching are :mod:`bayesplate.report.runner`'s.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from ..laminate import stiffness_from_engineering
+from ..pairing import MAC_EXTRA_MODES, pair_measured
+from ..quantities import to_case_units
+
+# Chain bounds of the posterior section: the sampler's own defaults (5000 steps, ESS 2000)
+# cost tens of minutes of full solves where walkers leave the fast model's box.
+_CHAINS = {"max_steps": 1000, "min_ess": 1000.0}
+_QUICK_CHAINS = {"max_steps": 400, "min_ess": 400.0}
+_CORNER_DRAWS = 4000  # posterior draws kept for the corner plot
+
+
+def pairing_step(case, model):
+    """Modes at the prior mean and the pairing (with any warnings as text)."""
+    m = case.measured.size
+    b = stiffness_from_engineering(case.prior.mean)
+    modal = model.solve(b, m + MAC_EXTRA_MODES)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        pairing = pair_measured(case, model, b, modal=modal)
+    data = {
+        "how": pairing.how,
+        "modes": pairing.modes,
+        "describe": pairing.describe(m),
+        "warnings": [str(w.message) for w in caught],
+        "prior_frequency_Hz": modal.frequency_Hz,
+        "threshold": pairing.threshold,
+    }
+    if pairing.measured is not None:
+        data["measured"] = pairing.measured
+    if pairing.mac is not None:
+        data["mac"] = pairing.mac
+    return data
+
+
+def estimate_step(case, model, method, pairing):
+    """One of the paper's estimators (:func:`bayesplate.estimators.estimate`) as plain data."""
+    from ..estimators import estimate
+
+    r = estimate(case, method, model=model, pairing=pairing)
+    return {
+        "method": r.method,
+        "converged": bool(r.converged),
+        "iterations": int(r.iterations),
+        "message": r.message,
+        "n_solves": int(r.n_solves),
+        "wall_time": float(r.wall_time),
+        "modes": np.asarray(r.modes),
+        "constants": r.constants,
+        "sd": r.sd,
+        "b": r.b,
+        "frequency_Hz": r.frequency_Hz,
+        "measured_Hz": r.measured_Hz,
+        "residual_Hz": r.residual,
+        "stages": [
+            {"converged": bool(s.converged), "iterations": int(s.iterations), "message": s.message}
+            for s in r.stages
+        ],
+    }
+
+
+def modes_step(case, model, b, n_modes, n_shapes):
+    """Modes, normalised sensitivities, mode kinds and the first `n_shapes` shapes at `b`."""
+    from ..discrepancy.locate import mode_kinds
+
+    modal = model.solve(np.asarray(b, dtype=float), n_modes)
+    return {
+        "b": modal.b,
+        "frequency_Hz": modal.frequency_Hz,
+        "eigenvalues": modal.eigenvalues,
+        "normalised_sensitivities": modal.normalised_sensitivities(),
+        "kinds": mode_kinds(model, modal),
+        "vectors": modal.vectors[:, :n_shapes],
+    }
+
+
+def diagnose_step(case, model, pairing, options, progress):
+    """Model discrepancy (:func:`bayesplate.discrepancy.diagnose.diagnose`) as plain data."""
+    from ..discrepancy.diagnose import diagnose, diagnosis_to_dict
+
+    d = diagnose(
+        case,
+        model=model,
+        rng=options.seed,
+        pairing=pairing,
+        progress=lambda msg: progress(f"    {msg}"),
+        n_starts=options.n_starts,
+        workers=2,  # the fits are independent: the results do not depend on it
+    )
+    data = {"diagnosis": diagnosis_to_dict(d), "mode_kinds": d.mode_kinds}
+    for key, lm in d.maps.items():
+        for name in ("points_mm", "chi2_drop", "amplitude", "physical"):
+            data[f"map_{key}_{name}"] = np.asarray(getattr(lm, name))
+        data[f"map_{key}_shape"] = np.asarray(lm.shape)
+    return data
+
+
+def sample_step(case, model, pairing, options):
+    """The posterior by :func:`bayesplate.sampling.sample` (only when the module exists).
+
+    The draws kept for the corner plot (at most ``_CORNER_DRAWS``, shape (n, 6)) are in
+    case units (GPa, -).
+    """
+    from ..laminate import engineering_from_stiffness
+    from ..sampling import sample
+
+    chains = _QUICK_CHAINS if options.quick else _CHAINS
+    with warnings.catch_warnings(record=True) as caught:  # counted below, not repeated
+        warnings.simplefilter("always")
+        r = sample(case, seed=options.seed, model=model, pairing=pairing, progress=False, **chains)
+    e = to_case_units(engineering_from_stiffness(r.samples_b))
+    keep = np.linspace(0, len(e) - 1, min(len(e), _CORNER_DRAWS)).astype(int)
+    return {
+        "mean": r.mean,
+        "sd": r.sd,
+        "hdi": r.hdi,
+        "ess_bulk": r.ess_bulk,
+        "rhat": r.rhat,
+        "converged": bool(r.converged),
+        "message": r.message,
+        "n_steps": int(r.n_steps),
+        "n_burn": int(r.n_burn),
+        "n_walkers": int(r.n_walkers),
+        "acceptance": float(r.acceptance),
+        "n_full": int(r.n_full),
+        "certificate": None if r.certificate is None else str(r.certificate),
+        "timings": {k: float(v) for k, v in r.timings.items()},
+        "map": None if r.estimate is None else r.estimate.constants,
+        "draws": e[keep],
+        "warnings": sorted({str(w.message) for w in caught}),
+    }
