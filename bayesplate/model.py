@@ -132,7 +132,7 @@ class PlateModel:
 
     @classmethod
     def from_case(cls, case, mesh=None, **kwargs):
-        """Model of a :class:`bayesplate.case.Case`, on ``mesh`` or the case's own mesh."""
+        """Model of a :class:`bayesplate.io.Case`, on ``mesh`` or the case's own mesh."""
         p = case.plate
         mesh = mesh or case.mesh or DEFAULT_MESH
         return cls(

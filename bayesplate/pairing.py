@@ -222,7 +222,7 @@ class Pairing:
 
     @classmethod
     def from_measurement(cls, measured, how="auto", extra=DEFAULT_EXTRA_MODES):
-        """Pairing of a :class:`bayesplate.case.Measurement` by order or mode index.
+        """Pairing of a :class:`bayesplate.io.Measurement` by order or mode index.
 
         Parameters
         ----------
@@ -259,7 +259,7 @@ class Pairing:
         return np.setdiff1d(np.arange(int(m)), self.kept(m))
 
     def select(self, measurement):
-        """The :class:`bayesplate.case.Measurement` restricted to the paired frequencies.
+        """The :class:`bayesplate.io.Measurement` restricted to the paired frequencies.
 
         The frequencies keep their measured order, so the pairing's `modes` must then be in
         the order of ``measured`` (always so for :func:`pair_measured`).
@@ -299,7 +299,7 @@ def resolve_pairing(measured, how="auto"):
 
     Parameters
     ----------
-    measured : bayesplate.case.Measurement
+    measured : bayesplate.io.Measurement
     how : {"auto", "mac", "likelihood", "index", "order"}
         ``"auto"``: by shape (MAC) when the measurement has shapes, else by its mode numbers
         when it has them, else by order.
@@ -323,7 +323,7 @@ def shape_mac(measurement, model, vectors):
 
     Parameters
     ----------
-    measurement : bayesplate.case.Measurement
+    measurement : bayesplate.io.Measurement
         With ``points`` (p, 2) in m and ``shapes`` (m, p).
     model : bayesplate.model.PlateModel
         Evaluates ``w`` at the points (:meth:`~bayesplate.model.PlateModel.interpolation`).
@@ -356,7 +356,7 @@ def pair_measured(
 
     Parameters
     ----------
-    case : bayesplate.case.Case
+    case : bayesplate.io.Case
     model : bayesplate.model.PlateModel
         Only used for ``how == "mac"`` (one eigen solve at `b`, unless `modal` is given).
     b : array_like, shape (6,)

@@ -199,7 +199,7 @@ class GaussianProblem:
 
         Parameters
         ----------
-        case : bayesplate.case.Case
+        case : bayesplate.io.Case
         model : object
             Has ``solve(b, n_modes)`` (a :class:`bayesplate.model.PlateModel`).
         pairing : Pairing, optional

@@ -48,11 +48,11 @@ def run(args):
     quiet = args.json == "-"
     if not quiet:
         logging.getLogger("bayesplate.sampling").setLevel(logging.INFO)  # progress
-    setup = prepare(case, model=model, forward="full" if args.full else "reduced", seed=args.seed,
+    setup = prepare(case, model=model, forward="full" if args.full else "reduced", rng=args.seed,
                     pairing=args.pairing)  # fmt: skip
     result = sample(
         case,
-        seed=args.seed,
+        rng=args.seed,
         n_walkers=args.walkers,
         max_steps=args.max_steps,
         min_ess=args.min_ess,

@@ -172,7 +172,7 @@ def diagnose(case, model=None, physics=None, rng=None, progress=None, pairing=No
 
     Parameters
     ----------
-    case : bayesplate.case.Case
+    case : bayesplate.io.Case
     model : PlateModel, optional
         Default: the case's mesh.
     physics : list of Physics, optional

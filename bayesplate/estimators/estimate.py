@@ -40,7 +40,7 @@ def estimate(
 
     Parameters
     ----------
-    case : bayesplate.case.Case
+    case : bayesplate.io.Case
     method : {"B", "MVE", "MVE-mod"}
     model : PlateModel, optional
         Forward model; default ``PlateModel.from_case(case)`` (the case's mesh).

@@ -135,7 +135,7 @@ def prior_stiffness(prior):
 
     Parameters
     ----------
-    prior : bayesplate.case.Prior
+    prior : bayesplate.io.Prior
         Independent Gaussian on ``(E1, E2, nu12, G12, G13, G23)`` (SI).
 
     Returns
@@ -155,7 +155,7 @@ def stiffness_box(prior, n_sigma=3.0, floor=0.1):
 
     Parameters
     ----------
-    prior : bayesplate.case.Prior
+    prior : bayesplate.io.Prior
     n_sigma, floor : float
         See :meth:`Box.from_covariance`.
 

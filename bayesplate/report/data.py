@@ -11,7 +11,7 @@ import importlib.util
 from dataclasses import dataclass, field
 
 from .. import __version__
-from ..case import Case
+from ..io import Case
 from ..estimators import METHODS
 from ..laminate import stiffness_from_engineering
 from ..model import PlateModel

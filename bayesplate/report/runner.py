@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from ..case import load_case
+from ..io import load_case
 from ..pairing import MAC_EXTRA_MODES
 from . import steps
 from .cache import StepCache

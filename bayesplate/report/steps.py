@@ -88,7 +88,8 @@ def modes_step(case, model, b, n_modes, n_shapes):
 
 def diagnose_step(case, model, pairing, options, progress):
     """Model discrepancy (:func:`bayesplate.discrepancy.diagnose.diagnose`) as plain data."""
-    from ..discrepancy.diagnose import diagnose, diagnosis_to_dict
+    from ..discrepancy.diagnose import diagnose
+    from ..io import diagnosis_to_dict
 
     d = diagnose(
         case,
@@ -119,7 +120,7 @@ def sample_step(case, model, pairing, options):
     chains = _QUICK_CHAINS if options.quick else _CHAINS
     with warnings.catch_warnings(record=True) as caught:  # counted below, not repeated
         warnings.simplefilter("always")
-        r = sample(case, seed=options.seed, model=model, pairing=pairing, progress=False, **chains)
+        r = sample(case, rng=options.seed, model=model, pairing=pairing, progress=False, **chains)
     e = to_case_units(engineering_from_stiffness(r.samples_b))
     keep = np.linspace(0, len(e) - 1, min(len(e), _CORNER_DRAWS)).astype(int)
     return {

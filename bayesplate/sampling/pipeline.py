@@ -52,7 +52,7 @@ def sample(
     ----------
     case : case object
         With ``.name``, ``.plate``, ``.measured`` and ``.prior`` (a
-        :class:`bayesplate.case.Case`).
+        :class:`bayesplate.io.Case`).
     rng : int, numpy.random.Generator or None
         Seeds the fast model's designs, the initial walkers and emcee: the same int, the same
         chain (it is split into two streams, for :func:`prepare` and the chain).

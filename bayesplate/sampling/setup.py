@@ -196,7 +196,7 @@ def prepare(
 
     Parameters
     ----------
-    case : bayesplate.case.Case
+    case : bayesplate.io.Case
     model : PlateModel, optional
         Full model; default ``PlateModel.from_case(case)``.
     forward : {"reduced", "full"}
