@@ -11,8 +11,8 @@ import importlib.util
 from dataclasses import dataclass, field
 
 from .. import __version__
-from ..io import Case
 from ..estimators import METHODS
+from ..io import Case
 from ..laminate import stiffness_from_engineering
 from ..model import PlateModel
 from ..pairing import DEFAULT_EXTRA_MODES, Pairing
