@@ -141,9 +141,9 @@ def _settle(case, model, b0, V, method, mean, sd, options, pair, start):
         start = at if result.converged else start  # the next round goes on from here
         again = pair_measured(case, model, at, "likelihood", prior=(at, V), start=pair)
         tried.append(_Settled(result, again, again.assignment.log_probability, 0, False))
-        if _same(again, pair):
+        if _same(again, pair, case.measured.size):
             return replace(tried[-1], rounds=len(tried), settled=True)
-        if any(_same(again, t.pair) for t in tried[:-1]):
+        if any(_same(again, t.pair, case.measured.size) for t in tried[:-1]):
             break
         pair = again
     pool = [t for t in tried if t.result.converged] or tried
@@ -180,9 +180,9 @@ def _lowest_first(case, model, b0, V, method, mean, sd, options):
     return pair_measured(case, model, at, "likelihood", prior=(at, V)), start
 
 
-def _same(a, b):
-    """Whether two pairings pair the same measured frequencies with the same modes."""
-    return np.array_equal(a.kept(0), b.kept(0)) and np.array_equal(a.modes, b.modes)
+def _same(a, b, m):
+    """Whether two pairings pair the same of `m` measured frequencies with the same modes."""
+    return np.array_equal(a.kept(m), b.kept(m)) and np.array_equal(a.modes, b.modes)
 
 
 def _assigned(result, pair, rounds, note):

@@ -45,7 +45,8 @@ from .export import (
     write_json,
     write_netcdf,
 )
-from .modal_data import ModalData, read_modal_data
+from .modal_data import ModalData
+from .modal_file import read_modal_data
 
 __all__ = [
     "MAX_MESH_ELEMENTS",

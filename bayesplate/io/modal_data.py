@@ -1,6 +1,6 @@
 """Measured modes as imported from a modal test file, before they meet a plate sheet.
 
-A modal test ends in one of two files, read by :func:`read_modal_data`:
+A modal test ends in one of two files, read by :func:`bayesplate.io.modal_file.read_modal_data`:
 
 - a Universal File (UFF, ``.uff``/``.unv``/``.uf``) as exported by modal software:
   :func:`bayesplate.io.uff.read_uff_modes`;
@@ -13,15 +13,11 @@ turns it into a case file.
 
 from __future__ import annotations
 
-import os
-import pathlib
 from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import CaseError
-
-__all__ = ["ModalData", "read_modal_data"]
+__all__ = ["ModalData"]
 
 UFF_SUFFIXES = (".uff", ".unv", ".uf")
 """File name suffixes read as Universal Files."""
@@ -70,32 +66,3 @@ class ModalData:
     def n_points(self) -> int:
         """Number of measurement points p (0 without shapes)."""
         return 0 if self.points_mm is None else len(self.points_mm)
-
-
-def read_modal_data(path) -> ModalData:
-    """Read a UFF (``.uff``, ``.unv``, ``.uf``) or CSV (``.csv``) file of measured modes.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-
-    Returns
-    -------
-    ModalData
-
-    Raises
-    ------
-    CaseError
-        For another suffix, or anything the chosen reader refuses.
-    """
-    suffix = pathlib.Path(path).suffix.lower()
-    if suffix == ".csv":
-        from .csv_table import read_frequency_csv
-
-        return read_frequency_csv(path)
-    if suffix in UFF_SUFFIXES:
-        from .uff import read_uff_modes  # pyuff is imported only for a UFF file
-
-        return read_uff_modes(path)
-    rule = f"unknown kind of file: expected {', '.join(UFF_SUFFIXES)} (UFF) or .csv"
-    raise CaseError("input", os.fspath(path), rule)
