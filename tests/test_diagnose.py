@@ -12,8 +12,11 @@ import pytest
 
 from bayesplate import PlateModel, bundled_case_path, load_case, stiffness_from_engineering
 from bayesplate.cli import main
-from bayesplate.discrepancy import PointMass
+from bayesplate.discrepancy import LocalStiffnessLoss, Parameter, PointMass
+from bayesplate.discrepancy.base import mirror_positions
 from bayesplate.discrepancy.diagnose import diagnose
+from bayesplate.discrepancy.local_stiffness_loss import element_energies
+from bayesplate.discrepancy.locate import effect_map
 from bayesplate.io import diagnosis_to_dict, write_json
 
 MESH = (12, 6)
@@ -117,7 +120,7 @@ def test_a_second_optimum_that_fits_as_well_makes_its_constants_unidentified():
     from types import SimpleNamespace
 
     from bayesplate import laminate
-    from bayesplate.discrepancy.diagnose import _basins_note, _unidentified
+    from bayesplate.discrepancy.verdict import basins_note, unidentified
 
     e = np.array([113e9, 8.5e9, 0.32, 4.45e9, 4.4e9, 2.9e9])
     sd = 0.01 * e  # well identified by the Laplace curvature of its own basin
@@ -129,7 +132,48 @@ def test_a_second_optimum_that_fits_as_well_makes_its_constants_unidentified():
         return SimpleNamespace(constants=e, constants_sd=sd, chi2=2.0, chi2_prior=10.0,
                                alternatives=((b_other, 12.0 + objective_gap),))  # fmt: skip
 
-    assert _unidentified(fit_with(1.0), V_b, 0.7, margin=2.0) == ["E1", "E2", "G13", "G23"]
-    assert "G23 2.9 GPa vs 1.45 GPa" in _basins_note(fit_with(1.0), 2.0)
-    assert _unidentified(fit_with(5.0), V_b, 0.7, margin=2.0) == []  # a worse basin: ignored
-    assert _basins_note(fit_with(5.0), 2.0) is None
+    assert unidentified(fit_with(1.0), V_b, 0.7, margin=2.0) == ["E1", "E2", "G13", "G23"]
+    assert "G23 2.9 GPa vs 1.45 GPa" in basins_note(fit_with(1.0), 2.0)
+    assert unidentified(fit_with(5.0), V_b, 0.7, margin=2.0) == []  # a worse basin: ignored
+    assert basins_note(fit_with(5.0), 2.0) is None
+
+
+class LocalStiffnessGain(LocalStiffnessLoss):
+    """A NEW located candidate, defined here alone: a stiffer patch (a bonded doubler).
+
+    Inside a rectangle ``C22, C12, C66, C44, C55`` are multiplied by ``factor > 1``. It
+    declares its name, its parameters, its scan grid and its first-order map; diagnose finds
+    it through the ``Physics`` hooks, with no package file edited.
+    """
+
+    name = "local_stiffness_gain"
+    description = "a rectangular region with stiffer matrix-dominated coefficients"
+    scan_factors = (1.5, 2.0, 3.0, 5.0)
+
+    def parameters(self, model, b):
+        return (*super().parameters(model, b)[:4], Parameter("factor", 1.5, 0.5, 1.0, 5.0))
+
+    def location_map(self, model, paired, b, residual_whitened, sigma_lambda, projector):
+        # a gain alpha raises lambda_i by alpha a_i^T K^e a_i: physical when alpha > 0
+        energy = element_energies(model, paired, np.asarray(b) * np.array([0, 1, 1, 1, 1, 1]))
+        mesh = model.mesh
+        return effect_map(energy, sigma_lambda, residual_whitened, projector,
+                          1e3 * mesh.centroids, (mesh.ny, mesh.nx))  # fmt: skip
+
+
+def test_a_located_candidate_defined_outside_the_package_is_mapped_scanned_and_fitted(model):
+    gain = LocalStiffnessGain()
+    truth = np.array([60.0, 30.0, 80.0, 50.0, 5.0])  # an 80 x 50 mm doubler at (60, 30) mm
+    case = _recordings(_plate1_case(), gain, truth, seed=3)
+    d = diagnose(case, model=model, physics=[gain, PointMass()], rng=0, n_starts=1)
+    # mapped and scanned under its own name, on the grid it declares
+    assert list(d.maps) == list(d.scans) == ["local_stiffness_gain", "point_mass"]
+    assert d.maps["local_stiffness_gain"].best() is not None
+    assert set(np.unique(d.scans["local_stiffness_gain"].theta[:, 4])) == set(gain.scan_factors)
+    # fitted, ranked and chosen: at the truth or one of its mirror images
+    assert d.verdict == "explained" and d.chosen.name == "local_stiffness_gain"
+    assert [c.name for c in d.candidates] == ["local_stiffness_gain", "point_mass"]
+    places = [truth[:2], *mirror_positions(model, *truth[:2])]
+    x, y = d.chosen.fit.theta[:2]
+    assert min(np.hypot(x - p[0], y - p[1]) for p in places) < 15.0
+    assert d.chosen.fit.theta[4] > 1.5  # a gain, recovered as one

@@ -330,7 +330,11 @@ def test_full_report_on_plate1(tmp_path):
     )
     text = path.read_text(encoding="utf-8")
     assert "**Verdict:" in text
-    for name in ("diagnose_residuals", "diagnose_map_stiffness_loss", "diagnose_map_point_mass"):
+    for name in (
+        "diagnose_residuals",
+        "diagnose_map_local_stiffness_loss",
+        "diagnose_map_point_mass",
+    ):
         assert (tmp_path / f"{name}.png").stat().st_size > MIN_PNG_BYTES
     if "sample" in data.results:
         assert (tmp_path / "posterior_corner.png").stat().st_size > MIN_PNG_BYTES

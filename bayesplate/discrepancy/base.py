@@ -4,6 +4,13 @@ A candidate is a family of modified plates indexed by a few parameters ``theta``
 units their names spell). :meth:`Physics.apply` returns the modified
 :class:`~bayesplate.model.PlateModel`; its stiffness stays linear in the six lamina
 coefficients, so the estimators, the posterior and the sampler work on it unchanged.
+
+A *located* candidate (an effect at a place on the plate: a point mass, a damaged patch)
+also implements the two optional hooks :meth:`Physics.location_map` (first order: where a
+small effect would explain the residuals) and :meth:`Physics.scan` (exact in a Ritz basis:
+where, and how large, over a grid the candidate declares). :func:`.diagnose.diagnose` calls
+them on every candidate and keys what they return by :attr:`Physics.name`; a new located
+candidate is one module.
 """
 
 from __future__ import annotations
@@ -39,8 +46,10 @@ class Parameter:
 class Physics:
     """A candidate piece of physics the nominal model leaves out.
 
-    Subclasses set :attr:`name` and :attr:`description` and implement :meth:`parameters`
-    and :meth:`apply`. ``theta`` is always a 1-D array ordered as :meth:`parameters`.
+    Subclasses set :attr:`name` (one string per candidate: it keys the candidate's results,
+    maps and scans) and :attr:`description` and implement :meth:`parameters` and
+    :meth:`apply`. ``theta`` is always a 1-D array ordered as :meth:`parameters`. Located
+    candidates also implement :meth:`location_map` and :meth:`scan`.
     """
 
     name = ""
@@ -76,6 +85,73 @@ class Physics:
         Default: none. Located effects override this (see :mod:`.point_mass`).
         """
         return []
+
+    def settings(self):
+        """Fixed choices of this instance that are not fitted, ``{name: value}``.
+
+        Reported before the fitted parameters (a taper's ``direction``). Default: none.
+        """
+        return {}
+
+    def location_map(self, model, paired, b, residual_whitened, sigma_lambda, projector):
+        """First-order map: how well a small effect at each place explains the residuals.
+
+        Linearised at the nominal fit: the column of each place is the derivative of the
+        paired eigenvalues with respect to the effect's size there, whitened, with what the
+        constants absorb projected out (:func:`.locate.effect_map` does that part).
+
+        Parameters
+        ----------
+        model : PlateModel
+            The nominal plate.
+        paired : ModalResult
+            Modes of the nominal fit paired with the measured ones (measured order):
+            ``eigenvalues`` shape (m,) in rad^2/s^2, ``vectors`` shape (n_dofs, m).
+        b : numpy.ndarray, shape (6,)
+            Stiffness coefficients of the nominal fit, Pa.
+        residual_whitened : numpy.ndarray, shape (m,)
+            ``(Y - lambda) / sigma`` of the nominal fit (dimensionless).
+        sigma_lambda : numpy.ndarray, shape (m,)
+            Deviations of the measured eigenvalues, rad^2/s^2.
+        projector : numpy.ndarray, shape (m, m)
+            Onto what the constants cannot absorb (:func:`.locate.absorbable_projector`).
+
+        Returns
+        -------
+        LocationMap or None
+            None (the default) when the candidate is not located.
+        """
+        return None
+
+    def scan(self, model, basis, b, Y, sigma, modes, projector):
+        """Ritz scan: the chi-square of the effect over a grid of places and sizes.
+
+        Exact (not linearised) in the Ritz basis of the nominal modes, so that large effects
+        that reorder modes are found too. The candidate declares its own grid of sizes; the
+        best distinct places of the scan start its joint fit.
+
+        Parameters
+        ----------
+        model : PlateModel
+            The nominal plate.
+        basis : RitzBasis
+            Rigid-body motions and elastic modes at the nominal fit (:mod:`.scan`).
+        b : numpy.ndarray, shape (6,)
+            Stiffness coefficients of the nominal fit, Pa.
+        Y, sigma : numpy.ndarray, shape (m,)
+            Measured eigenvalues and their deviations, rad^2/s^2.
+        modes : numpy.ndarray of int, shape (m,)
+            0-based elastic modes paired with the measured ones.
+        projector : numpy.ndarray, shape (m, m)
+            Onto what the constants cannot absorb (:func:`.locate.absorbable_projector`).
+
+        Returns
+        -------
+        Scan or None
+            ``theta`` ordered as :meth:`parameters`; None (the default) when the candidate
+            is not located.
+        """
+        return None
 
     def labelled(self, model, b, theta):
         """``{name: value}`` of a parameter vector, for reports and JSON."""

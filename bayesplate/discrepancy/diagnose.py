@@ -1,19 +1,25 @@
-"""Diagnose a mismatch between the model and the recordings.
+"""Diagnose a mismatch between the model and the recordings: the steps, in order.
 
 1. Fit the nominal model globally (several starts) and check it: chi-square of the
    standardised residuals against ``m - p_eff`` degrees of freedom (``p_eff``: parameters
-   the data fix), and a predictive check per mode.
+   the data fix), and a predictive check per mode (:mod:`.verdict`).
 2. Locate: which modes carry the misfit, what kind of modes they are, and where on the plate
-   a local change would explain the residuals (after the constants took their share).
+   a local change would explain the residuals (after the constants took their share): the
+   location map and the Ritz scan of every located candidate (its
+   :meth:`~.base.Physics.location_map` and :meth:`~.base.Physics.scan`).
 3. Name: fit every candidate physics jointly with the constants and rank the candidates by
-   their Laplace evidence gain over the nominal model (what the constants cannot absorb).
+   their Laplace evidence gain over the nominal model (what the constants cannot absorb;
+   :mod:`.rank`).
 4. Model: the chosen candidate's joint fit is the refit, with its Laplace posterior.
-5. Verdict: ``consistent``, ``explained`` or ``unexplained``.
+5. Verdict: ``consistent``, ``explained`` or ``unexplained`` (:mod:`.verdict`).
 
 Before any of it, the mesh's own error on every frequency is estimated by Richardson
 extrapolation (the element converges as h^2) and reported beside the measurement deviation;
 where it is not well under it, it is added to the deviation in quadrature and the report says
 so, so that discretisation is never blamed on physics.
+
+No candidate is named here: the candidates are :class:`~.base.Physics` objects, and what is
+found about each (maps, scans, results) is keyed by its :attr:`~.base.Physics.name`.
 """
 
 from __future__ import annotations
@@ -23,23 +29,17 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.stats import chi2 as chi2_dist
-from scipy.stats import norm
 
-from .. import laminate
 from ..model import PlateModel
-from ..pairing import pair_measured
+from ..pairing import Pairing, pair_measured
 from ..posterior import observed_eigenvalues, prior_in_stiffness
-from ..quantities import ENGINEERING_NAMES, engineering_covariance
 from . import candidates as all_candidates
+from .base import mirror_positions
 from .fit import JointFit, JointProblem, fit
-from .locate import (
-    absorbable_projector,
-    mode_kinds,
-    point_mass_map,
-    stiffness_loss_map,
-)
-from .parallel import fork_map
-from .scan import RitzBasis, point_mass_scan, stiffness_loss_scan
+from .locate import absorbable_projector, mode_kinds
+from .rank import CandidateResult, improved_nominal, rank
+from .scan import RitzBasis
+from .verdict import basins_note, predictive_p_values, unidentified, verdict
 
 __all__ = [
     "CandidateResult",
@@ -64,31 +64,10 @@ DEFAULTS = {
     "basin_margin": 2.0,  # chi2 + chi2_prior: another nominal optimum this close fits as well
     "workers": 1,  # processes for independent fits (fork); the CLI uses 2
 }
+"""Default values of :func:`diagnose`'s keyword-only options (their single source)."""
 
-
-@dataclass(frozen=True)
-class CandidateResult:
-    """One candidate physics fitted jointly with the constants.
-
-    Attributes
-    ----------
-    name : str
-    fit : JointFit
-    log_evidence_gain : float
-        ``ln Z(candidate) - ln Z(nominal)``, nats.
-    parameters : dict
-        ``{name: value}`` in the parameters' units (plus ``direction`` for a taper).
-    parameters_sd : dict
-    mirror_images : list of dict
-        Parameter values that fit equally by the plate's symmetry.
-    """
-
-    name: str
-    fit: JointFit = field(repr=False)
-    log_evidence_gain: float
-    parameters: dict
-    parameters_sd: dict
-    mirror_images: list
+#: Elastic modes of the Ritz basis of the scans beyond the highest paired one.
+RITZ_EXTRA_MODES = 20
 
 
 @dataclass(frozen=True)
@@ -108,7 +87,8 @@ class Diagnosis:
         1-based measured modes whose standardised residual exceeds 2.
     mode_kinds : list of str
     maps : dict of LocationMap
-        ``"stiffness_loss"`` and ``"point_mass"``.
+        One per located candidate among ``physics``, keyed by its
+        :attr:`~.base.Physics.name`, in the order of ``physics``.
     region_mm : tuple or None
         Best location of a local change, mm; ``region_mirrors_mm`` fit equally.
     candidates : list of CandidateResult
@@ -119,6 +99,8 @@ class Diagnosis:
         Constants the data do not inform (nominal fit, and refit when there is one).
     sigma_Hz, mesh_error_Hz : numpy.ndarray, shape (m,)
     notes : list of str
+    scans : dict of Scan
+        The Ritz scan of each located candidate, keyed as ``maps``.
     """
 
     verdict: str
@@ -140,6 +122,7 @@ class Diagnosis:
     mesh_error_Hz: np.ndarray
     measured_Hz: np.ndarray
     notes: list
+    scans: dict = field(default_factory=dict, repr=False)
 
 
 def coarse_model(model):
@@ -167,36 +150,76 @@ def mesh_error(model, b, n_modes, coarse=None):
     return (coarse.solve(b, n_modes).frequency_Hz - fine) / 3.0
 
 
-def diagnose(case, model=None, physics=None, rng=None, progress=None, pairing=None, **options):
+def diagnose(
+    case,
+    model=None,
+    physics=None,
+    rng=None,
+    progress=None,
+    pairing="auto",
+    *,
+    alpha=DEFAULTS["alpha"],
+    evidence_threshold=DEFAULTS["evidence_threshold"],
+    n_starts=DEFAULTS["n_starts"],
+    unidentified_ratio=DEFAULTS["unidentified_ratio"],
+    mesh_error_ratio=DEFAULTS["mesh_error_ratio"],
+    refine_margin=DEFAULTS["refine_margin"],
+    basin_margin=DEFAULTS["basin_margin"],
+    workers=DEFAULTS["workers"],
+):
     """Diagnose a case: nominal fit, location, candidate ranking, refit, verdict.
 
     Parameters
     ----------
+<<<<<<< HEAD
     case : bayesplate.io.Case
+=======
+    case : bayesplate.case.Case
+        Duck-typed: its ``.plate``, ``.measured`` and ``.prior``.
+>>>>>>> split-discrepancy
     model : PlateModel, optional
         Default: the case's mesh.
     physics : list of Physics, optional
-        Candidates to rank (default: all of :func:`bayesplate.discrepancy.candidates`).
+        Candidates to rank (default: all of :func:`bayesplate.discrepancy.candidates`); the
+        located ones among them are also mapped and scanned.
     rng : numpy.random.Generator or int, optional
         Seeds the random starts of the nominal fit.
     progress : callable, optional
         ``progress(message)`` after each step.
-    pairing : Pairing, optional
-        Measured-to-computed modes; default :func:`bayesplate.pairing.pair_measured` at the
-        prior mean (by shape when the case has shapes). Unpaired measured modes are left out.
-    **options
-        Overrides of :data:`DEFAULTS`.
+    pairing : {"auto", "mac", "index", "order"} or Pairing
+        Measured-to-computed modes (:func:`bayesplate.pairing.pair_measured` at the prior
+        mean, as :func:`bayesplate.estimators.estimate` takes it): "auto" pairs by shape
+        when the case has shapes. Unpaired measured modes are left out.
+    alpha : float
+        Significance of the chi-square tests (nominal fit and refit).
+    evidence_threshold : float
+        Laplace evidence gain a candidate needs to be chosen, nats (3: about 20 to 1).
+    n_starts : int
+        Random starts of the nominal fit, besides the prior mean.
+    unidentified_ratio : float
+        Posterior sd / prior sd above which a constant is reported as unidentified.
+    mesh_error_ratio : float
+        Mesh error / measurement deviation above which the deviation is inflated.
+    refine_margin : float
+        Candidates gaining less than this on the coarse mesh are not refined, nats.
+    basin_margin : float
+        Another nominal optimum whose ``chi2 + chi2_prior`` is this close fits as well.
+    workers : int
+        Processes for the independent fits (fork); the results do not depend on it.
+
+    The defaults are those of :data:`DEFAULTS`.
 
     Returns
     -------
     Diagnosis
     """
-    opts = {**DEFAULTS, **options}
     rng = np.random.default_rng(rng)
     say = progress or (lambda message: log.info(message))
     model = model or PlateModel.from_case(case)
+    physics = physics or all_candidates()
     mu_b, V_b = prior_in_stiffness(case.prior.mean, case.prior.sd, "full")
-    pairing = pairing or pair_measured(case, model, mu_b)
+    if not isinstance(pairing, Pairing):
+        pairing = pair_measured(case, model, mu_b, pairing)
     measured, modes = pairing.select(case.measured), pairing.modes
     m = measured.size
     notes = []
@@ -206,7 +229,7 @@ def diagnose(case, model=None, physics=None, rng=None, progress=None, pairing=No
     sigma_Hz = np.asarray(measured.sigma_Hz, dtype=float)
     ratio = np.abs(err) / sigma_Hz
     say(f"mesh {model.mesh.nx} x {model.mesh.ny}: error up to {ratio.max():.2f} sigma")
-    if ratio.max() > opts["mesh_error_ratio"]:
+    if ratio.max() > mesh_error_ratio:
         sigma_Hz = np.hypot(sigma_Hz, err)
         notes.append(
             f"the mesh's own error reaches {ratio.max():.2f} sigma (mode "
@@ -217,27 +240,26 @@ def diagnose(case, model=None, physics=None, rng=None, progress=None, pairing=No
     sigma = 2.0 * Y * sigma_Hz / measured.frequency_Hz  # d lambda = 2 lambda df / f
 
     nominal_problem = JointProblem(model, Y, sigma, mu_b, V_b, modes)
-    nominal = fit_nominal(nominal_problem, coarse, rng, opts["n_starts"], opts["workers"])
+    nominal = fit_nominal(nominal_problem, coarse, rng, n_starts, workers)
     dof = max(m - nominal.effective_parameters, 1.0)
     p_value = float(chi2_dist.sf(nominal.chi2, dof))
     say(f"nominal fit: chi2 = {nominal.chi2:.1f} on {dof:.1f} dof, p = {p_value:.3g}")
-    mode_p = _predictive_p_values(nominal, nominal_problem)
-    unidentified = _unidentified(nominal, V_b, opts["unidentified_ratio"], opts["basin_margin"])
+    mode_p = predictive_p_values(nominal, nominal_problem)
+    loose = unidentified(nominal, V_b, unidentified_ratio, basin_margin)
 
     kinds = mode_kinds(model, _paired(nominal, modes))
     # what the constants can absorb, whitened: projected out of the maps and of the scans
     P = absorbable_projector(_paired(nominal, modes).sensitivities * nominal.b / sigma[:, None])
-    maps = _maps(model, nominal, modes, sigma, P)
+    maps = _maps(physics, model, nominal, modes, sigma, P)
     region, mirrors = _region(model, maps)
     located = [int(i) + 1 for i in np.flatnonzero(np.abs(nominal.residual_sigma) > 2.0)]
 
     coarse_lam = coarse.solve(nominal.b, int(modes.max()) + 1).eigenvalues[modes]
     level = {"coarse": coarse, "scale": nominal.eigenvalues / coarse_lam,
-             "margin": opts["refine_margin"], "workers": opts["workers"]}  # fmt: skip
-    scans = _scans(model, nominal, modes, Y, sigma, P)
-    ranked = _rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans,
-                   physics or all_candidates(), say)  # fmt: skip
-    better = _improved_nominal(nominal_problem, nominal, ranked, level)
+             "margin": refine_margin, "workers": workers}  # fmt: skip
+    scans = _scans(physics, model, nominal, modes, Y, sigma, P)
+    ranked = rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics, say)
+    better = improved_nominal(nominal_problem, nominal, ranked, level)
     if better is not None:
         say(f"nominal fit improved from a candidate's constants: chi2 = {better.chi2:.1f}")
         shift = better.log_evidence - nominal.log_evidence
@@ -246,34 +268,33 @@ def diagnose(case, model=None, physics=None, rng=None, progress=None, pairing=No
         nominal = replace(better, alternatives=earlier)  # the other basins stay known
         dof = max(m - nominal.effective_parameters, 1.0)
         p_value = float(chi2_dist.sf(nominal.chi2, dof))
-        mode_p = _predictive_p_values(nominal, nominal_problem)
-        unidentified = _unidentified(nominal, V_b, opts["unidentified_ratio"],
-                                     opts["basin_margin"])  # fmt: skip
+        mode_p = predictive_p_values(nominal, nominal_problem)
+        loose = unidentified(nominal, V_b, unidentified_ratio, basin_margin)
     best = next((c for c in ranked if c.fit.refined), None)
-    warranted = best is not None and best.log_evidence_gain > opts["evidence_threshold"]
+    warranted = best is not None and best.log_evidence_gain > evidence_threshold
     refit_dof, refit_p = np.nan, np.nan
     if warranted:
         refit_dof = max(m - best.fit.effective_parameters, 1.0)
         refit_p = float(chi2_dist.sf(best.fit.chi2, refit_dof))
-        unidentified = _unidentified(best.fit, V_b, opts["unidentified_ratio"])
-    verdict, chosen = _verdict(p_value, warranted, refit_p, opts["alpha"], best)
-    if verdict == "consistent":
+        loose = unidentified(best.fit, V_b, unidentified_ratio)
+    outcome, chosen = verdict(p_value, warranted, refit_p, alpha, best)
+    if outcome == "consistent":
         region, mirrors = None, []
-    if verdict == "unexplained":
+    if outcome == "unexplained":
         notes.append(
             "the recordings disagree with the model beyond their deviations and no candidate "
             "physics explains the mismatch"
         )
-    basins = _basins_note(nominal, opts["basin_margin"])
+    basins = basins_note(nominal, basin_margin)
     if basins is not None and chosen is None:
         notes.append(basins)
-    if verdict != "consistent" and region is not None and mirrors:
+    if outcome != "consistent" and region is not None and mirrors:
         notes.append("the plate's symmetry makes the mirror images of the located region fit "
                      "equally well from frequencies alone")  # fmt: skip
-    say(f"verdict: {verdict}" + (f" ({chosen.name})" if chosen else ""))
+    say(f"verdict: {outcome}" + (f" ({chosen.name})" if chosen else ""))
     return Diagnosis(
-        verdict, nominal, dof, p_value, mode_p, located, kinds, maps, region, mirrors, ranked,
-        chosen, refit_dof, refit_p, unidentified, sigma_Hz, err, measured.frequency_Hz, notes,
+        outcome, nominal, dof, p_value, mode_p, located, kinds, maps, region, mirrors, ranked,
+        chosen, refit_dof, refit_p, loose, sigma_Hz, err, measured.frequency_Hz, notes, scans,
     )  # fmt: skip
 
 
@@ -295,39 +316,6 @@ def fit_nominal(problem, coarse, rng, n_starts=DEFAULTS["n_starts"], workers=1):
     return fit(problem, starts, coarse=coarse, keep=3, workers=workers)
 
 
-def _improved_nominal(problem, nominal, ranked, level):
-    """A better nominal optimum, started from candidates that beat it on the prior too.
-
-    A candidate's fit starts from the nominal constants and may walk into a better basin of
-    the constants alone; its gain would then be credited to the physics. Re-fitting the
-    nominal model from there keeps the gains honest. Each re-fit runs on the corrected
-    coarse mesh first and is refined only when it beats the nominal evidence there.
-    """
-    total = nominal.chi2 + nominal.chi2_prior
-    best = nominal
-    for c in ranked:
-        if c.fit.refined and c.fit.chi2 + c.fit.chi2_prior < total - 0.5:
-            trial = fit(
-                problem,
-                [problem.pack(c.fit.b)],
-                coarse=level["coarse"],
-                scale=level["scale"],
-                refine=lambda rough, bar=best.log_evidence: rough.log_evidence > bar,
-            )
-            if trial.refined and trial.log_evidence > best.log_evidence:
-                best = trial
-    return None if best is nominal else best
-
-
-def _verdict(p_value, warranted, refit_p, alpha, best):
-    """The three verdicts of the issue."""
-    if warranted and refit_p >= alpha:
-        return "explained", best
-    if p_value >= alpha and not warranted:
-        return "consistent", None
-    return "unexplained", None
-
-
 def _paired(fit_, modes):
     """The fit's modal result restricted to the paired modes (measured order)."""
     modal = fit_.modal
@@ -335,83 +323,20 @@ def _paired(fit_, modes):
                        modal.sensitivities[modes], modal.rigid_eigenvalues)  # fmt: skip
 
 
-def _predictive_p_values(fit_, problem):
-    """Two-sided p-value of each residual under the Laplace posterior predictive."""
-    S = fit_.modal.sensitivities[problem.modes]
-    var = problem.sigma**2 + np.einsum("ij,jk,ik->i", S, fit_.covariance[:6, :6], S)
-    z = (problem.Y - fit_.eigenvalues) / np.sqrt(var)
-    return 2.0 * norm.sf(np.abs(z))
-
-
-def _unidentified(fit_, V_b, ratio, margin=None):
-    """Engineering constants the data do not fix.
-
-    Those whose posterior deviation is close to the prior one, and, when ``margin`` is
-    given, those that differ by more than two deviations at another local optimum whose
-    objective ``chi2 + chi2_prior`` is within ``margin`` of the best: the data fit both
-    basins about equally, so neither value is an estimate (the Laplace deviation, local to
-    one basin, would understate the uncertainty).
-    """
-    prior_sd = np.sqrt(np.diag(engineering_covariance(fit_.constants, V_b)))
-    loose = fit_.constants_sd > ratio * prior_sd
-    for _, _, differs in _rival_optima(fit_, margin) if margin is not None else ():
-        loose |= differs
-    return [n for n, flag in zip(ENGINEERING_NAMES, loose, strict=True) if flag]
-
-
-def _rival_optima(fit_, margin):
-    """Other optima within ``margin`` of the best objective whose constants differ.
-
-    Returns
-    -------
-    list of (constants, objective, differs)
-        ``differs``: bool (6,), the constants more than two deviations from the best fit's.
-    """
-    best = fit_.chi2 + fit_.chi2_prior
-    rivals = []
-    for b, objective in fit_.alternatives:
-        if objective - best < margin and laminate.is_physical(b):
-            e = laminate.engineering_from_stiffness(b)
-            differs = np.abs(e - fit_.constants) > 2.0 * fit_.constants_sd
-            if differs.any():
-                rivals.append((e, objective, differs))
-    return rivals
-
-
-def _basins_note(fit_, margin):
-    """A note naming the other optimum that fits about as well, or None."""
-    rivals = _rival_optima(fit_, margin)
-    if not rivals:
-        return None
-    e, objective, differs = rivals[0]
-    values = ", ".join(f"{n} {_case_units(n, fit_.constants)} vs {_case_units(n, e)}"
-                       for n, d in zip(ENGINEERING_NAMES, differs, strict=True) if d)  # fmt: skip
-    return (
-        f"the nominal fit has a second optimum that fits about as well (objective "
-        f"{fit_.chi2 + fit_.chi2_prior:.2f} vs {objective:.2f}): {values}; these "
-        "constants are reported as unidentified"
-    )
-
-
-def _case_units(name, e):
-    i = ENGINEERING_NAMES.index(name)
-    return f"{e[i]:.3g}" if name == "nu12" else f"{1e-9 * e[i]:.3g} GPa"
-
-
-def _maps(model, nominal, modes, sigma, P):
-    """Location maps of a local stiffness loss and of a point mass at the nominal fit."""
+def _maps(physics_list, model, nominal, modes, sigma, P):
+    """Location maps of the located candidates at the nominal fit, keyed by name."""
     paired = _paired(nominal, modes)
     r = nominal.residual_sigma
-    return {
-        "stiffness_loss": stiffness_loss_map(model, paired, nominal.b, r, sigma, P),
-        "point_mass": point_mass_map(model, paired, r, sigma, P),
-    }
+    maps = {}
+    for physics in physics_list:
+        location = physics.location_map(model, paired, nominal.b, r, sigma, P)
+        if location is not None:
+            maps[physics.name] = location
+    return maps
 
 
 def _region(model, maps):
-    """The best located place over both maps, with its mirror images."""
-    from .base import mirror_positions
-
+    """The best located place over all maps, with its mirror images."""
     best = None
     for m in maps.values():
         i = m.best()
@@ -422,34 +347,13 @@ def _region(model, maps):
     return best[1], [tuple(float(v) for v in p) for p in mirror_positions(model, *best[1])]
 
 
-def _scans(model, nominal, modes, Y, sigma, P):
-    """Ritz scans of the located candidates at the nominal fit (see :mod:`.scan`)."""
-    basis = RitzBasis.from_modes(model, model.solve(nominal.b, int(modes.max()) + 21))
-    plate_mass_g = 1e3 * model.density * model.thickness * model.mesh.a * model.mesh.b
-    a_mm, b_mm = 1e3 * model.mesh.a, 1e3 * model.mesh.b
-    sizes = [(a_mm * sx, b_mm * sy) for sx, sy in
-             ((0.1, 0.1), (0.2, 0.2), (0.4, 0.4), (0.2, 0.4), (0.4, 0.2))]  # fmt: skip
-    return {
-        "point_mass": point_mass_scan(model, basis, Y, sigma, modes, P,
-                                      np.geomspace(0.003, 1.0, 18) * plate_mass_g),
-        "local_stiffness_loss": stiffness_loss_scan(model, basis, nominal.b, Y, sigma, modes,
-                                                    P, sizes, (0.2, 0.4, 0.6, 0.8, 0.9)),
-    }  # fmt: skip
+def _scans(physics_list, model, nominal, modes, Y, sigma, P):
+    """Ritz scans of the located candidates at the nominal fit, keyed by name.
 
-
-def _located_starts(physics, model, scans, n=3):
-    """Starting parameters of a located effect: the best distinct places of its scan."""
-    scan = scans.get(physics.name)
-    return [] if scan is None else scan.best(model, n)
-
-
-def _rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list, say):
-    """Fit every candidate jointly with the constants; best evidence gain first.
-
-    Every start is fitted on the coarse mesh corrected by the fine-to-coarse eigenvalue
-    ratio at the nominal fit; candidates that gain at least ``level["margin"]`` there are
-    refined on the working mesh. Only refined candidates can be chosen.
+    The Ritz basis (:mod:`.scan`) holds the nominal modes up to ``RITZ_EXTRA_MODES`` beyond
+    the highest paired one.
     """
+<<<<<<< HEAD
 
     def promising(rough):
         return rough.log_evidence - nominal.log_evidence > level["margin"]
@@ -487,3 +391,66 @@ def _rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list
         ):
             best_by_name[r.name] = r
     return sorted(best_by_name.values(), key=lambda r: -r.log_evidence_gain)
+=======
+    n_basis = int(modes.max()) + 1 + RITZ_EXTRA_MODES
+    basis = RitzBasis.from_modes(model, model.solve(nominal.b, n_basis))
+    scans = {}
+    for physics in physics_list:
+        result = physics.scan(model, basis, nominal.b, Y, sigma, modes, P)
+        if result is not None:
+            scans[physics.name] = result
+    return scans
+
+
+def _fit_summary(fit_, dof, p_value):
+    """Chi-square, constants and residuals of one fit, for JSON."""
+    from ..io import constants_json
+
+    return {
+        "chi2": fit_.chi2,
+        "dof": dof,
+        "p_value": p_value,
+        "residual_sigma": fit_.residual_sigma,
+        "frequency_Hz": fit_.frequency_Hz,
+        "constants": constants_json(fit_.constants, fit_.constants_sd),
+    }
+
+
+def diagnosis_to_dict(d):
+    """The diagnosis as plain data, in the units of the case files (see the issue's keys)."""
+    nominal = _fit_summary(d.nominal, d.dof, d.p_value)
+    nominal["mode_p_value"] = d.mode_p_values
+    refit = None
+    if d.chosen is not None:
+        refit = _fit_summary(d.chosen.fit, d.refit_dof, d.refit_p_value)
+        refit["parameters"] = d.chosen.parameters
+        refit["parameters_sd"] = d.chosen.parameters_sd
+        refit["mirror_images"] = d.chosen.mirror_images
+    return {
+        "verdict": d.verdict,
+        "measured_Hz": d.measured_Hz,
+        "sigma_Hz": d.sigma_Hz,
+        "mesh_error_Hz": d.mesh_error_Hz,
+        "nominal": nominal,
+        "located": {
+            "modes": d.located_modes,
+            "mode_kinds": d.mode_kinds,
+            "region_mm": None if d.region_mm is None else list(d.region_mm),
+            "region_mirrors_mm": [list(p) for p in d.region_mirrors_mm],
+        },
+        "candidates": [
+            {
+                "physics": c.name,
+                "log_evidence_gain": c.log_evidence_gain,
+                "chi2": c.fit.chi2,
+                "parameters": c.parameters,
+                "parameters_sd": c.parameters_sd,
+            }
+            for c in d.candidates
+        ],  # fmt: skip
+        "chosen": None if d.chosen is None else d.chosen.name,
+        "refit": refit,
+        "unidentified": d.unidentified,
+        "notes": d.notes,
+    }
+>>>>>>> split-discrepancy

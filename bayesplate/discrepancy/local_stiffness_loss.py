@@ -1,12 +1,20 @@
-"""A rectangular region that lost stiffness (impact damage, porosity, a dry patch)."""
+"""A rectangular region that lost stiffness (impact damage, porosity, a dry patch): located."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from .base import Parameter, Physics, mirror_positions
+from .locate import effect_map
+from .scan import Scan, misfit
 
-__all__ = ["LocalStiffnessLoss", "area_fractions"]
+__all__ = [
+    "LocalStiffnessLoss",
+    "area_fractions",
+    "element_energies",
+    "stiffness_loss_map",
+    "stiffness_loss_scan",
+]
 
 #: The matrix-dominated coefficients that the factor multiplies: C22, C12, C66, C44, C55.
 _KEPT = np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
@@ -42,10 +50,22 @@ class LocalStiffnessLoss(Physics):
     the rectangle's edge take the factor in proportion to the area inside, so the
     frequencies vary smoothly with position and size. Kept linear in the lamina
     coefficients: ``K_j -> K_j + (d_j - 1) sum_e frac_e K_j^e``.
+
+    Attributes
+    ----------
+    scan_sizes : tuple of (float, float)
+        Patch sides the scan tries, as fractions of the plate's sides ``(a, b)``.
+    scan_factors : tuple of float
+        Fractions of ``C22, C12, C66, C44, C55`` kept that the scan tries.
+    scan_stride : int
+        The scan tries every ``scan_stride``-th element centre each way.
     """
 
     name = "local_stiffness_loss"
     description = "a rectangular region keeping a fraction of E2, G12, G13, G23"
+    scan_sizes = ((0.1, 0.1), (0.2, 0.2), (0.4, 0.4), (0.2, 0.4), (0.4, 0.2))
+    scan_factors = (0.2, 0.4, 0.6, 0.8, 0.9)
+    scan_stride = 2
 
     def parameters(self, model, b):
         """Centre ``x_mm``, ``y_mm``; sides ``dx_mm``, ``dy_mm``; ``factor`` kept in (0, 1]."""
@@ -77,3 +97,124 @@ class LocalStiffnessLoss(Physics):
     def mirror_images(self, model, theta):
         """The same region at the mirror positions of its centre."""
         return [np.array([x, y, *theta[2:]]) for x, y in mirror_positions(model, *theta[:2])]
+
+    def location_map(self, model, paired, b, residual_whitened, sigma_lambda, projector):
+        """A small loss at each element (:func:`stiffness_loss_map`)."""
+        return stiffness_loss_map(model, paired, b, residual_whitened, sigma_lambda, projector)
+
+    def scan(self, model, basis, b, Y, sigma, modes, projector):
+        """Every ``scan_stride``-th element centre, ``scan_sizes`` and ``scan_factors``."""
+        a_mm, b_mm = 1e3 * model.mesh.a, 1e3 * model.mesh.b
+        sizes = [(a_mm * sx, b_mm * sy) for sx, sy in self.scan_sizes]
+        return stiffness_loss_scan(model, basis, b, Y, sigma, modes, projector, sizes,
+                                   self.scan_factors, self.scan_stride)  # fmt: skip
+
+
+def element_energies(model, paired, weights):
+    """Strain energy of each paired mode in each element, for weighted coefficients.
+
+    Parameters
+    ----------
+    model : PlateModel
+    paired : ModalResult
+        ``vectors`` shape (n_dofs, m).
+    weights : array_like, shape (6,)
+        Multiplies the element stiffness of each lamina coefficient (Pa).
+
+    Returns
+    -------
+    numpy.ndarray, shape (m, n_elements)
+        ``a_i^T K^e a_i`` (twice the strain energy), rad^2/s^2 for M-normalised modes.
+    """
+    Ke = np.einsum("j,jab->ab", weights, model.element_stiffness_terms())
+    q = paired.vectors[model.mesh.element_dofs]  # (n_el, 32, m)
+    return np.einsum("eai,ab,ebi->ie", q, Ke, q)
+
+
+def stiffness_loss_map(model, result, b, residual_whitened, sigma_lambda, projector):
+    """Map of a local loss of the matrix-dominated stiffness at each element.
+
+    Column ``e``: ``d lambda_i / d alpha_e = -a_i^T K_loss^e a_i`` for losing a fraction
+    ``alpha`` of ``C22, C12, C66, C44, C55`` in element ``e``.
+
+    Parameters
+    ----------
+    model : PlateModel
+    result : ModalResult
+        Paired modes (columns of ``result.vectors`` in measured order).
+    b : array_like, shape (6,)
+        Stiffness coefficients of the nominal fit, Pa.
+    residual_whitened : numpy.ndarray, shape (m,)
+    sigma_lambda : numpy.ndarray, shape (m,)
+    projector : numpy.ndarray, shape (m, m)
+
+    Returns
+    -------
+    LocationMap
+        On the element centres, shape ``(ny, nx)``.
+    """
+    weights = np.asarray(b, dtype=float) * np.array([0, 1, 1, 1, 1, 1])
+    energy = element_energies(model, result, weights)
+    mesh = model.mesh
+    return effect_map(-energy, sigma_lambda, residual_whitened, projector,
+                      1e3 * mesh.centroids, (mesh.ny, mesh.nx))  # fmt: skip
+
+
+def stiffness_loss_scan(model, basis, b, Y, sigma, modes, projector, sizes_mm, factors,
+                        stride=2):  # fmt: skip
+    """Scan a patch that lost matrix-dominated stiffness over centres, sizes and factors.
+
+    In the Ritz basis: ``(Lambda - (1 - factor) Phi^T K_loss Phi) q = lambda q``. The patch
+    is made of whole elements (those whose centre lies inside); centres are element centres
+    (every ``stride``-th each way). A factor above 1 is a stiffer patch.
+
+    Parameters
+    ----------
+    model : PlateModel
+    basis : RitzBasis
+    b : array_like, shape (6,)
+        Nominal stiffness coefficients, Pa.
+    Y, sigma : numpy.ndarray, shape (m,)
+        Measured eigenvalues and their deviations (rad^2/s^2).
+    modes : numpy.ndarray of int, shape (m,)
+        0-based elastic modes paired with the measured ones.
+    projector : numpy.ndarray, shape (m, m)
+        Onto what the constants cannot absorb (:func:`.locate.absorbable_projector`).
+    sizes_mm : sequence of (dx_mm, dy_mm)
+    factors : array_like
+        Fractions of ``C22, C12, C66, C44, C55`` kept inside.
+    stride : int
+
+    Returns
+    -------
+    Scan
+        ``theta = (x_mm, y_mm, dx_mm, dy_mm, factor)``.
+    """
+    mesh = model.mesh
+    Ke = np.einsum("j,jab->ab", np.asarray(b) * (1.0 - _KEPT), model.element_stiffness_terms())
+    q = basis.vectors[mesh.element_dofs]  # (n_el, 32, n)
+    reduced = q.transpose(0, 2, 1) @ (Ke @ q)
+    ix = np.floor(mesh.centroids[:, 0] / mesh.dx).astype(int)
+    iy = np.floor(mesh.centroids[:, 1] / mesh.dy).astype(int)
+    n = basis.eigenvalues.size
+    table = np.zeros((mesh.ny + 1, mesh.nx + 1, n, n))  # summed-area table of the elements
+    table[iy + 1, ix + 1] = reduced
+    table = table.cumsum(axis=0).cumsum(axis=1)
+    cy, cx = np.meshgrid(np.arange(0, mesh.ny, stride), np.arange(0, mesh.nx, stride),
+                         indexing="ij")  # fmt: skip
+    cx, cy = cx.ravel(), cy.ravel()
+    thetas, chi2 = [], []
+    for dx_mm, dy_mm in sizes_mm:
+        # elements either side of the centre one: the patch spans 2 h + 1 elements
+        hx = max(int(np.floor((1e-3 * dx_mm / mesh.dx - 1) / 2 + 0.5)), 0)
+        hy = max(int(np.floor((1e-3 * dy_mm / mesh.dy - 1) / 2 + 0.5)), 0)
+        x0, x1 = np.clip(cx - hx, 0, mesh.nx), np.clip(cx + hx + 1, 0, mesh.nx)
+        y0, y1 = np.clip(cy - hy, 0, mesh.ny), np.clip(cy + hy + 1, 0, mesh.ny)
+        patch = table[y1, x1] - table[y0, x1] - table[y1, x0] + table[y0, x0]
+        size = 1e3 * np.column_stack([(x1 - x0) * mesh.dx, (y1 - y0) * mesh.dy])
+        centre = 1e3 * np.column_stack([(x0 + x1) * mesh.dx, (y0 + y1) * mesh.dy]) / 2
+        for factor in np.asarray(factors, dtype=float):
+            A = np.diag(basis.eigenvalues) - (1.0 - factor) * patch
+            chi2.append(misfit(np.linalg.eigvalsh(A), basis, Y, sigma, modes, projector))
+            thetas.append(np.column_stack([centre, size, np.full(cx.size, factor)]))
+    return Scan(np.vstack(thetas), np.concatenate(chi2), (0, 1))

@@ -4,6 +4,9 @@ Everything here is linearised at the nominal fit and pure array computation. Res
 effect columns are whitened by the observation deviations, and the part of every effect
 that the six elastic constants can absorb is projected out first: only what the constants
 cannot explain points at missing physics.
+
+The maps of the located candidates are built here from the derivative columns each
+candidate computes in its :meth:`~.base.Physics.location_map` (:func:`effect_map`).
 """
 
 from __future__ import annotations
@@ -16,9 +19,8 @@ __all__ = [
     "LocationMap",
     "absorbable_projector",
     "explained_chi2",
+    "effect_map",
     "mode_kinds",
-    "stiffness_loss_map",
-    "point_mass_map",
 ]
 
 _KIND_BY_COEFFICIENT = {0: "bending along x", 1: "bending along y", 3: "torsion"}
@@ -131,39 +133,28 @@ class LocationMap:
         return None if not np.isfinite(score[i]) or score[i] <= 0 else i
 
 
-def stiffness_loss_map(model, result, b, residual_whitened, sigma_lambda, projector):
-    """Map of a local loss of the matrix-dominated stiffness at each element.
-
-    Column ``e``: ``d lambda_i / d alpha_e = -a_i^T K_loss^e a_i`` for losing a fraction
-    ``alpha`` of ``C22, C12, C66, C44, C55`` in element ``e``.
+def effect_map(derivatives, sigma_lambda, residual_whitened, projector, points_mm, shape):
+    """The location map of an effect from its derivative columns, one per place.
 
     Parameters
     ----------
-    model : PlateModel
-    result : ModalResult
-        Paired modes (columns of ``result.vectors`` in measured order).
-    b : array_like, shape (6,)
-    residual_whitened : numpy.ndarray, shape (m,)
+    derivatives : numpy.ndarray, shape (m, n)
+        ``d lambda_i / d alpha`` at each of the ``n`` places (rad^2/s^2 per unit of the
+        effect's size ``alpha``), signed so that a physical effect has ``alpha > 0``.
     sigma_lambda : numpy.ndarray, shape (m,)
+        Deviations of the measured eigenvalues, rad^2/s^2.
+    residual_whitened : numpy.ndarray, shape (m,)
     projector : numpy.ndarray, shape (m, m)
+    points_mm : numpy.ndarray, shape (n, 2)
+        The places, mm.
+    shape : tuple of int
+        Grid shape ``(ny, nx)`` of the places.
 
     Returns
     -------
     LocationMap
+        ``physical`` where the best amplitude is positive.
     """
-    weights = np.asarray(b, dtype=float) * np.array([0, 1, 1, 1, 1, 1])
-    Ke = np.einsum("j,jab->ab", weights, model.element_stiffness_terms())
-    q = result.vectors[model.mesh.element_dofs]  # (n_el, 32, m)
-    energy = np.einsum("eai,ab,ebi->ie", q, Ke, q)  # (m, n_el)
-    drop, amp = explained_chi2(residual_whitened, -energy / sigma_lambda[:, None], projector)
-    mesh = model.mesh
-    return LocationMap(1e3 * mesh.centroids, drop, amp, amp > 0, (mesh.ny, mesh.nx))
-
-
-def point_mass_map(model, result, residual_whitened, sigma_lambda, projector):
-    """Map of a small point mass at each node: ``d lambda_i / d m = -lambda_i w_i(x)^2``."""
-    w = result.vectors[model.mesh.dofs("w")]  # (n_nodes, m)
-    effect = -(result.eigenvalues[:, None] * (w.T**2)) / sigma_lambda[:, None]
-    drop, amp = explained_chi2(residual_whitened, effect, projector)
-    mesh = model.mesh
-    return LocationMap(1e3 * mesh.nodes, drop, amp, amp > 0, (mesh.ny + 1, mesh.nx + 1))
+    effects = derivatives / sigma_lambda[:, None]
+    drop, amp = explained_chi2(residual_whitened, effects, projector)
+    return LocationMap(points_mm, drop, amp, amp > 0, shape)

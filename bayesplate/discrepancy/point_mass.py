@@ -1,12 +1,18 @@
-"""A glued sensor or lump: a point mass on the plate's mid-plane."""
+"""A glued sensor or lump: a point mass on the plate's mid-plane (a located candidate)."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from .base import Parameter, Physics, mirror_positions
+from .locate import effect_map
+from .scan import Scan, misfit
 
-__all__ = ["PointMass"]
+__all__ = ["PointMass", "point_mass_map", "point_mass_scan"]
+
+
+def _plate_mass_g(model):
+    return 1e3 * model.density * model.thickness * model.mesh.a * model.mesh.b
 
 
 class PointMass(Physics):
@@ -14,10 +20,19 @@ class PointMass(Physics):
 
     The mass moves with the mid-plane deflection ``w``; its rotary and in-plane inertia are
     neglected (a sensor much smaller than the wavelengths).
+
+    Attributes
+    ----------
+    scan_mass_fractions : numpy.ndarray
+        Masses the scan tries, as fractions of the plate's mass.
+    scan_stride : int
+        The scan tries every ``scan_stride``-th node each way.
     """
 
     name = "point_mass"
     description = "a point mass (glued sensor) at (x, y)"
+    scan_mass_fractions = np.geomspace(0.003, 1.0, 18)
+    scan_stride = 2
 
     def parameters(self, model, b):
         """``mass_g``, ``x_mm``, ``y_mm``.
@@ -26,7 +41,7 @@ class PointMass(Physics):
         deviation of a uniform position over the plate.
         """
         a_mm, b_mm = 1e3 * model.mesh.a, 1e3 * model.mesh.b
-        plate_mass_g = 1e3 * model.density * model.thickness * model.mesh.a * model.mesh.b
+        plate_mass_g = _plate_mass_g(model)
         return (
             Parameter("mass_g", 0.05 * plate_mass_g, 0.1 * plate_mass_g, 0.0, plate_mass_g),
             Parameter("x_mm", a_mm / 2, a_mm / np.sqrt(12), 0.0, a_mm),
@@ -45,3 +60,75 @@ class PointMass(Physics):
     def mirror_images(self, model, theta):
         """The same mass at the mirror positions of ``(x, y)``."""
         return [np.array([theta[0], x, y]) for x, y in mirror_positions(model, *theta[1:])]
+
+    def location_map(self, model, paired, b, residual_whitened, sigma_lambda, projector):
+        """A small mass at each node (:func:`point_mass_map`)."""
+        return point_mass_map(model, paired, residual_whitened, sigma_lambda, projector)
+
+    def scan(self, model, basis, b, Y, sigma, modes, projector):
+        """Every ``scan_stride``-th node, masses ``scan_mass_fractions`` of the plate's."""
+        masses_g = self.scan_mass_fractions * _plate_mass_g(model)
+        return point_mass_scan(model, basis, Y, sigma, modes, projector, masses_g,
+                               self.scan_stride)  # fmt: skip
+
+
+def point_mass_map(model, result, residual_whitened, sigma_lambda, projector):
+    """Map of a small point mass at each node: ``d lambda_i / d m = -lambda_i w_i(x)^2``.
+
+    Parameters are those of :meth:`.base.Physics.location_map` (``result``: the paired
+    modes). The amplitude is the mass, kg.
+
+    Returns
+    -------
+    LocationMap
+        On the nodes, shape ``(ny + 1, nx + 1)``.
+    """
+    w = result.vectors[model.mesh.dofs("w")]  # (n_nodes, m)
+    derivatives = -(result.eigenvalues[:, None] * (w.T**2))
+    mesh = model.mesh
+    return effect_map(derivatives, sigma_lambda, residual_whitened, projector,
+                      1e3 * mesh.nodes, (mesh.ny + 1, mesh.nx + 1))  # fmt: skip
+
+
+def point_mass_scan(model, basis, Y, sigma, modes, projector, masses_g, stride=2):
+    """Scan a point mass over the nodes (every ``stride``-th each way) and ``masses_g``.
+
+    In the Ritz basis: ``Lambda q = lambda (I + m w_p w_p^T) q`` with ``w_p`` the basis'
+    ``w`` at node ``p``.
+
+    Parameters
+    ----------
+    model : PlateModel
+    basis : RitzBasis
+    Y, sigma : numpy.ndarray, shape (m,)
+        Measured eigenvalues and their deviations (rad^2/s^2).
+    modes : numpy.ndarray of int, shape (m,)
+        0-based elastic modes paired with the measured ones.
+    projector : numpy.ndarray, shape (m, m)
+        Onto what the constants cannot absorb (:func:`.locate.absorbable_projector`).
+    masses_g : array_like
+        Masses to try, g.
+    stride : int
+
+    Returns
+    -------
+    Scan
+        ``theta = (mass_g, x_mm, y_mm)``.
+    """
+    mesh = model.mesh
+    grid = np.arange(mesh.n_nodes).reshape(mesh.ny + 1, mesh.nx + 1)[::stride, ::stride]
+    nodes = grid.ravel()
+    w = basis.vectors[mesh.dofs("w", nodes)]  # (p, n)
+    s = np.einsum("pn,pn->p", w, w)
+    lam = basis.eigenvalues
+    xy = 1e3 * mesh.nodes[nodes]
+    thetas, chi2 = [], []
+    for mass_g in np.asarray(masses_g, dtype=float):
+        m = 1e-3 * mass_g
+        # (I + m w w^T)^(-1/2) = I - c w w^T: the symmetric form of the pencil
+        c = (1.0 - 1.0 / np.sqrt(1.0 + m * s)) / np.where(s > 0, s, 1.0)
+        S = np.eye(lam.size) - c[:, None, None] * w[:, :, None] * w[:, None, :]
+        A = (S * lam) @ S
+        chi2.append(misfit(np.linalg.eigvalsh(A), basis, Y, sigma, modes, projector))
+        thetas.append(np.column_stack([np.full(nodes.size, mass_g), xy]))
+    return Scan(np.vstack(thetas), np.concatenate(chi2), (1, 2))

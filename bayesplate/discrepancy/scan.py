@@ -15,6 +15,10 @@ lowest elastic modes at the nominal fit, ``Lambda`` their eigenvalues,
 a few dozen unknowns, solved for thousands of places and sizes at once. The scan's
 chi-square is taken after projecting out what the six constants absorb (as in the maps);
 its best distinct places and sizes are starting points for the joint fit.
+
+This module is the machinery every located candidate shares (the basis, the scan's result,
+the misfit of batched Ritz eigenvalues); each candidate writes its own pencil in its
+:meth:`~.base.Physics.scan`, in its own module, over the grid it declares.
 Pure array computation.
 """
 
@@ -26,7 +30,7 @@ import numpy as np
 
 from .base import mirror_positions
 
-__all__ = ["RitzBasis", "Scan", "point_mass_scan", "stiffness_loss_scan"]
+__all__ = ["RitzBasis", "Scan", "misfit"]
 
 
 @dataclass(frozen=True)
@@ -103,103 +107,26 @@ class Scan:
         return chosen
 
 
-def _misfit(eigenvalues, basis, Y, sigma, modes, projector):
-    """Projected chi-square of batched Ritz eigenvalues, shape (...,)."""
+def misfit(eigenvalues, basis, Y, sigma, modes, projector):
+    """Projected chi-square of batched Ritz eigenvalues.
+
+    Parameters
+    ----------
+    eigenvalues : numpy.ndarray, shape (..., r + n)
+        Eigenvalues of the modified plate in ``basis`` (any order), rad^2/s^2.
+    basis : RitzBasis
+    Y, sigma : numpy.ndarray, shape (m,)
+        Measured eigenvalues and their deviations, rad^2/s^2.
+    modes : numpy.ndarray of int, shape (m,)
+        0-based elastic modes paired with the measured ones.
+    projector : numpy.ndarray, shape (m, m)
+        Onto what the constants cannot absorb.
+
+    Returns
+    -------
+    numpy.ndarray, shape (...,)
+    """
     elastic = np.sort(eigenvalues, axis=-1)[..., basis.n_rigid :]
     r = (Y - elastic[..., modes]) / sigma
     r = r @ projector.T
     return np.einsum("...i,...i->...", r, r)
-
-
-def point_mass_scan(model, basis, Y, sigma, modes, projector, masses_g, stride=2):
-    """Scan a point mass over the nodes (every ``stride``-th each way) and ``masses_g``.
-
-    Parameters
-    ----------
-    model : PlateModel
-    basis : RitzBasis
-    Y, sigma : numpy.ndarray, shape (m,)
-        Measured eigenvalues and their deviations (rad^2/s^2).
-    modes : numpy.ndarray of int, shape (m,)
-        0-based elastic modes paired with the measured ones.
-    projector : numpy.ndarray, shape (m, m)
-        Onto what the constants cannot absorb (:func:`.locate.absorbable_projector`).
-    masses_g : array_like
-        Masses to try, g.
-
-    Returns
-    -------
-    Scan
-        ``theta = (mass_g, x_mm, y_mm)``.
-    """
-    mesh = model.mesh
-    grid = np.arange(mesh.n_nodes).reshape(mesh.ny + 1, mesh.nx + 1)[::stride, ::stride]
-    nodes = grid.ravel()
-    w = basis.vectors[mesh.dofs("w", nodes)]  # (p, n)
-    s = np.einsum("pn,pn->p", w, w)
-    lam = basis.eigenvalues
-    xy = 1e3 * mesh.nodes[nodes]
-    thetas, chi2 = [], []
-    for mass_g in np.asarray(masses_g, dtype=float):
-        m = 1e-3 * mass_g
-        # (I + m w w^T)^(-1/2) = I - c w w^T: the symmetric form of the pencil
-        c = (1.0 - 1.0 / np.sqrt(1.0 + m * s)) / np.where(s > 0, s, 1.0)
-        S = np.eye(lam.size) - c[:, None, None] * w[:, :, None] * w[:, None, :]
-        A = (S * lam) @ S
-        chi2.append(_misfit(np.linalg.eigvalsh(A), basis, Y, sigma, modes, projector))
-        thetas.append(np.column_stack([np.full(nodes.size, mass_g), xy]))
-    return Scan(np.vstack(thetas), np.concatenate(chi2), (1, 2))
-
-
-def stiffness_loss_scan(model, basis, b, Y, sigma, modes, projector, sizes_mm, factors,
-                        stride=2):  # fmt: skip
-    """Scan a patch that lost matrix-dominated stiffness over centres, sizes and factors.
-
-    The patch is made of whole elements (those whose centre lies inside); centres are
-    element centres (every ``stride``-th each way).
-
-    Parameters
-    ----------
-    b : array_like, shape (6,)
-        Nominal stiffness coefficients, Pa.
-    sizes_mm : sequence of (dx_mm, dy_mm)
-    factors : array_like
-        Fractions of ``C22, C12, C66, C44, C55`` kept inside.
-
-    Other parameters are those of :func:`point_mass_scan`.
-
-    Returns
-    -------
-    Scan
-        ``theta = (x_mm, y_mm, dx_mm, dy_mm, factor)``.
-    """
-    from .local_stiffness_loss import _KEPT
-
-    mesh = model.mesh
-    Ke = np.einsum("j,jab->ab", np.asarray(b) * (1.0 - _KEPT), model.element_stiffness_terms())
-    q = basis.vectors[mesh.element_dofs]  # (n_el, 32, n)
-    reduced = q.transpose(0, 2, 1) @ (Ke @ q)
-    ix = np.floor(mesh.centroids[:, 0] / mesh.dx).astype(int)
-    iy = np.floor(mesh.centroids[:, 1] / mesh.dy).astype(int)
-    n = basis.eigenvalues.size
-    table = np.zeros((mesh.ny + 1, mesh.nx + 1, n, n))  # summed-area table of the elements
-    table[iy + 1, ix + 1] = reduced
-    table = table.cumsum(axis=0).cumsum(axis=1)
-    cy, cx = np.meshgrid(np.arange(0, mesh.ny, stride), np.arange(0, mesh.nx, stride),
-                         indexing="ij")  # fmt: skip
-    cx, cy = cx.ravel(), cy.ravel()
-    thetas, chi2 = [], []
-    for dx_mm, dy_mm in sizes_mm:
-        # elements either side of the centre one: the patch spans 2 h + 1 elements
-        hx = max(int(np.floor((1e-3 * dx_mm / mesh.dx - 1) / 2 + 0.5)), 0)
-        hy = max(int(np.floor((1e-3 * dy_mm / mesh.dy - 1) / 2 + 0.5)), 0)
-        x0, x1 = np.clip(cx - hx, 0, mesh.nx), np.clip(cx + hx + 1, 0, mesh.nx)
-        y0, y1 = np.clip(cy - hy, 0, mesh.ny), np.clip(cy + hy + 1, 0, mesh.ny)
-        patch = table[y1, x1] - table[y0, x1] - table[y1, x0] + table[y0, x0]
-        size = 1e3 * np.column_stack([(x1 - x0) * mesh.dx, (y1 - y0) * mesh.dy])
-        centre = 1e3 * np.column_stack([(x0 + x1) * mesh.dx, (y0 + y1) * mesh.dy]) / 2
-        for factor in np.asarray(factors, dtype=float):
-            A = np.diag(basis.eigenvalues) - (1.0 - factor) * patch
-            chi2.append(_misfit(np.linalg.eigvalsh(A), basis, Y, sigma, modes, projector))
-            thetas.append(np.column_stack([centre, size, np.full(cx.size, factor)]))
-    return Scan(np.vstack(thetas), np.concatenate(chi2), (0, 1))

@@ -29,6 +29,10 @@ class ThicknessTaper(Physics):
             raise ValueError(f"direction = {direction!r}: must be 'x' or 'y'")
         self.direction = direction
 
+    def settings(self):
+        """``{"direction": "x" or "y"}``."""
+        return {"direction": self.direction}
+
     def parameters(self, model, b):
         """``ratio`` e: prior 0 +- 0.05, within +-0.5."""
         return (Parameter("ratio", 0.0, 0.05, -0.5, 0.5),)

@@ -88,8 +88,8 @@ def diagnosis_figures(model, diagnosis):
         "residuals": residual_comparison(d.measured_Hz, d.nominal.residual_sigma, after,
                                          d.mode_kinds, title=f"verdict: {d.verdict}"),
     }  # fmt: skip
-    for key, title in (("stiffness_loss", "local stiffness loss"), ("point_mass", "point mass")):
-        lm = d.maps[key]
+    for key, lm in d.maps.items():  # keyed by the located candidates' physics names
+        title = key.replace("_", " ")
         best = lm.best()
         mirrors = [] if best is None else mirror_positions(model, *lm.points_mm[best])
         figs[f"map_{key}"] = location_map(lm, model, title=f"where: {title}", mirrors=mirrors)

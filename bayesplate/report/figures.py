@@ -94,7 +94,12 @@ def _diagnosis_view(result):
 
     d = result["diagnosis"]
     maps = {}
-    for key in ("stiffness_loss", "point_mass"):
+    names = [
+        k[len("map_") : -len("_shape")]
+        for k in result
+        if k.startswith("map_") and k.endswith("_shape")
+    ]
+    for key in names:  # the located candidates' physics names, as diagnose keyed them
         fields = [result[f"map_{key}_{n}"] for n in ("points_mm", "chi2_drop", "amplitude")]
         physical = result[f"map_{key}_physical"].astype(bool)
         maps[key] = LocationMap(

@@ -294,10 +294,13 @@ def _diagnose_section(data, figures):
     ]
     lines += _table(["candidate", "evidence gain (nats)", "chi-square", "parameters"], rows)
     lines.append("")
+    located = [k for k in figures if k.startswith("diagnose_map_")]
     for name, caption in (
         ("diagnose_residuals", "Standardised residuals of the nominal fit (and of the refit)"),
-        ("diagnose_map_stiffness_loss", "Where a local stiffness loss would explain the misfit"),
-        ("diagnose_map_point_mass", "Where a point mass would explain the misfit"),
+        *(
+            (k, f"Where a {k[len('diagnose_map_') :].replace('_', ' ')} would explain the misfit")
+            for k in located
+        ),
     ):
         lines += _image(figures, name, caption)
     return lines

@@ -1,0 +1,147 @@
+"""Step 3 of diagnose, name: every candidate fitted jointly with the constants, ranked.
+
+Each candidate's joint fit starts from the prior mean of its parameters, its own extra
+starting points and, for a located candidate, the best distinct places of its Ritz scan; it
+runs on the coarse mesh corrected to the working one and is refined only when promising.
+The candidates are ranked by their Laplace evidence gain over the nominal model.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .fit import JointFit, JointProblem, fit
+from .parallel import fork_map
+
+__all__ = ["CandidateResult", "improved_nominal", "rank"]
+
+
+@dataclass(frozen=True)
+class CandidateResult:
+    """One candidate physics fitted jointly with the constants.
+
+    Attributes
+    ----------
+    name : str
+        The candidate's :attr:`~.base.Physics.name`.
+    fit : JointFit
+    log_evidence_gain : float
+        ``ln Z(candidate) - ln Z(nominal)``, nats.
+    parameters : dict
+        ``{name: value}`` in the parameters' units, after the candidate's fixed
+        :meth:`~.base.Physics.settings` (a taper's ``direction``).
+    parameters_sd : dict
+    mirror_images : list of dict
+        Parameter values that fit equally by the plate's symmetry.
+    """
+
+    name: str
+    fit: JointFit = field(repr=False)
+    log_evidence_gain: float
+    parameters: dict
+    parameters_sd: dict
+    mirror_images: list
+
+
+def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list, say):
+    """Fit every candidate jointly with the constants; best evidence gain first.
+
+    Every start is fitted on the coarse mesh corrected by the fine-to-coarse eigenvalue
+    ratio at the nominal fit; candidates that gain at least ``level["margin"]`` there are
+    refined on the working mesh. Only refined candidates can be chosen. Candidates of one
+    name (a taper per direction) keep the better.
+
+    Parameters
+    ----------
+    model : PlateModel
+    level : dict
+        ``coarse`` (PlateModel), ``scale`` (fine / coarse eigenvalues, shape (m,)),
+        ``margin`` (nats), ``workers`` (int).
+    Y, sigma : numpy.ndarray, shape (m,)
+        Measured eigenvalues and their deviations, rad^2/s^2.
+    mu_b : numpy.ndarray, shape (6,)
+    V_b : numpy.ndarray, shape (6, 6)
+        Prior of the stiffness coefficients, Pa and Pa^2.
+    modes : numpy.ndarray of int, shape (m,)
+    nominal : JointFit
+    scans : dict of Scan
+        Keyed by :attr:`~.base.Physics.name`: the located candidates' scans.
+    physics_list : list of Physics
+    say : callable
+
+    Returns
+    -------
+    list of CandidateResult
+    """
+
+    def promising(rough):
+        return rough.log_evidence - nominal.log_evidence > level["margin"]
+
+    def candidate(physics):
+        problem = JointProblem(model, Y, sigma, mu_b, V_b, modes, physics)
+        thetas = [problem.theta_mean, *physics.starting_points(model, nominal.b),
+                  *_located_starts(physics, model, scans)]  # fmt: skip
+        lo, hi = problem.theta_lower, problem.theta_upper
+        starts = [problem.pack(nominal.b, np.clip(t, lo, hi)) for t in thetas]
+        result = fit(problem, starts, max_nfev=25, coarse=level["coarse"],
+                     scale=level["scale"], refine=promising)  # fmt: skip
+        gain = result.log_evidence - nominal.log_evidence
+        params = {**physics.settings(), **physics.labelled(model, nominal.b, result.theta)}
+        sds = physics.labelled(model, nominal.b, result.theta_sd)
+        mirrors = [physics.labelled(model, nominal.b, t)
+                   for t in physics.mirror_images(model, result.theta)]  # fmt: skip
+        return CandidateResult(physics.name, result, gain, params, sds, mirrors)
+
+    # the candidates with most parameters take longest: they go first to the workers
+    order = sorted(range(len(physics_list)),
+                   key=lambda i: -len(physics_list[i].parameters(model, nominal.b)))  # fmt: skip
+    fitted = fork_map(candidate, [physics_list[i] for i in order], level["workers"])
+    results = [fitted[order.index(i)] for i in range(len(physics_list))]
+    for r in results:
+        where = "" if r.fit.refined else " (coarse mesh, not refined)"
+        say(f"{r.name}: chi2 = {r.fit.chi2:.1f}, evidence gain {r.log_evidence_gain:+.1f}{where}")
+    best_by_name = {}
+    for r in results:  # the taper is fitted once per direction; keep the better
+        if (
+            r.name not in best_by_name
+            or r.log_evidence_gain > best_by_name[r.name].log_evidence_gain
+        ):
+            best_by_name[r.name] = r
+    return sorted(best_by_name.values(), key=lambda r: -r.log_evidence_gain)
+
+
+def _located_starts(physics, model, scans, n=3):
+    """Starting parameters of a located effect: the best distinct places of its scan."""
+    scan = scans.get(physics.name)
+    return [] if scan is None else scan.best(model, n)
+
+
+def improved_nominal(problem, nominal, ranked, level):
+    """A better nominal optimum, started from candidates that beat it on the prior too.
+
+    A candidate's fit starts from the nominal constants and may walk into a better basin of
+    the constants alone; its gain would then be credited to the physics. Re-fitting the
+    nominal model from there keeps the gains honest. Each re-fit runs on the corrected
+    coarse mesh first and is refined only when it beats the nominal evidence there.
+
+    Returns
+    -------
+    JointFit or None
+        None when no candidate leads to a better nominal fit.
+    """
+    total = nominal.chi2 + nominal.chi2_prior
+    best = nominal
+    for c in ranked:
+        if c.fit.refined and c.fit.chi2 + c.fit.chi2_prior < total - 0.5:
+            trial = fit(
+                problem,
+                [problem.pack(c.fit.b)],
+                coarse=level["coarse"],
+                scale=level["scale"],
+                refine=lambda rough, bar=best.log_evidence: rough.log_evidence > bar,
+            )
+            if trial.refined and trial.log_evidence > best.log_evidence:
+                best = trial
+    return None if best is nominal else best

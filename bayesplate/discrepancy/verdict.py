@@ -1,0 +1,130 @@
+"""The checks of a fit and the verdict: predictive p-values, unidentified constants, basins.
+
+Step 1 and step 5 of :func:`.diagnose.diagnose`: what a fit's Laplace posterior says about
+each measured mode and each constant, which other optima fit about as well, and the three
+verdicts. Pure computation on :class:`.fit.JointFit` results.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.stats import norm
+
+from .. import laminate
+from ..quantities import ENGINEERING_NAMES, engineering_covariance
+
+__all__ = ["basins_note", "predictive_p_values", "rival_optima", "unidentified", "verdict"]
+
+
+def verdict(p_value, warranted, refit_p, alpha, best):
+    """The three verdicts of the issue.
+
+    Parameters
+    ----------
+    p_value : float
+        Of the nominal fit's chi-square.
+    warranted : bool
+        Whether the best refined candidate gains enough evidence.
+    refit_p : float
+        Of the best candidate's chi-square (NaN when not warranted).
+    alpha : float
+        Significance of the tests.
+    best : CandidateResult or None
+
+    Returns
+    -------
+    verdict : {"consistent", "explained", "unexplained"}
+    chosen : CandidateResult or None
+    """
+    if warranted and refit_p >= alpha:
+        return "explained", best
+    if p_value >= alpha and not warranted:
+        return "consistent", None
+    return "unexplained", None
+
+
+def predictive_p_values(fit_, problem):
+    """Two-sided p-value of each residual under the Laplace posterior predictive.
+
+    Parameters
+    ----------
+    fit_ : JointFit
+    problem : JointProblem
+
+    Returns
+    -------
+    numpy.ndarray, shape (m,)
+    """
+    S = fit_.modal.sensitivities[problem.modes]
+    var = problem.sigma**2 + np.einsum("ij,jk,ik->i", S, fit_.covariance[:6, :6], S)
+    z = (problem.Y - fit_.eigenvalues) / np.sqrt(var)
+    return 2.0 * norm.sf(np.abs(z))
+
+
+def unidentified(fit_, V_b, ratio, margin=None):
+    """Engineering constants the data do not fix.
+
+    Those whose posterior deviation is close to the prior one, and, when ``margin`` is
+    given, those that differ by more than two deviations at another local optimum whose
+    objective ``chi2 + chi2_prior`` is within ``margin`` of the best: the data fit both
+    basins about equally, so neither value is an estimate (the Laplace deviation, local to
+    one basin, would understate the uncertainty).
+
+    Parameters
+    ----------
+    fit_ : JointFit
+    V_b : numpy.ndarray, shape (6, 6)
+        Prior covariance of the stiffness coefficients, Pa^2.
+    ratio : float
+        Posterior sd / prior sd above which a constant is unidentified.
+    margin : float, optional
+
+    Returns
+    -------
+    list of str
+        Names of :data:`bayesplate.quantities.ENGINEERING_NAMES`.
+    """
+    prior_sd = np.sqrt(np.diag(engineering_covariance(fit_.constants, V_b)))
+    loose = fit_.constants_sd > ratio * prior_sd
+    for _, _, differs in rival_optima(fit_, margin) if margin is not None else ():
+        loose |= differs
+    return [n for n, flag in zip(ENGINEERING_NAMES, loose, strict=True) if flag]
+
+
+def rival_optima(fit_, margin):
+    """Other optima within ``margin`` of the best objective whose constants differ.
+
+    Returns
+    -------
+    list of (constants, objective, differs)
+        ``differs``: bool (6,), the constants more than two deviations from the best fit's.
+    """
+    best = fit_.chi2 + fit_.chi2_prior
+    rivals = []
+    for b, objective in fit_.alternatives:
+        if objective - best < margin and laminate.is_physical(b):
+            e = laminate.engineering_from_stiffness(b)
+            differs = np.abs(e - fit_.constants) > 2.0 * fit_.constants_sd
+            if differs.any():
+                rivals.append((e, objective, differs))
+    return rivals
+
+
+def basins_note(fit_, margin):
+    """A note naming the other optimum that fits about as well, or None."""
+    rivals = rival_optima(fit_, margin)
+    if not rivals:
+        return None
+    e, objective, differs = rivals[0]
+    values = ", ".join(f"{n} {_case_units(n, fit_.constants)} vs {_case_units(n, e)}"
+                       for n, d in zip(ENGINEERING_NAMES, differs, strict=True) if d)  # fmt: skip
+    return (
+        f"the nominal fit has a second optimum that fits about as well (objective "
+        f"{fit_.chi2 + fit_.chi2_prior:.2f} vs {objective:.2f}): {values}; these "
+        "constants are reported as unidentified"
+    )
+
+
+def _case_units(name, e):
+    i = ENGINEERING_NAMES.index(name)
+    return f"{e[i]:.3g}" if name == "nu12" else f"{1e-9 * e[i]:.3g} GPa"
