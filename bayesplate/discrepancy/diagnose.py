@@ -171,12 +171,8 @@ def diagnose(
 
     Parameters
     ----------
-<<<<<<< HEAD
     case : bayesplate.io.Case
-=======
-    case : bayesplate.case.Case
         Duck-typed: its ``.plate``, ``.measured`` and ``.prior``.
->>>>>>> split-discrepancy
     model : PlateModel, optional
         Default: the case's mesh.
     physics : list of Physics, optional
@@ -353,45 +349,6 @@ def _scans(physics_list, model, nominal, modes, Y, sigma, P):
     The Ritz basis (:mod:`.scan`) holds the nominal modes up to ``RITZ_EXTRA_MODES`` beyond
     the highest paired one.
     """
-<<<<<<< HEAD
-
-    def promising(rough):
-        return rough.log_evidence - nominal.log_evidence > level["margin"]
-
-    def candidate(physics):
-        problem = JointProblem(model, Y, sigma, mu_b, V_b, modes, physics)
-        thetas = [problem.theta_mean, *physics.starting_points(model, nominal.b),
-                  *_located_starts(physics, model, scans)]  # fmt: skip
-        lo, hi = problem.theta_lower, problem.theta_upper
-        starts = [problem.pack(nominal.b, np.clip(t, lo, hi)) for t in thetas]
-        result = fit(problem, starts, max_nfev=25, coarse=level["coarse"],
-                     scale=level["scale"], refine=promising)  # fmt: skip
-        gain = result.log_evidence - nominal.log_evidence
-        params = physics.labelled(model, nominal.b, result.theta)
-        sds = physics.labelled(model, nominal.b, result.theta_sd)
-        if physics.name == "thickness_taper":
-            params = {"direction": physics.direction, **params}
-        mirrors = [physics.labelled(model, nominal.b, t)
-                   for t in physics.mirror_images(model, result.theta)]  # fmt: skip
-        return CandidateResult(physics.name, result, gain, params, sds, mirrors)
-
-    # the candidates with most parameters take longest: they go first to the workers
-    order = sorted(range(len(physics_list)),
-                   key=lambda i: -len(physics_list[i].parameters(model, nominal.b)))  # fmt: skip
-    fitted = fork_map(candidate, [physics_list[i] for i in order], level["workers"])
-    results = [fitted[order.index(i)] for i in range(len(physics_list))]
-    for r in results:
-        where = "" if r.fit.refined else " (coarse mesh, not refined)"
-        say(f"{r.name}: chi2 = {r.fit.chi2:.1f}, evidence gain {r.log_evidence_gain:+.1f}{where}")
-    best_by_name = {}
-    for r in results:  # the taper is fitted once per direction; keep the better
-        if (
-            r.name not in best_by_name
-            or r.log_evidence_gain > best_by_name[r.name].log_evidence_gain
-        ):
-            best_by_name[r.name] = r
-    return sorted(best_by_name.values(), key=lambda r: -r.log_evidence_gain)
-=======
     n_basis = int(modes.max()) + 1 + RITZ_EXTRA_MODES
     basis = RitzBasis.from_modes(model, model.solve(nominal.b, n_basis))
     scans = {}
@@ -400,57 +357,3 @@ def _scans(physics_list, model, nominal, modes, Y, sigma, P):
         if result is not None:
             scans[physics.name] = result
     return scans
-
-
-def _fit_summary(fit_, dof, p_value):
-    """Chi-square, constants and residuals of one fit, for JSON."""
-    from ..io import constants_json
-
-    return {
-        "chi2": fit_.chi2,
-        "dof": dof,
-        "p_value": p_value,
-        "residual_sigma": fit_.residual_sigma,
-        "frequency_Hz": fit_.frequency_Hz,
-        "constants": constants_json(fit_.constants, fit_.constants_sd),
-    }
-
-
-def diagnosis_to_dict(d):
-    """The diagnosis as plain data, in the units of the case files (see the issue's keys)."""
-    nominal = _fit_summary(d.nominal, d.dof, d.p_value)
-    nominal["mode_p_value"] = d.mode_p_values
-    refit = None
-    if d.chosen is not None:
-        refit = _fit_summary(d.chosen.fit, d.refit_dof, d.refit_p_value)
-        refit["parameters"] = d.chosen.parameters
-        refit["parameters_sd"] = d.chosen.parameters_sd
-        refit["mirror_images"] = d.chosen.mirror_images
-    return {
-        "verdict": d.verdict,
-        "measured_Hz": d.measured_Hz,
-        "sigma_Hz": d.sigma_Hz,
-        "mesh_error_Hz": d.mesh_error_Hz,
-        "nominal": nominal,
-        "located": {
-            "modes": d.located_modes,
-            "mode_kinds": d.mode_kinds,
-            "region_mm": None if d.region_mm is None else list(d.region_mm),
-            "region_mirrors_mm": [list(p) for p in d.region_mirrors_mm],
-        },
-        "candidates": [
-            {
-                "physics": c.name,
-                "log_evidence_gain": c.log_evidence_gain,
-                "chi2": c.fit.chi2,
-                "parameters": c.parameters,
-                "parameters_sd": c.parameters_sd,
-            }
-            for c in d.candidates
-        ],  # fmt: skip
-        "chosen": None if d.chosen is None else d.chosen.name,
-        "refit": refit,
-        "unidentified": d.unidentified,
-        "notes": d.notes,
-    }
->>>>>>> split-discrepancy
