@@ -162,3 +162,10 @@ def test_likelihood_assignment_of_a_complete_test_is_the_order(plate1_test2, com
     assert r.settings["assignment"].in_order
     assert r.settings["unobserved_modes"] == [] and r.settings["spurious_peaks"] == []
     np.testing.assert_array_equal(r.constants, complete_mve.constants)
+
+
+def test_the_command_line_offers_every_pairing():
+    from bayesplate.cli.options import PAIRING_CHOICES
+    from bayesplate.pairing import PAIRINGS
+
+    assert PAIRING_CHOICES == PAIRINGS

@@ -7,7 +7,14 @@ import logging
 from ..io import estimate_to_dict, write_json
 from ..model import PlateModel
 from ..quantities import ENGINEERING_KEYS, to_case_units
-from .options import add_case_argument, add_json_option, add_mesh_option, mesh_of, resolve_case
+from .options import (
+    PAIRING_CHOICES,
+    add_case_argument,
+    add_json_option,
+    add_mesh_option,
+    mesh_of,
+    resolve_case,
+)
 
 __all__ = ["register"]
 
@@ -86,10 +93,11 @@ def register(sub):
     )
     p.add_argument(
         "--pairing",
-        choices=("auto", "mac", "order", "index"),
+        choices=PAIRING_CHOICES,
         default="auto",
         help="measured-to-computed modes: by shape (MAC) when the case has measured shapes, "
-        "else by the case's mode indices if any, else by order",
+        "else by the case's mode indices if any, else by order; 'likelihood': the most "
+        "probable assignment by frequency (a mode may go unobserved, a peak be spurious)",
     )
     add_mesh_option(p)
     add_json_option(p)

@@ -59,3 +59,8 @@ def resolve_case(name_or_path):
     if not pathlib.Path(name_or_path).exists() and name_or_path in bundled_case_names():
         name_or_path = bundled_case_path(name_or_path)
     return load_case(name_or_path)
+
+
+#: The pairings of :data:`bayesplate.pairing.PAIRINGS`, spelled here so that the parser does
+#: not import scipy at start-up (a test holds the two equal).
+PAIRING_CHOICES = ("auto", "mac", "likelihood", "index", "order")

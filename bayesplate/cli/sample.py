@@ -8,7 +8,14 @@ import pathlib
 from ..io import sampling_to_dict, save_figure, write_json, write_netcdf
 from ..model import PlateModel
 from ..quantities import ENGINEERING_KEYS, to_case_units
-from .options import add_case_argument, add_json_option, add_mesh_option, mesh_of, resolve_case
+from .options import (
+    PAIRING_CHOICES,
+    add_case_argument,
+    add_json_option,
+    add_mesh_option,
+    mesh_of,
+    resolve_case,
+)
 
 __all__ = ["register"]
 
@@ -103,9 +110,10 @@ def register(sub):
     p.add_argument("--full", action="store_true", help="sample the full model (slow)")
     p.add_argument(
         "--pairing",
-        choices=("auto", "mac", "index", "order"),
+        choices=PAIRING_CHOICES,
         default="auto",
-        help="measured-to-computed modes (default: by shape, else mode numbers, else order)",
+        help="measured-to-computed modes (default: by shape, else mode numbers, else order; "
+        "'likelihood': the most probable assignment by frequency, settled by B)",
     )
     add_mesh_option(p)
     add_json_option(p)
