@@ -406,18 +406,21 @@ def test_frederiksen_covariance_linearised_against_sampled():
 
 def test_prepare_assigns_a_test_that_missed_a_mode():
     # Issue 16: plate 1 without mode 5 and no shapes. By likelihood the sampler's problem
-    # pairs the peaks above the gap with the modes above it (not by order), and its MAP
-    # finds the constants of the complete test (Plate 1's target within 1 %: the case's own
-    # prior is the paper's test 1, 1/6).
+    # pairs the peaks above the gap with the modes above it (not by order), and its MAP is
+    # the complete test's within the complete test's posterior deviations (both carry B's
+    # bias from the case's prior, the paper's test 1: E1 about 145 GPa for 150).
     case = load_case(bundled_case_path("plate1"))
     keep = np.delete(np.arange(14), 4)
     missing = case.with_measured(
         frequency_Hz=case.measured.frequency_Hz[keep], sigma_Hz=case.measured.sigma_Hz[keep]
     )
+    complete = prepare(case, rng=SEED, pairing="likelihood")
+    assert complete.problem.pairing.assignment.in_order
     setup = prepare(missing, rng=SEED, pairing="likelihood")
     pairing = setup.problem.pairing
     assert pairing.how == "likelihood"
     np.testing.assert_array_equal(pairing.modes, keep)
     np.testing.assert_array_equal(pairing.assignment.unobserved, [4])
-    e = setup.estimate.constants
-    np.testing.assert_allclose(e[[0, 1, 3]], case.reference[[0, 1, 3]], rtol=0.01)
+    assert setup.estimate.converged, setup.estimate.message
+    difference = setup.estimate.constants - complete.estimate.constants
+    assert np.all(np.abs(difference) < complete.estimate.sd)

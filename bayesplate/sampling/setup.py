@@ -239,14 +239,17 @@ def prepare(
     model = model or PlateModel.from_case(case)
     mean = np.asarray(case.prior.mean if prior_mean is None else prior_mean, dtype=float)
     sd = np.asarray(case.prior.sd if prior_sd is None else prior_sd, dtype=float)
+    settled = None
     if not isinstance(pairing, Pairing):
         how = resolve_pairing(case.measured, pairing)
         if how == "likelihood":  # the assignment B settles on (a coarser mesh's error
-            # in the upper modes would call their peaks spurious: the working model)
-            pairing = estimate_case(
+            # in the upper modes would call their peaks spurious: the working model); that
+            # B run is the pilot too (the pilot mesh may number the upper modes otherwise)
+            settled = estimate_case(
                 case, "B", model=model, tol=PILOT_TOL, convention=conventions,
                 prior_mean=mean, prior_sd=sd, pairing="likelihood",
-            ).pairing  # fmt: skip
+            )  # fmt: skip
+            pairing = settled.pairing
         else:
             b_prior = laminate.stiffness_from_engineering(mean)
             pairing = pair_measured(case, model, b_prior, how)
@@ -257,6 +260,9 @@ def prepare(
     timings = {"pilot": 0.0, "build": 0.0, "map": 0.0}
     pilot, solves = None, 0
     if forward == "reduced" and fast is None:
+        if box is None and settled is not None:
+            pilot, solves = settled, settled.n_solves
+            box = posterior_box(pilot, problem.mu_b, problem.V_b, box_sigma)
         if box is None:
             started = time.perf_counter()
             pilot_model = _pilot_model(case, model, pilot_mesh if own_model else None)
@@ -278,7 +284,9 @@ def prepare(
     setup = SamplingSetup(problem, model, fast if forward == "reduced" else None, None,
                           pilot, None if fast is None else fast.box, timings, solves)  # fmt: skip
     started = time.perf_counter()
-    estimate = _map(setup, conventions)
+    # B from the settled assignment's estimate (B's fixed point from the prior mean may be
+    # another optimum with a pairing that skips modes); from the prior mean otherwise
+    estimate = _map(setup, conventions, None if settled is None else settled.b)
     timings["map"] = time.perf_counter() - started
     if not estimate.converged:
         log.warning("B (the MAP) did not converge: %s", estimate.message)
@@ -286,9 +294,9 @@ def prepare(
     return replace(setup, estimate=estimate)
 
 
-def _map(setup, conventions):
+def _map(setup, conventions, start=None):
     """B to ``MAP_TOL`` on the sampler's model: the MAP and ``P`` (eq. 9)."""
-    return _run_on_fast(setup, "B", MAP_TOL, conventions=conventions)
+    return _run_on_fast(setup, "B", MAP_TOL, conventions=conventions, start=start)
 
 
 def _run_on_fast(setup, method, tol, **kwargs):
