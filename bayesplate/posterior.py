@@ -234,6 +234,10 @@ class GaussianProblem:
         """The same data and forward model with another prior on ``b``."""
         return type(self)(self.Y, self.V_Y, mu_b, V_b, self.forward, self.pairing)
 
+    def with_forward(self, forward):
+        """The same data and prior on another forward model, ``forward(b, n_modes)``."""
+        return type(self)(self.Y, self.V_Y, self.mu_b, self.V_b, forward, self.pairing)
+
     def predict(self, b, modes=None):
         """Paired model eigenvalues and sensitivities at ``b``.
 

@@ -13,7 +13,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import laminate
-from ..posterior import GaussianProblem
 from ..quantities import LOG_STIFFNESS
 
 __all__ = ["EigenvalueForward", "WhitenedLogPosterior", "engineering_constants"]
@@ -97,9 +96,7 @@ class WhitenedLogPosterior:
         if not np.array_equal(problem.V_Y, np.diag(var)):
             raise ValueError("pointwise log-likelihoods need a diagonal V_Y")
         self._source = problem.forward if forward is None else forward
-        self.problem = GaussianProblem(
-            problem.Y, problem.V_Y, problem.mu_b, problem.V_b, self._forward, problem.pairing
-        )
+        self.problem = problem.with_forward(self._forward)
         b0 = np.array(center, dtype=float)
         if not laminate.is_physical(b0):
             raise ValueError("the centre of the sampler's coordinates is not a physical lamina")

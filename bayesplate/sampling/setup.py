@@ -113,7 +113,7 @@ class SamplingSetup:
         p = self.problem
         mu_b = p.mu_b if mu_b is None else mu_b
         V_b = p.V_b if V_b is None else V_b
-        return GaussianProblem(p.Y, p.V_Y, mu_b, V_b, self.forward_with_sensitivities(), p.pairing)
+        return p.with_prior(mu_b, V_b).with_forward(self.forward_with_sensitivities())
 
     def run_estimator(self, method="MVE", tol=1e-3, **kwargs):
         """B or MVE (:func:`bayesplate.estimators.run`) on the sampler's model.
@@ -311,7 +311,7 @@ def _run_on_fast(setup, method, tol, **kwargs):
     if fast is None or not fast.certified:
         return run(setup.problem_on_fast_model(), method, tol=tol, **kwargs)
     p = setup.problem
-    free = GaussianProblem(p.Y, p.V_Y, p.mu_b, p.V_b, fast.reduced.solve, p.pairing)
+    free = p.with_forward(fast.reduced.solve)
     result = run(free, method, tol=tol, **kwargs)
     if fast.box.contains(result.b) and result.status != "solve_failed":
         return result
