@@ -169,3 +169,49 @@ def test_the_command_line_offers_every_pairing():
     from bayesplate.pairing import PAIRINGS
 
     assert PAIRING_CHOICES == PAIRINGS
+
+
+BUNDLED = ["plate1", "plate2", "crossply", "angleply", "frederiksen_t300", "badiane_spruce_5R"]
+
+
+def _bundled(name):
+    from bayesplate import PlateModel, bundled_case_path, load_case
+
+    case = load_case(bundled_case_path(name))
+    return case, PlateModel.from_case(case)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", BUNDLED)
+def test_every_bundled_case_with_a_mode_removed_or_a_peak_added(name):
+    # Issue 16: with a mode removed or a spurious peak added to any bundled case, the
+    # automatic assignment finds it and the constants stay within their reported
+    # uncertainty of the complete case (B, the case's own prior and mesh).
+    from bayesplate.estimators import estimate
+
+    case, model = _bundled(name)
+    f, s = case.measured.frequency_Hz, case.measured.sigma_Hz
+    m = f.size
+    complete = estimate(case, "B", model=model, pairing="likelihood")
+    assert complete.settings["assignment"].in_order, complete.message
+    # a mode removed from the middle of the band
+    gone = m // 2
+    keep = np.delete(np.arange(m), gone)
+    r = estimate(
+        case.with_measured(frequency_Hz=f[keep], sigma_Hz=s[keep]), "B", model=model,
+        pairing="likelihood",
+    )  # fmt: skip
+    assert len(r.settings["unobserved_modes"]) == 1 and r.settings["spurious_peaks"] == []
+    assert abs(r.settings["unobserved_modes"][0] - (gone + 1)) <= 1  # a close pair: either
+    assert np.all(np.abs(r.constants - complete.constants) < complete.sd), r.message
+    # a peak added in the widest gap between two middle peaks, far from any computed mode
+    k = 1 + int(np.argmax(f[2 : m - 1] / f[1 : m - 2]))
+    extra = np.sqrt(f[k] * f[k + 1])
+    added = np.insert(f, k + 1, extra)
+    r = estimate(
+        case.with_measured(frequency_Hz=added, sigma_Hz=np.insert(s, k + 1, s[k])), "B",
+        model=model, pairing="likelihood",
+    )  # fmt: skip
+    assert r.settings["spurious_peaks"] == [k + 2], r.message
+    assert r.settings["unobserved_modes"] == []
+    assert np.all(np.abs(r.constants - complete.constants) < complete.sd), r.message
