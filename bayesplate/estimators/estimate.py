@@ -109,7 +109,7 @@ def estimate(
     _, V = prior_in_stiffness(mean, sd, "full")
     settle = (case, model, b0, V, method, mean, sd, options)
     a = _settle(*settle, pair_measured(case, model, b0, "order"), None)
-    if a.settled and a.pair.assignment.in_order:
+    if a.settled and a.pair.assignment.in_order and a.result.converged:
         return _assigned(a.result, a.pair, a.rounds, "")
     b = _settle(*settle, *_lowest_first(*settle))
     best = max((b, a), key=lambda x: (x.settled, x.result.converged, x.log_probability))

@@ -223,7 +223,9 @@ def run(
         order or index is re-applied at every iterate, as the paper does), re-pair along the
         tracked modes, or skip. ``"auto"``: follow when the modes were paired by shape
         (MAC pairing names physical modes, whose order changes as the iterate moves),
-        report otherwise.
+        report otherwise (an assignment by frequency names modes by their order at the
+        point where it was made: following them from a prior far off would follow modes
+        the prior misplaced).
     weight : array_like or sparse matrix, optional
         MAC weight for tracking (the mass matrix).
     start : array_like, shape (6,), optional
