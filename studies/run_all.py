@@ -27,6 +27,7 @@ STUDIES = [
     "concealment",
     "diagnose_frederiksen",
     "prior_bias",
+    "spruce_badiane",
 ]
 
 

@@ -191,3 +191,20 @@ def test_prior_bias_quick(tmp_path):
     text = (tmp_path / module.REPORT).read_text()
     assert text.startswith("Made by `python studies/prior_bias.py --quick`")
     _assert_pngs(tmp_path, [module.FIGURE.format("plate1", 3)])
+
+
+@pytest.mark.slow
+def test_spruce_badiane_quick(tmp_path):
+    # The measured spruce plate (issue 16): B, its peaks assigned by likelihood (all ten in
+    # order), within 3 % of the source's constants rescaled to the case's h and rho on E1,
+    # E2 and G12 (the source is the authors' own vibration-based identification).
+    module = _load(ROOT / "studies" / "spruce_badiane.py")
+    rows = module.main(tmp_path, quick=True)
+    case = module.load_case(module.bundled_case_path(module.CASE))
+    reference, factor = module.rescaled_reference(case)
+    assert factor == pytest.approx(1.095, abs=5e-4)  # the case file's comment
+    (b,) = rows
+    assert b["status"] == "converged" and b["spurious"] == [] and b["unobserved"] == []
+    np.testing.assert_allclose(b["constants"][[0, 1, 3]], reference[[0, 1, 3]], rtol=0.03)
+    text = (tmp_path / module.REPORT).read_text()
+    assert text.startswith("Made by `python studies/spruce_badiane.py --quick`")
