@@ -103,22 +103,41 @@ def estimate(
     # centred where the model is linearised: a profile fit with its Occam factor, not the
     # evidence under a far prior mean, which would rather drop the peaks that disagree with
     # it), remade at each estimate until it stands. Far from the truth an assignment made at
-    # the prior is unreliable, so two starts: A, pairing by order (kept when its estimate
-    # confirms it); B, the lowest peaks assigned at the prior and fitted first. The settled
-    # one more probable at its own estimate wins.
+    # the prior is unreliable, so two starts: pairing by order (kept when its estimate
+    # confirms it), and the lowest peaks assigned at the prior and fitted first. The settled
+    # one more probable at its own estimate wins. B settles it (its prior anchors it).
     _, V = prior_in_stiffness(mean, sd, "full")
+    first = _most_probable(case, model, b0, V, "B", mean, sd, options)
+    if method == "B" or not first.result.converged:
+        if method == "B":
+            return _assigned(first.result, first.pair, first.rounds, first.note)
+        first = _most_probable(case, model, b0, V, method, mean, sd, options)
+        return _assigned(first.result, first.pair, first.rounds, first.note)
+    # MVE and MVE-mod from B's estimate, the assigned modes followed by MAC between iterates
+    # (identified where B converged, not at a far prior): re-pairing by sorted index lets two
+    # close modes swap places every iteration while MVE moves a weakly determined constant
+    follow = {
+        **options,
+        "tracking": "follow" if options["tracking"] == "auto" else options["tracking"],
+    }
+    s = _settle(case, model, b0, V, method, mean, sd, follow, first.pair, first.result.b)
+    note = "" if s.settled else f"; the assignment did not settle in {s.rounds} rounds"
+    note += f"; started from B's estimate (assignment settled in {first.rounds} rounds)"
+    return _assigned(s.result, s.pair, first.rounds + s.rounds, note)
+
+
+def _most_probable(case, model, b0, V, method, mean, sd, options):
+    """Two starts (by order; lowest peaks first), each settled; the more probable one."""
     settle = (case, model, b0, V, method, mean, sd, options)
     a = _settle(*settle, pair_measured(case, model, b0, "order"), None)
     if a.settled and a.pair.assignment.in_order and a.result.converged:
-        return _assigned(a.result, a.pair, a.rounds, "")
+        return a
     b = _settle(*settle, *_lowest_first(*settle))
     best = max((b, a), key=lambda x: (x.settled, x.result.converged, x.log_probability))
-    note = (
-        ""
-        if best.settled
-        else (f"; the assignment did not settle in {best.rounds} rounds: kept the most probable")
-    )
-    return _assigned(best.result, best.pair, a.rounds + b.rounds, note)
+    note = "" if best.settled else (
+        f"; the assignment did not settle in {best.rounds} rounds: kept the most probable"
+    )  # fmt: skip
+    return replace(best, rounds=a.rounds + b.rounds, note=note)
 
 
 @dataclass
@@ -130,6 +149,7 @@ class _Settled:
     log_probability: float
     rounds: int
     settled: bool
+    note: str = ""
 
 
 def _settle(case, model, b0, V, method, mean, sd, options, pair, start):
