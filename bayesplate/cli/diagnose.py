@@ -7,6 +7,7 @@ import pathlib
 from ..io import diagnosis_to_dict, save_figure, write_json
 from ..model import PlateModel
 from .options import (
+    PAIRING_CHOICES,
     add_case_argument,
     add_json_option,
     add_mesh_option,
@@ -29,6 +30,7 @@ def run(args):
         case,
         model=model,
         rng=args.seed,
+        pairing=args.pairing,
         workers=args.workers,
         progress=None if quiet else (lambda msg: print(f"  {msg}", flush=True)),
     )
@@ -91,6 +93,13 @@ def register(sub):
         type=positive_int,
         default=2,
         help="processes for the independent fits (default 2; the results do not depend on it)",
+    )
+    p.add_argument(
+        "--pairing",
+        choices=PAIRING_CHOICES,
+        default="auto",
+        help="measured-to-computed modes (default: by shape, else mode numbers, else order; "
+        "'likelihood': the most probable assignment by frequency, settled by B)",
     )
     add_json_option(p)
     p.add_argument("--plots", metavar="DIR", help="write figures (PNG) into DIR")

@@ -31,7 +31,7 @@ import numpy as np
 from scipy.stats import chi2 as chi2_dist
 
 from ..model import PlateModel
-from ..pairing import Pairing, pair_measured
+from ..pairing import Pairing, pair_measured, resolve_pairing
 from ..posterior import observed_eigenvalues, prior_in_stiffness
 from . import candidates as all_candidates
 from .base import mirror_positions
@@ -182,10 +182,11 @@ def diagnose(
         Seeds the random starts of the nominal fit.
     progress : callable, optional
         ``progress(message)`` after each step.
-    pairing : {"auto", "mac", "index", "order"} or Pairing
+    pairing : {"auto", "mac", "likelihood", "index", "order"} or Pairing
         Measured-to-computed modes (:func:`bayesplate.pairing.pair_measured` at the prior
         mean, as :func:`bayesplate.estimators.estimate` takes it): "auto" pairs by shape
-        when the case has shapes. Unpaired measured modes are left out.
+        when the case has shapes; "likelihood" takes the assignment B settles on (on
+        `model`). Unpaired measured modes (spurious peaks) are left out.
     alpha : float
         Significance of the chi-square tests (nominal fit and refit).
     evidence_threshold : float
@@ -215,7 +216,12 @@ def diagnose(
     physics = physics or all_candidates()
     mu_b, V_b = prior_in_stiffness(case.prior.mean, case.prior.sd, "full")
     if not isinstance(pairing, Pairing):
-        pairing = pair_measured(case, model, mu_b, pairing)
+        if resolve_pairing(case.measured, pairing) == "likelihood":  # the one B settles on
+            from ..estimators import estimate
+
+            pairing = estimate(case, "B", model=model, tol=1e-2, pairing="likelihood").pairing
+        else:
+            pairing = pair_measured(case, model, mu_b, pairing)
     measured, modes = pairing.select(case.measured), pairing.modes
     m = measured.size
     notes = []
