@@ -7,10 +7,10 @@ import pathlib
 from ..io import diagnosis_to_dict, save_figure, write_json
 from ..model import PlateModel
 from .options import (
-    PAIRING_CHOICES,
     add_case_argument,
     add_json_option,
     add_mesh_option,
+    add_pairing_option,
     mesh_of,
     positive_int,
     resolve_case,
@@ -94,13 +94,7 @@ def register(sub):
         default=2,
         help="processes for the independent fits (default 2; the results do not depend on it)",
     )
-    p.add_argument(
-        "--pairing",
-        choices=PAIRING_CHOICES,
-        default="auto",
-        help="measured-to-computed modes (default: by shape, else mode numbers, else order; "
-        "'likelihood': the most probable assignment by frequency, settled by B)",
-    )
+    add_pairing_option(p)
     add_json_option(p)
     p.add_argument("--plots", metavar="DIR", help="write figures (PNG) into DIR")
     p.set_defaults(func=run)

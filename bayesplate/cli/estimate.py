@@ -8,10 +8,10 @@ from ..io import estimate_to_dict, write_json
 from ..model import PlateModel
 from ..quantities import ENGINEERING_KEYS, to_case_units
 from .options import (
-    PAIRING_CHOICES,
     add_case_argument,
     add_json_option,
     add_mesh_option,
+    add_pairing_option,
     mesh_of,
     resolve_case,
 )
@@ -91,14 +91,7 @@ def register(sub):
         "V_Y = diag(dlambda^2), V_b = diag(dC^2), MVE with fixed V_b), 'full-prior' (the "
         "full propagated prior covariance), 'printed' (section 3.6 as printed)",
     )
-    p.add_argument(
-        "--pairing",
-        choices=PAIRING_CHOICES,
-        default="auto",
-        help="measured-to-computed modes: by shape (MAC) when the case has measured shapes, "
-        "else by the case's mode indices if any, else by order; 'likelihood': the most "
-        "probable assignment by frequency (a mode may go unobserved, a peak be spurious)",
-    )
+    add_pairing_option(p)
     add_mesh_option(p)
     add_json_option(p)
     p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")

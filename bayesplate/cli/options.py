@@ -11,6 +11,8 @@ __all__ = [
     "add_case_argument",
     "add_json_option",
     "add_mesh_option",
+    "add_pairing_option",
+    "PAIRING_CHOICES",
     "mesh_of",
     "positive_int",
     "resolve_case",
@@ -64,3 +66,16 @@ def resolve_case(name_or_path):
 #: The pairings of :data:`bayesplate.pairing.PAIRINGS`, spelled here so that the parser does
 #: not import scipy at start-up (a test holds the two equal).
 PAIRING_CHOICES = ("auto", "mac", "likelihood", "index", "order")
+
+
+def add_pairing_option(p):
+    """``--pairing``: how measured frequencies meet computed modes (estimate, sample, diagnose)."""
+    p.add_argument(
+        "--pairing",
+        choices=PAIRING_CHOICES,
+        default="auto",
+        help="measured-to-computed modes: by shape (MAC) when the case has measured shapes, "
+        "else by the case's mode numbers if any, else by order; 'likelihood': the most "
+        "probable assignment by frequency (a mode may go unobserved, a peak be spurious), "
+        "settled by B",
+    )

@@ -9,10 +9,10 @@ from ..io import sampling_to_dict, save_figure, write_json, write_netcdf
 from ..model import PlateModel
 from ..quantities import ENGINEERING_KEYS, to_case_units
 from .options import (
-    PAIRING_CHOICES,
     add_case_argument,
     add_json_option,
     add_mesh_option,
+    add_pairing_option,
     mesh_of,
     resolve_case,
 )
@@ -108,13 +108,7 @@ def register(sub):
     p.add_argument("--backend", metavar="FILE.h5",
                    help="keep the chain in this HDF5 file; re-running continues it")  # fmt: skip
     p.add_argument("--full", action="store_true", help="sample the full model (slow)")
-    p.add_argument(
-        "--pairing",
-        choices=PAIRING_CHOICES,
-        default="auto",
-        help="measured-to-computed modes (default: by shape, else mode numbers, else order; "
-        "'likelihood': the most probable assignment by frequency, settled by B)",
-    )
+    add_pairing_option(p)
     add_mesh_option(p)
     add_json_option(p)
     p.add_argument("--plots", metavar="DIR",
