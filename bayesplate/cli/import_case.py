@@ -48,7 +48,9 @@ def _tap_modal_data(args):
     kept = read_poles(args.use_poles) if args.use_poles is not None else None
     spectra = read_spectra(args.test, window=args.window or "auto")
     order = DEFAULT_ORDER if args.order is None else args.order
-    analysis = extract_poles(spectra, band_Hz=args.band, order=order)
+    analysis = None
+    if kept is None or args.poles is not None or args.chart is not None:
+        analysis = extract_poles(spectra, band_Hz=args.band, order=order)
     if kept is None:
         kept = analysis.kept
         if not kept:

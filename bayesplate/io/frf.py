@@ -144,7 +144,7 @@ def _read_uff_frf(path: str) -> FRFData:
         mm_per_unit, notes = _uff_mm_per_unit(sets)
         xyz = np.array([coordinates[node] for node in nodes]) * mm_per_unit
         _check_plane(xyz)
-        points = xyz[:, :2]
+        points = np.array([[float(f"{v:.12g}") for v in row] for row in xyz[:, :2]])
     else:
         notes = ("no coordinates for the response nodes (dataset 15 or 2411): frequencies only",)
     return FRFData(frequency, frf, points, forms.pop(), source=path, notes=notes)
