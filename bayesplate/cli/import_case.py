@@ -1,4 +1,4 @@
-"""``bayesplate import``: a case file from a modal test (UFF or CSV) and a plate sheet."""
+"""``bayesplate import``: a case file from a modal test (UFF, CSV or WAV) and a plate sheet."""
 
 from __future__ import annotations
 
@@ -12,8 +12,11 @@ from ..io import (
     read_modal_data,
     write_case,
 )
+from ..io.modal_file import is_tap_test, read_spectra
 
 __all__ = ["register"]
+
+_TAP_OPTIONS = ("poles", "chart", "use_poles", "band", "order", "window")
 
 
 def run(args):
@@ -23,7 +26,11 @@ def run(args):
     plate = args.plate
     if not pathlib.Path(plate).exists() and plate in bundled_plate_names():
         plate = bundled_plate_path(plate)
-    modal = read_modal_data(args.test)
+    tap_options = any(getattr(args, name) is not None for name in _TAP_OPTIONS)
+    if tap_options or is_tap_test(args.test):
+        modal = _tap_modal_data(args)
+    else:
+        modal = read_modal_data(args.test)
     text = case_from_modal_data(plate, modal, sigma_rel=args.sigma_rel)
     try:
         write_case(args.output, text)
@@ -33,18 +40,62 @@ def run(args):
     return 0
 
 
+def _tap_modal_data(args):
+    """Modes of a tap test: poles extracted, written and charted on request, then chosen."""
+    from ..io.poles import DEFAULT_ORDER, extract_poles, modal_data_from_poles
+    from ..io.poles_file import read_poles, write_chart, write_poles
+
+    kept = read_poles(args.use_poles) if args.use_poles is not None else None
+    spectra = read_spectra(args.test, window=args.window or "auto")
+    order = DEFAULT_ORDER if args.order is None else args.order
+    analysis = None
+    if kept is None or args.poles is not None or args.chart is not None:
+        analysis = extract_poles(spectra, band_Hz=args.band, order=order)
+    if kept is None:
+        kept = analysis.kept
+        if not kept:
+            rule = (f"no pole is stable over the last orders ({len(analysis.candidates)} "
+                    "candidates): write them with --poles, edit, and give --use-poles")  # fmt: skip
+            raise CaseError(None, rule=rule, path=args.test)
+        listed = ", ".join(f"{pole.frequency_Hz:.6g}" for pole in kept)
+        print(f"{len(kept)} stable poles taken automatically (Hz): {listed}")
+    else:
+        print(f"{len(kept)} poles kept in {args.use_poles}")
+    for note in spectra.notes:
+        print(f"{args.test}: {note}")
+    if args.poles is not None:
+        _written("--poles", args.poles, write_poles, args.poles, analysis, str(args.test))
+        print(f"{len(analysis.candidates)} candidate poles -> {args.poles}")
+    if args.chart is not None:
+        _written("--chart", args.chart, write_chart, args.chart, analysis,
+                 spectra.frequency_Hz, spectra.frf, kept)  # fmt: skip
+        print(f"stabilisation chart -> {args.chart}")
+    return modal_data_from_poles(spectra, kept, band_Hz=args.band)
+
+
+def _written(option, path, write, *args):
+    """Call ``write(*args)``; an OSError becomes a CaseError naming `option` and `path`."""
+    try:
+        write(*args)
+    except OSError as err:
+        raise CaseError(option, path, f"cannot write ({err.strerror or err})") from None
+
+
 def register(sub):
     """Add the ``import`` subcommand."""
     p = sub.add_parser(
         "import",
-        help="make a case file from a modal test (UFF or CSV) and a plate sheet",
+        help="make a case file from a modal test (UFF, CSV or a WAV tap) and a plate sheet",
         description="Combine measured modes with a plate sheet (a case file without "
         "[measured] frequencies) into a case file. UFF: dataset 55 per mode, node "
         "coordinates from dataset 15 or 2411, units from dataset 164 (default mm); the z "
         "component of each shape is kept. CSV: a header with frequency_Hz and optionally "
-        "sigma_Hz or sigma_rel, and mode.",
+        "sigma_Hz or sigma_rel, and mode. Tap tests: FRFs (UFF dataset 58 per response "
+        "node; CSV frequency_Hz, H1_re, H1_im, ...) or an impulse recording (WAV: channel 1 "
+        "response, 2 force; CSV time_s, signal[, force]); the modes are the LSCF poles "
+        "(sdypy-EMA) stable over the last model orders, or those kept in --use-poles.",
     )
-    p.add_argument("test", metavar="TEST", help="measured modes: .uff/.unv/.uf or .csv")
+    p.add_argument("test", metavar="TEST", help="the test: .uff/.unv/.uf, .csv or .wav")
     p.add_argument(
         "--plate",
         required=True,
@@ -55,5 +106,27 @@ def register(sub):
         "--sigma-rel",
         type=float,
         help="relative standard deviation of each frequency (default: the sheet's, else 0.01)",
+    )
+    tap = p.add_argument_group("tap tests (FRFs or impulse recordings)")
+    tap.add_argument("--poles", metavar="CSV", help="write the candidate poles here, to edit")
+    tap.add_argument("--chart", metavar="PNG", help="write the stabilisation chart here")
+    tap.add_argument(
+        "--use-poles",
+        metavar="CSV",
+        help="take exactly the poles marked keep = 1 in this (edited) poles file",
+    )
+    tap.add_argument(
+        "--band",
+        nargs=2,
+        type=float,
+        metavar=("LOW_HZ", "HIGH_HZ"),
+        help="frequency band of the fit, Hz (default: all the data above 0 Hz)",
+    )
+    tap.add_argument("--order", type=int, help="highest LSCF model order (default 60)")
+    tap.add_argument(
+        "--window",
+        choices=("auto", "none", "exponential"),
+        help="window of an impulse recording (default auto: none if the response has "
+        "decayed within the record, else exponential with the poles corrected)",
     )
     p.set_defaults(func=run)

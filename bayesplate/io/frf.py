@@ -1,0 +1,251 @@
+"""Measured frequency response functions (FRFs) of a tap test: UFF dataset 58 or a CSV table.
+
+Both readers return an :class:`FRFData`, the spectra that :mod:`bayesplate.io.poles` turns
+into measured modes. Every problem raises :class:`~bayesplate.io.errors.CaseError`, one line
+naming the file, the dataset or line and column, and the rule.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import CaseError
+
+__all__ = ["FRFData", "read_uff_frf", "read_frf_csv"]
+
+_FRF_FORMS = {8: "receptance", 11: "mobility", 12: "accelerance"}  # ordinate spec data type
+
+
+@dataclass(frozen=True, eq=False)
+class FRFData:
+    """Spectra of one tap test: one FRF (or response spectrum) per response point.
+
+    Parameters
+    ----------
+    frequency_Hz : numpy.ndarray, shape (n,)
+        Equally spaced frequency lines, Hz, ascending, from 0 or above.
+    frf : numpy.ndarray of complex, shape (p, n)
+        FRF (or response spectrum) of each response point at each frequency line.
+    points_mm : numpy.ndarray, shape (p, 2), optional
+        (x, y) of the response points in the plate frame, mm; None without coordinates
+        (then only frequencies are imported).
+    form : str
+        ``"receptance"``, ``"mobility"`` or ``"accelerance"``: what the FRF measures
+        (used by the modal-constant fit, not by the poles).
+    added_decay_per_s : float
+        Decay rate ``1/tau`` (1/s) an exponential window added to every pole; the pole
+        estimates are corrected by it. 0 without a window.
+    source : str
+        The file the spectra came from.
+    notes : tuple of str
+        What the reader had to assume or chose (window, units).
+    """
+
+    frequency_Hz: np.ndarray
+    frf: np.ndarray
+    points_mm: np.ndarray | None = None
+    form: str = "receptance"
+    added_decay_per_s: float = 0.0
+    source: str = ""
+    notes: tuple[str, ...] = ()
+
+    @property
+    def n_points(self) -> int:
+        """Number of response points p."""
+        return int(self.frf.shape[0])
+
+
+def read_uff_frf(path) -> FRFData:
+    """Read FRFs from a Universal File: one dataset 58 per response point.
+
+    Supported: dataset 58 records of function type 4 (frequency response function) with
+    complex ordinates, all on the same evenly spaced frequency axis (Hz), one per response
+    node, out-of-plane response (direction +z or -z: a -z record is negated). The FRF form
+    comes from the ordinate's specific data type (8 displacement: receptance, 11 velocity:
+    mobility, 12 acceleration: accelerance; otherwise receptance). Node coordinates come
+    from datasets 15 or 2411 in the units of dataset 164 (default mm), as for
+    :func:`bayesplate.io.uff.read_uff_modes`; without them only frequencies are imported.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The UFF file (ASCII).
+
+    Returns
+    -------
+    FRFData
+
+    Raises
+    ------
+    CaseError
+        Naming the file, the dataset (with its 1-based block number) and the rule.
+    """
+    path = os.fspath(path)
+    try:
+        return _read_uff_frf(path)
+    except CaseError as err:
+        raise err.with_path(path) from None
+
+
+def _read_uff_frf(path: str) -> FRFData:
+    from .uff import _check_plane, _uff_coordinates, _uff_mm_per_unit, _uff_sets
+
+    sets = _uff_sets(path, wanted=(15, 58, 164, 2411))
+    records = [(key, dset) for key, dset in sets if dset["type"] == 58]
+    if not records:
+        found = sorted({dset["type"] for _, dset in sets}) or "none"
+        rule = f"the file holds no dataset 58 (FRFs); supported datasets found: {found}"
+        raise CaseError("dataset 58", rule=rule)
+    frequency = None
+    rows, nodes, forms = [], [], set()
+    for key, dset in records:
+        if dset.get("func_type") != 4:
+            rule = "must be 4 (frequency response function)"
+            raise CaseError(f"{key} record 6 field 1 (function type)", dset.get("func_type"), rule)
+        x = np.asarray(dset.get("x", []), dtype=float)
+        data = np.asarray(dset.get("data", []))
+        if not np.iscomplexobj(data):
+            rule = "must be 5 or 6 (complex ordinates): an FRF has a phase"
+            raise CaseError(f"{key} record 8 field 2 (ordinate type)", dset.get("ord_data_type"),
+                            rule)  # fmt: skip
+        if x.ndim != 1 or x.shape != data.shape or x.size < 8:
+            raise CaseError(f"{key} record 12", rule="malformed: fewer than 8 frequency lines")
+        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(data))):
+            raise CaseError(f"{key} record 12", rule="values must be finite")
+        if frequency is None:
+            frequency = x
+            _check_axis(frequency, f"{key} record 12 (abscissa)")
+        elif x.shape != frequency.shape or not np.allclose(x, frequency, rtol=1e-9, atol=0):
+            rule = "every FRF must share the frequency axis of the first dataset 58"
+            raise CaseError(f"{key} record 12 (abscissa)", rule=rule)
+        direction = dset.get("rsp_dir")
+        if direction not in (3, -3):
+            rule = "must be +3 or -3 (z, out of the plate's plane)"
+            raise CaseError(f"{key} record 6 field 7 (response direction)", direction, rule)
+        node = int(dset.get("rsp_node", 0))
+        if node in nodes:
+            rule = "one FRF per response node: the node appears twice"
+            raise CaseError(f"{key} record 6 field 6 (response node)", node, rule)
+        nodes.append(node)
+        rows.append(data if direction == 3 else -data)
+        forms.add(_FRF_FORMS.get(dset.get("ordinate_spec_data_type"), "receptance"))
+    if len(forms) > 1:
+        raise CaseError("dataset 58 record 8 field 1 (ordinate)", sorted(forms), "must agree")
+    frf = np.array(rows)
+    coordinates = _uff_coordinates(sets)
+    notes: tuple[str, ...] = ()
+    points = None
+    if coordinates and all(node in coordinates for node in nodes):
+        mm_per_unit, notes = _uff_mm_per_unit(sets)
+        xyz = np.array([coordinates[node] for node in nodes]) * mm_per_unit
+        _check_plane(xyz)
+        points = np.array([[float(f"{v:.12g}") for v in row] for row in xyz[:, :2]])
+    else:
+        notes = ("no coordinates for the response nodes (dataset 15 or 2411): frequencies only",)
+    return FRFData(frequency, frf, points, forms.pop(), source=path, notes=notes)
+
+
+def _check_axis(frequency: np.ndarray, key: str) -> None:
+    step = np.diff(frequency)
+    if frequency[0] < 0 or not np.all(step > 0) or np.ptp(step) > 1e-6 * step.mean():
+        raise CaseError(key, rule="frequencies must be >= 0, ascending and evenly spaced (Hz)")
+
+
+def read_frf_csv(path) -> FRFData:
+    """Read FRFs from a CSV table: ``frequency_Hz, H1_re, H1_im[, H2_re, H2_im, ...]``.
+
+    A header line, then one row per frequency line (Hz, evenly spaced, ascending); each
+    response point ``k`` has two columns ``Hk_re`` and ``Hk_im`` (real and imaginary part,
+    any consistent unit, receptance assumed). ``#`` starts a comment; blank lines are skipped.
+    The table has no coordinates: only frequencies are imported from it.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+
+    Returns
+    -------
+    FRFData
+
+    Raises
+    ------
+    CaseError
+        Naming the file, the line and the column, e.g.
+        ``frf.csv: line 1, column H1_im: required column is missing (...)``.
+    """
+    path = os.fspath(path)
+    try:
+        header_line, header, rows = read_csv_rows(path)
+        if "frequency_Hz" not in header:
+            rule = f"required column is missing from the header ({', '.join(header)})"
+            raise CaseError(f"line {header_line}, column frequency_Hz", rule=rule)
+        names = [name for name in header if name != "frequency_Hz"]
+        points = sorted({name.rsplit("_", 1)[0] for name in names})
+        for name in names:
+            if not (name.startswith("H") and name.endswith(("_re", "_im"))):
+                rule = "unknown column: expected frequency_Hz, then Hk_re and Hk_im per point"
+                raise CaseError(f"line {header_line}, column {name}", name, rule)
+        for point in points:
+            for part in ("_re", "_im"):
+                if point + part not in header:
+                    rule = f"required column is missing from the header ({', '.join(header)})"
+                    raise CaseError(f"line {header_line}, column {point}{part}", rule=rule)
+        if not points:
+            rule = "required: give Hk_re and Hk_im columns for at least one response point"
+            raise CaseError(f"line {header_line}, column H1_re", rule=rule)
+        table = numeric_table(header, rows)
+        frequency = table["frequency_Hz"]
+        _check_axis(frequency, "column frequency_Hz")
+        frf = np.array([table[p + "_re"] + 1j * table[p + "_im"] for p in points])
+    except CaseError as err:
+        raise err.with_path(path) from None
+    return FRFData(frequency, frf, source=path)
+
+
+def read_csv_rows(path: str, min_rows: int = 8) -> tuple[int, list[str], list]:
+    """Header line number, header cells and ``(line number, cells)`` rows of a CSV file."""
+    try:
+        with open(path, encoding="utf-8-sig", newline="") as stream:
+            text = stream.read()
+    except OSError as err:
+        raise CaseError(None, rule=f"cannot read the file ({err.strerror or err})") from None
+    except UnicodeDecodeError:
+        raise CaseError(None, rule="not a UTF-8 text file") from None
+    lines = []
+    for number, line in enumerate(text.splitlines(), start=1):
+        content = line.split("#", 1)[0]
+        if content.strip():
+            lines.append((number, [cell.strip() for cell in next(csv.reader([content]))]))
+    if not lines:
+        raise CaseError(None, rule="the file is empty: give a header line and data rows")
+    (header_line, header), rows = lines[0], lines[1:]
+    for i, name in enumerate(header):
+        if name in header[:i]:
+            raise CaseError(f"line {header_line}, column {name}", name, "column given twice")
+    if len(rows) < min_rows:
+        rule = f"at least {min_rows} data rows must follow the header"
+        raise CaseError(f"line {header_line}", rule=rule)
+    return header_line, header, rows
+
+
+def numeric_table(header: list[str], rows) -> dict[str, np.ndarray]:
+    """Columns of finite numbers by name; a bad row or cell raises a CaseError naming it."""
+    values = np.empty((len(rows), len(header)))
+    for i, (number, cells) in enumerate(rows):
+        if len(cells) != len(header):
+            rule = f"must have {len(header)} comma-separated values ({', '.join(header)})"
+            raise CaseError(f"line {number}", ",".join(cells), rule)
+        for j, (name, cell) in enumerate(zip(header, cells, strict=True)):
+            try:
+                value = float(cell)
+            except ValueError:
+                raise CaseError(f"line {number}, column {name}", cell, "must be a number") from None
+            if not math.isfinite(value):
+                raise CaseError(f"line {number}, column {name}", cell, "must be a finite number")
+            values[i, j] = value
+    return {name: values[:, j] for j, name in enumerate(header)}
