@@ -189,7 +189,10 @@ def _bundled(name):
     from bayesplate import PlateModel, bundled_case_path, load_case
 
     case = load_case(bundled_case_path(name))
-    return case, PlateModel.from_case(case)
+    # Frederiksen's plate on 25 x 25 instead of 50 x 50: 0.35 % off, under its 1 % deviations,
+    # at a quarter of the cost
+    mesh = (25, 25) if name == "frederiksen_t300" else None
+    return case, PlateModel.from_case(case, mesh=mesh)
 
 
 @pytest.mark.slow

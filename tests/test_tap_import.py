@@ -155,9 +155,15 @@ def write_uff58(path, points_mm, frf, axis_Hz):
     """Nodes (dataset 15) and one dataset 58 receptance per response node, reference node 1."""
     p = len(points_mm)
     sets = [
-        pyuff.prepare_15(node_nums=list(range(1, p + 1)), def_cs=[0] * p, disp_cs=[0] * p,
-                         color=[0] * p, x=[float(v) for v in points_mm[:, 0]],
-                         y=[float(v) for v in points_mm[:, 1]], z=[0.0] * p)  # fmt: skip
+        pyuff.prepare_15(
+            node_nums=list(range(1, p + 1)),
+            def_cs=[0] * p,
+            disp_cs=[0] * p,
+            color=[0] * p,
+            x=[float(v) for v in points_mm[:, 0]],
+            y=[float(v) for v in points_mm[:, 1]],
+            z=[0.0] * p,
+        )  # fmt: skip
     ]
     for j in range(p):
         sets.append(pyuff.prepare_58(

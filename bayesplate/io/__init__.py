@@ -10,6 +10,11 @@ Everything that touches a file lives here; the numerics never import it.
   :func:`parse_case`) and the bundled cases.
 - :mod:`~bayesplate.io.modal_data`, :mod:`~bayesplate.io.uff`,
   :mod:`~bayesplate.io.csv_table`: measured modes from a modal test (UFF or CSV).
+- :mod:`~bayesplate.io.frf`, :mod:`~bayesplate.io.impulse`: a tap test's spectra (FRFs from
+  UFF dataset 58 or CSV; impulse recordings from WAV or CSV);
+  :mod:`~bayesplate.io.poles`: natural frequencies, damping and shapes by LSCF (sdypy-EMA,
+  imported only then); :mod:`~bayesplate.io.poles_file`: the editable poles file and the
+  stabilisation chart; :mod:`~bayesplate.io.modal_file`: any of these files by its content.
 - :mod:`~bayesplate.io.case_writer`: a plate sheet plus measured modes as a case file.
 - :mod:`~bayesplate.io.export`: atomic writes and the JSON documents of the results.
 
@@ -45,10 +50,22 @@ from .export import (
     write_json,
     write_netcdf,
 )
+from .frf import FRFData
 from .modal_data import ModalData
-from .modal_file import read_modal_data
+from .modal_file import is_tap_test, read_modal_data, read_spectra
+from .poles import PoleAnalysis, extract_poles, modal_data_from_poles
+from .poles_file import read_poles, write_chart, write_poles
 
 __all__ = [
+    "FRFData",
+    "PoleAnalysis",
+    "extract_poles",
+    "is_tap_test",
+    "modal_data_from_poles",
+    "read_poles",
+    "read_spectra",
+    "write_chart",
+    "write_poles",
     "MAX_MESH_ELEMENTS",
     "DEFAULT_SIGMA_REL",
     "CaseError",
