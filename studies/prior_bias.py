@@ -77,7 +77,7 @@ def _plate1_runs(deviations, min_ess):
     runs = []
     for d in deviations:
         sd = initial / DEVIATIONS[d]
-        setup = prepare(case, model=model, seed=SEED, prior_mean=initial, prior_sd=sd)
+        setup = prepare(case, model=model, rng=SEED, prior_mean=initial, prior_sd=sd)
         runs.append(_run(case, "plate1", d, setup, initial, sd, target, min_ess))
         runs[-1].paper_b = PAPER["plate1"]["test2"]["B"][d]
         runs[-1].paper_mve = PAPER["plate1"]["test2"]["MVE"][d]
@@ -115,7 +115,7 @@ def _frederiksen_runs(deviations, min_ess):
 
 
 def _run(case, plate, d, setup, mean, sd, target, min_ess):
-    posterior = sample(case, seed=SEED, setup=setup, progress=False, min_ess=min_ess)
+    posterior = sample(case, rng=SEED, setup=setup, progress=False, min_ess=min_ess)
     mve = setup.run_estimator("MVE")
     return Run(plate, d, mean, sd, np.asarray(target, dtype=float), setup.estimate, mve,
                posterior)  # fmt: skip
