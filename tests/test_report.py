@@ -389,3 +389,22 @@ def test_readme_first_command_in_a_fresh_environment(tmp_path):
     for png in figures:
         assert png.stat().st_size > MIN_PNG_BYTES, png.name
         assert f"({png.name})" in text
+
+
+def test_report_names_a_missed_mode_by_likelihood(tmp_path):
+    # Issue 16: plate 1 without its 5th frequency, `--pairing likelihood`: the report's
+    # pairing line names computed mode 5 unobserved, and every estimator fits the 13 peaks
+    # with the modes above the gap (not by order).
+    text = bundled_case_path("plate1").read_text()
+    old = "frequency_Hz = [611.23, 2002.7, 2171.2, 2338.5, 2478.2, 3810.3, 5165.3,"
+    assert old in text
+    case_file = tmp_path / "plate1_missed.toml"
+    case_file.write_text(
+        text.replace(old, "frequency_Hz = [611.23, 2002.7, 2171.2, 2338.5, 3810.3, 5165.3,")
+    )
+    options = ReportOptions(diagnose=False, sample=False, pairing="likelihood")
+    path, data = make_report(case_file, tmp_path / "out", options, lambda line: None, "missed")
+    report = path.read_text()
+    assert "computed mode 5 unobserved" in report
+    assert list(data.results["pairing"]["unobserved"]) == [4]
+    np.testing.assert_array_equal(data.pairing().modes, np.delete(np.arange(14), 4))

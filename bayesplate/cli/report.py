@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from .options import add_case_argument, add_mesh_option, mesh_of, resolve_case
+from .options import add_case_argument, add_mesh_option, add_pairing_option, mesh_of, resolve_case
 
 __all__ = ["register"]
 
@@ -18,6 +18,7 @@ def run(args):
         seed=args.seed,
         diagnose=not args.no_diagnose,
         sample=not args.no_sample,
+        pairing=args.pairing,
     )
     path, data = make_report(case.path, args.output, options, label=args.case)
     print(f"{path}: {len(data.computed)} steps computed, {len(data.reused)} reused from the cache")
@@ -47,6 +48,7 @@ def register(sub):
         "posterior chains (nothing skipped)",
     )
     add_mesh_option(p)
+    add_pairing_option(p)
     p.add_argument("--seed", type=int, default=0, help="seed of diagnose and the sampler")
     p.add_argument("--no-diagnose", action="store_true", help="leave out the diagnosis")
     p.add_argument("--no-sample", action="store_true", help="leave out posterior sampling")

@@ -30,6 +30,10 @@ class ReportOptions:
         Sample the posterior when :mod:`bayesplate.sampling` is available.
     n_shapes : int
         Mode shapes drawn.
+    pairing : {"auto", "mac", "likelihood", "index", "order"}
+        Measured-to-computed modes for every step (as :func:`bayesplate.estimators.estimate`
+        takes it); ``"likelihood"``: the assignment B settles on, whose unobserved modes and
+        spurious peaks the report names.
     """
 
     quick: bool = False
@@ -38,6 +42,7 @@ class ReportOptions:
     diagnose: bool = True
     sample: bool = True
     n_shapes: int = 6
+    pairing: str = "auto"
 
     def working_mesh(self, case):
         """Elements ``(nx, ny)`` of the working mesh for `case`."""

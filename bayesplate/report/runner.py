@@ -81,6 +81,8 @@ class _Runner:
         self.data, self.cache, self.say = data, cache, say
         self.case, self.options = data.case, data.options
         self.pairing_options = {"extra": MAC_EXTRA_MODES}
+        if data.options.pairing != "auto":  # (the default keeps the caches' keys)
+            self.pairing_options["how"] = data.options.pairing
 
     def step(self, name, title, options, compute, optional=False):
         """``compute()`` or its cached result; an optional step may fail (noted)."""
@@ -106,7 +108,9 @@ class _Runner:
             "pairing",
             "modes at the prior mean and mode pairing",
             self.pairing_options,
-            lambda: steps.pairing_step(self.case, self.data.plate_model()),
+            lambda: steps.pairing_step(
+                self.case, self.data.plate_model(), self.data.options.pairing
+            ),
         )
         for message in result["warnings"]:
             self.say(f"warning: {message}")

@@ -12,7 +12,7 @@ import warnings
 import numpy as np
 
 from ..laminate import stiffness_from_engineering
-from ..pairing import MAC_EXTRA_MODES, pair_measured
+from ..pairing import MAC_EXTRA_MODES, pair_measured, resolve_pairing
 from ..quantities import to_case_units
 
 # Chain bounds of the posterior section: the sampler's own defaults (5000 steps, ESS 2000)
@@ -22,14 +22,23 @@ _QUICK_CHAINS = {"max_steps": 400, "min_ess": 400.0}
 _CORNER_DRAWS = 4000  # posterior draws kept for the corner plot
 
 
-def pairing_step(case, model):
-    """Modes at the prior mean and the pairing (with any warnings as text)."""
+def pairing_step(case, model, how="auto"):
+    """Modes at the prior mean and the pairing (with any warnings as text).
+
+    ``how == "likelihood"``: the assignment B settles on (:mod:`bayesplate.assignment`), with
+    its unobserved computed modes and spurious peaks (0-based) in the result.
+    """
     m = case.measured.size
     b = stiffness_from_engineering(case.prior.mean)
     modal = model.solve(b, m + MAC_EXTRA_MODES)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        pairing = pair_measured(case, model, b, modal=modal)
+        if resolve_pairing(case.measured, how) == "likelihood":
+            from ..estimators import estimate
+
+            pairing = estimate(case, "B", model=model, pairing="likelihood").pairing
+        else:
+            pairing = pair_measured(case, model, b, how, modal=modal)
     data = {
         "how": pairing.how,
         "modes": pairing.modes,
@@ -42,6 +51,9 @@ def pairing_step(case, model):
         data["measured"] = pairing.measured
     if pairing.mac is not None:
         data["mac"] = pairing.mac
+    if pairing.assignment is not None:
+        data["unobserved"] = pairing.assignment.unobserved
+        data["spurious"] = pairing.assignment.spurious
     return data
 
 
