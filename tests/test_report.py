@@ -408,3 +408,7 @@ def test_report_names_a_missed_mode_by_likelihood(tmp_path):
     assert "computed mode 5 unobserved" in report
     assert list(data.results["pairing"]["unobserved"]) == [4]
     np.testing.assert_array_equal(data.pairing().modes, np.delete(np.arange(14), 4))
+    for method in ("B", "MVE", "MVE-mod"):  # each step settled the same assignment
+        np.testing.assert_array_equal(
+            data.results[method]["modes"], np.delete(np.arange(14), 4) + 1
+        )

@@ -70,8 +70,20 @@ class ReportData:
             self.model = PlateModel.from_case(self.case, mesh=self.mesh)
         return self.model
 
+    def pairing_for_steps(self):
+        """What the estimate, sample and diagnose steps are given as their pairing.
+
+        The pairing step's :class:`bayesplate.pairing.Pairing`; but ``"likelihood"`` by name,
+        so that each step settles the assignment as :func:`bayesplate.estimators.estimate`
+        does, from B's warm-started rounds (given only the pairing, B from the prior mean
+        can reach another optimum when a mode is missing).
+        """
+        if self.options.pairing == "likelihood":
+            return "likelihood"
+        return self.pairing()
+
     def pairing(self):
-        """The :class:`bayesplate.pairing.Pairing` every step used."""
+        """The :class:`bayesplate.pairing.Pairing` the pairing step found."""
         p = self.results["pairing"]
         measured = p.get("measured")
         return Pairing(

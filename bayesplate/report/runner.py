@@ -122,7 +122,7 @@ class _Runner:
             f"estimate {method}",
             {"pairing": self.pairing_options},
             lambda: steps.estimate_step(
-                self.case, self.data.plate_model(), method, self.data.pairing()
+                self.case, self.data.plate_model(), method, self.data.pairing_for_steps()
             ),
         )
 
@@ -151,7 +151,7 @@ class _Runner:
                 "pairing": self.pairing_options,
             },
             lambda: steps.sample_step(
-                self.case, self.data.plate_model(), self.data.pairing(), self.options
+                self.case, self.data.plate_model(), self.data.pairing_for_steps(), self.options
             ),
             optional=True,
         )
@@ -166,6 +166,10 @@ class _Runner:
                 "pairing": self.pairing_options,
             },
             lambda: steps.diagnose_step(
-                self.case, self.data.plate_model(), self.data.pairing(), self.options, self.say
+                self.case,
+                self.data.plate_model(),
+                self.data.pairing_for_steps(),
+                self.options,
+                self.say,
             ),
         )
