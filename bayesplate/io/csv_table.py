@@ -52,7 +52,12 @@ def read_frequency_csv(path) -> ModalData:
         raise err.with_path(path) from None
 
 
-def _read_csv(path: str) -> ModalData:
+def csv_lines(path: str) -> list[tuple[int, list[str]]]:
+    """``(line number, cells)`` of every line of a CSV file that is not blank or a comment.
+
+    ``#`` starts a comment; a byte-order mark is skipped. Cells are as the csv module splits
+    them (not stripped). An unreadable or non-UTF-8 file raises a :class:`CaseError`.
+    """
     try:
         with open(path, encoding="utf-8-sig", newline="") as stream:
             text = stream.read()
@@ -65,6 +70,11 @@ def _read_csv(path: str) -> ModalData:
         content = line.split("#", 1)[0]
         if content.strip():
             lines.append((number, next(csv.reader([content]))))
+    return lines
+
+
+def _read_csv(path: str) -> ModalData:
+    lines = csv_lines(path)
     if not lines:
         rule = "required, but the file is empty: give a header line and one row per frequency"
         raise CaseError("column frequency_Hz", rule=rule)

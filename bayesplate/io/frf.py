@@ -7,13 +7,13 @@ naming the file, the dataset or line and column, and the rule.
 
 from __future__ import annotations
 
-import csv
 import math
 import os
 from dataclasses import dataclass
 
 import numpy as np
 
+from .csv_table import csv_lines
 from .errors import CaseError
 
 __all__ = ["FRFData", "read_uff_frf", "read_frf_csv"]
@@ -208,19 +208,11 @@ def read_frf_csv(path) -> FRFData:
 
 
 def read_csv_rows(path: str, min_rows: int = 8) -> tuple[int, list[str], list]:
-    """Header line number, header cells and ``(line number, cells)`` rows of a CSV file."""
-    try:
-        with open(path, encoding="utf-8-sig", newline="") as stream:
-            text = stream.read()
-    except OSError as err:
-        raise CaseError(None, rule=f"cannot read the file ({err.strerror or err})") from None
-    except UnicodeDecodeError:
-        raise CaseError(None, rule="not a UTF-8 text file") from None
-    lines = []
-    for number, line in enumerate(text.splitlines(), start=1):
-        content = line.split("#", 1)[0]
-        if content.strip():
-            lines.append((number, [cell.strip() for cell in next(csv.reader([content]))]))
+    """Header line number, header cells and ``(line number, cells)`` rows of a CSV file.
+
+    The lines of :func:`bayesplate.io.csv_table.csv_lines`, cells stripped.
+    """
+    lines = [(number, [cell.strip() for cell in cells]) for number, cells in csv_lines(path)]
     if not lines:
         raise CaseError(None, rule="the file is empty: give a header line and data rows")
     (header_line, header), rows = lines[0], lines[1:]
