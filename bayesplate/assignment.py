@@ -31,6 +31,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from .quantities import eigenvalue_from_hz, eigenvalue_sd, hz_from_eigenvalue, hz_sd
+
 __all__ = [
     "P_UNOBSERVED",
     "P_SPURIOUS",
@@ -124,7 +126,7 @@ def predictive_sd_Hz(frequency_Hz, sensitivities, covariance_b):
     S = np.asarray(sensitivities, dtype=float)
     var = np.einsum("ij,jk,ik->i", S, np.asarray(covariance_b, dtype=float), S)
     f = np.asarray(frequency_Hz, dtype=float)
-    return np.sqrt(np.maximum(var, 0.0)) / (8 * np.pi**2 * f)
+    return hz_sd(f, np.sqrt(np.maximum(var, 0.0)))
 
 
 def assign(
@@ -290,19 +292,19 @@ def most_probable(
     g = np.asarray(eigenvalues, dtype=float)
     S = np.asarray(sensitivities, dtype=float)
     V_b = np.asarray(prior_covariance_b, dtype=float)
-    Y = (2 * np.pi * f) ** 2
-    V_Y = np.diag((8 * np.pi**2 * f * s) ** 2)
+    Y = eigenvalue_from_hz(f)
+    V_Y = np.diag(eigenvalue_sd(f, s) ** 2)
     shift = S @ (np.asarray(prior_mean_b, dtype=float) - np.asarray(b, dtype=float))
     band = float(np.max(f + _BAND_SIGMAS * s))
-    log_B = np.log((2 * np.pi * band) ** 2)
-    in_band = g <= (2 * np.pi * np.max(f)) ** 2
+    log_B = np.log(eigenvalue_from_hz(band))
+    in_band = g <= eigenvalue_from_hz(np.max(f))
     m, n = f.size, g.size
 
     def score(modes):
         args = (Y, V_Y, g, S, shift, V_b, in_band, p_unobserved, p_spurious, log_B)
         return _log_evidence(modes, *args)
 
-    computed_Hz = np.sqrt(np.maximum(g, 0.0)) / (2 * np.pi)
+    computed_Hz = hz_from_eigenvalue(g)
     spread = predictive_sd_Hz(computed_Hz, S, V_b)
     starts = [np.arange(m), assign(f, s, computed_Hz, spread, p_unobserved, p_spurious).modes]
     if start is not None:
