@@ -108,11 +108,11 @@ def estimate(
     # one more probable at its own estimate wins. B settles it (its prior anchors it).
     _, V = prior_in_stiffness(mean, sd, "full")
     first = _most_probable(case, model, b0, V, "B", mean, sd, options)
-    if method == "B" or not first.result.converged:
-        if method == "B":
-            return _assigned(first.result, first.pair, first.rounds, first.note)
-        first = _most_probable(case, model, b0, V, method, mean, sd, options)
+    if method == "B":
         return _assigned(first.result, first.pair, first.rounds, first.note)
+    if not first.result.converged:  # no estimate to start from: the method's own rounds
+        own = _most_probable(case, model, b0, V, method, mean, sd, options)
+        return _assigned(own.result, own.pair, own.rounds, own.note)
     # MVE and MVE-mod from B's estimate, the assigned modes followed by MAC between iterates
     # (identified where B converged, not at a far prior): re-pairing by sorted index lets two
     # close modes swap places every iteration while MVE moves a weakly determined constant
@@ -189,10 +189,10 @@ def _lowest_first(case, model, b0, V, method, mean, sd, options):
     estimate, where the next run starts (None: at the prior mean).
     """
     m = case.measured.size
-    low = np.flatnonzero(np.arange(m) < max(FIRST_ROUND_MIN, int(FIRST_ROUND_QUANTILE * m)))
-    if low.size >= m:
+    n_low = max(FIRST_ROUND_MIN, int(FIRST_ROUND_QUANTILE * m))
+    if n_low >= m:
         return pair_measured(case, model, b0, "likelihood", prior=(b0, V)), None
-    lower = case.with_measured(case.measured.select(low))
+    lower = case.with_measured(case.measured.select(np.arange(n_low)))
     first = pair_measured(lower, model, b0, "likelihood", prior=(b0, V))
     result = _estimate_paired(lower, model, first, method, mean, sd, options)
     at = result.b if laminate.is_physical(result.b) else b0
