@@ -31,7 +31,7 @@ import numpy as np
 from scipy.stats import chi2 as chi2_dist
 
 from ..model import PlateModel
-from ..pairing import Pairing, pair_measured, resolve_pairing
+from ..pairing import Pairing
 from ..posterior import observed_eigenvalues, prior_in_stiffness
 from . import candidates as all_candidates
 from .base import mirror_positions
@@ -216,12 +216,9 @@ def diagnose(
     physics = physics or all_candidates()
     mu_b, V_b = prior_in_stiffness(case.prior.mean, case.prior.sd, "full")
     if not isinstance(pairing, Pairing):
-        if resolve_pairing(case.measured, pairing) == "likelihood":  # the one B settles on
-            from ..estimators import estimate
+        from ..estimators import settle_pairing
 
-            pairing = estimate(case, "B", model=model, tol=1e-2, pairing="likelihood").pairing
-        else:
-            pairing = pair_measured(case, model, mu_b, pairing)
+        pairing, _ = settle_pairing(case, model, pairing, tol=1e-2)
     measured, modes = pairing.select(case.measured), pairing.modes
     m = measured.size
     notes = []

@@ -32,7 +32,7 @@ Modules: :mod:`~.conventions` (the open choices), :mod:`~.steps` (one B or MVE u
 """
 
 from .conventions import CONVENTIONS, Conventions, resolve_conventions
-from .estimate import estimate
+from .estimate import estimate, settle_pairing
 from .iteration import DEFAULT_MAX_ITER, TRACKING, run
 from .result import METHODS, STATUSES, EstimateResult
 from .steps import b_step, mve_step
@@ -47,6 +47,7 @@ __all__ = [
     "resolve_conventions",
     "EstimateResult",
     "estimate",
+    "settle_pairing",
     "run",
     "b_step",
     "mve_step",

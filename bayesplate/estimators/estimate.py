@@ -14,7 +14,7 @@ from .conventions import resolve_conventions
 from .iteration import DEFAULT_MAX_ITER, run
 from .result import METHODS
 
-__all__ = ["estimate"]
+__all__ = ["estimate", "settle_pairing"]
 
 
 def estimate(
@@ -124,6 +124,46 @@ def estimate(
     note = "" if s.settled else f"; the assignment did not settle in {s.rounds} rounds"
     note += f"; started from B's estimate (assignment settled in {first.rounds} rounds)"
     return _assigned(s.result, s.pair, first.rounds + s.rounds, note)
+
+
+def settle_pairing(
+    case, model, how="auto", *, tol=1e-3, convention="paper", prior_mean=None, prior_sd=None,
+    modal=None,
+):  # fmt: skip
+    """The pairing for a case, and the B run that settled it when it is by likelihood.
+
+    The one place where the sampler, diagnose and the report turn a pairing's name into a
+    :class:`bayesplate.pairing.Pairing`: ``"likelihood"`` is the assignment B settles on
+    (:func:`estimate` with ``pairing="likelihood"``: rounds with warm starts, on `model`),
+    any other name :func:`bayesplate.pairing.pair_measured` at the prior mean.
+
+    Parameters
+    ----------
+    case : bayesplate.io.Case
+    model : ForwardModel
+    how : {"auto", "mac", "likelihood", "index", "order"}
+    tol : float
+        TOL of the settling B run.
+    convention, prior_mean, prior_sd
+        As for :func:`estimate` (SI).
+    modal : ModalResult, optional
+        Modes already computed at the prior mean (for :func:`pair_measured`).
+
+    Returns
+    -------
+    pairing : Pairing
+    settled : EstimateResult or None
+        The B run (by likelihood only): its estimate is a good start or pilot.
+    """
+    if resolve_pairing(case.measured, how) == "likelihood":
+        settled = estimate(
+            case, "B", model=model, tol=tol, convention=convention, prior_mean=prior_mean,
+            prior_sd=prior_sd, pairing="likelihood",
+        )  # fmt: skip
+        return settled.pairing, settled
+    mean = case.prior.mean if prior_mean is None else prior_mean
+    b = laminate.stiffness_from_engineering(np.asarray(mean, dtype=float))
+    return pair_measured(case, model, b, how, modal=modal), None
 
 
 def _most_probable(case, model, b0, V, method, mean, sd, options):

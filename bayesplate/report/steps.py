@@ -12,7 +12,7 @@ import warnings
 import numpy as np
 
 from ..laminate import stiffness_from_engineering
-from ..pairing import MAC_EXTRA_MODES, pair_measured, resolve_pairing
+from ..pairing import MAC_EXTRA_MODES
 from ..quantities import to_case_units
 
 # Chain bounds of the posterior section: the sampler's own defaults (5000 steps, ESS 2000)
@@ -33,12 +33,9 @@ def pairing_step(case, model, how="auto"):
     modal = model.solve(b, m + MAC_EXTRA_MODES)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        if resolve_pairing(case.measured, how) == "likelihood":
-            from ..estimators import estimate
+        from ..estimators import settle_pairing
 
-            pairing = estimate(case, "B", model=model, pairing="likelihood").pairing
-        else:
-            pairing = pair_measured(case, model, b, how, modal=modal)
+        pairing, _ = settle_pairing(case, model, how, modal=modal)
     data = {
         "how": pairing.how,
         "modes": pairing.modes,

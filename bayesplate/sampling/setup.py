@@ -16,11 +16,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .. import laminate
-from ..estimators import estimate as estimate_case
-from ..estimators import resolve_conventions, run
+from ..estimators import resolve_conventions, run, settle_pairing
 from ..model import PlateModel
-from ..pairing import Pairing, pair_measured, resolve_pairing
+from ..pairing import Pairing
 from ..posterior import GaussianProblem
 from ..quantities import LOG_STIFFNESS
 from ..reduced import Box, fast_model
@@ -241,18 +239,12 @@ def prepare(
     sd = np.asarray(case.prior.sd if prior_sd is None else prior_sd, dtype=float)
     settled = None
     if not isinstance(pairing, Pairing):
-        how = resolve_pairing(case.measured, pairing)
-        if how == "likelihood":  # the assignment B settles on (a coarser mesh's error
-            # in the upper modes would call their peaks spurious: the working model); that
-            # B run is the pilot too (the pilot mesh may number the upper modes otherwise)
-            settled = estimate_case(
-                case, "B", model=model, tol=PILOT_TOL, convention=conventions,
-                prior_mean=mean, prior_sd=sd, pairing="likelihood",
-            )  # fmt: skip
-            pairing = settled.pairing
-        else:
-            b_prior = laminate.stiffness_from_engineering(mean)
-            pairing = pair_measured(case, model, b_prior, how)
+        # by likelihood, B settles the assignment on the working model (a coarser mesh's
+        # error in the upper modes would call their peaks spurious), and that B run is the
+        # pilot too (the pilot mesh may number the upper modes otherwise)
+        pairing, settled = settle_pairing(case, model, pairing, tol=PILOT_TOL,
+                                          convention=conventions, prior_mean=mean,
+                                          prior_sd=sd)  # fmt: skip
     pair = replace(pairing, extra=0)
     problem = GaussianProblem.from_case(
         case, model, pair, conventions.observation, conventions.prior, mean, sd
