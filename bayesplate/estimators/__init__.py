@@ -28,13 +28,15 @@ correlations of the propagated prior; ``"printed"`` is section 3.6 to the letter
 
 Modules: :mod:`~.conventions` (the open choices), :mod:`~.steps` (one B or MVE update),
 :mod:`~.iteration` (:func:`run`: the iteration and its stopping rules), :mod:`~.estimate`
-(:func:`estimate`: a case, MVE-mod's two stages), :mod:`~.result` (:class:`EstimateResult`).
+(:func:`estimate`: a case, MVE-mod's two stages), :mod:`~.fast` (the same on the certified
+fast model, each answer confirmed by the full model), :mod:`~.result` (:class:`EstimateResult`).
 """
 
 from .conventions import CONVENTIONS, Conventions, resolve_conventions
-from .estimate import estimate, settle_pairing
+from .estimate import estimate, estimate_on_fast, settle_pairing
+from .fast import FAST_MIN_DOFS, FORWARDS, FastModelWarning, case_fast_model, resolve_forward
 from .iteration import DEFAULT_MAX_ITER, TRACKING, run
-from .result import METHODS, STATUSES, EstimateResult
+from .result import METHODS, STATUSES, EstimateResult, FullModelCheck
 from .steps import b_step, mve_step
 
 __all__ = [
@@ -46,7 +48,14 @@ __all__ = [
     "CONVENTIONS",
     "resolve_conventions",
     "EstimateResult",
+    "FullModelCheck",
+    "FAST_MIN_DOFS",
+    "FORWARDS",
+    "FastModelWarning",
+    "case_fast_model",
     "estimate",
+    "estimate_on_fast",
+    "resolve_forward",
     "settle_pairing",
     "run",
     "b_step",

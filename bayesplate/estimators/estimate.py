@@ -8,13 +8,14 @@ import numpy as np
 
 from .. import laminate
 from ..model import PlateModel
-from ..pairing import Pairing, pair_measured, resolve_pairing
+from ..pairing import MAC_EXTRA_MODES, Pairing, pair_measured, resolve_pairing
 from ..posterior import GaussianProblem, prior_in_stiffness
 from .conventions import resolve_conventions
+from .fast import case_fast_model, confirmed_run, resolve_forward
 from .iteration import DEFAULT_MAX_ITER, run
 from .result import METHODS
 
-__all__ = ["estimate", "settle_pairing"]
+__all__ = ["estimate", "estimate_on_fast", "settle_pairing"]
 
 
 def estimate(
@@ -31,6 +32,10 @@ def estimate(
     stage2_sd=None,
     pairing="auto",
     tracking="auto",
+    *,
+    forward="auto",
+    fast=None,
+    rng=None,
 ):
     """Estimate the elastic constants of a case with the paper's B, MVE or MVE-mod.
 
@@ -72,6 +77,15 @@ def estimate(
     tracking : {"auto", "report", "follow", "off"}
         MAC tracking of paired modes between iterates (see :func:`run`); "auto" follows
         modes paired by shape and keeps order or index pairings as they are.
+    forward : {"auto", "fast", "full"}
+        Iterate on the certified fast model, the answer confirmed by the full one
+        (:mod:`bayesplate.estimators.fast`; the result's ``check``), or on the full model
+        throughout; ``"auto"``: fast on meshes of more than ``FAST_MIN_DOFS`` unknowns.
+    fast : bayesplate.reduced.CertifiedModel, optional
+        A fast model already built for this case (implies the fast path); see
+        :func:`estimate_on_fast` to get it back enriched.
+    rng : numpy.random.Generator or int, optional
+        Seed of the fast model's design (default 0: the same model every time).
 
     Returns
     -------
@@ -79,8 +93,14 @@ def estimate(
     """
     if method not in METHODS:
         raise ValueError(f"method = {method!r}: must be one of {METHODS}")
-    conventions = resolve_conventions(convention)
     model = model or PlateModel.from_case(case)
+    if fast is not None or resolve_forward(forward, model) == "fast":
+        options = {"tol": tol, "max_iter": max_iter, "convention": convention,
+                   "prior_mean": prior_mean, "prior_sd": prior_sd, "stage1_tol": stage1_tol,
+                   "stage2_factor": stage2_factor, "stage2_sd": stage2_sd, "pairing": pairing,
+                   "tracking": tracking}  # fmt: skip
+        return estimate_on_fast(case, method, model, fast, rng=rng, **options)[0]
+    conventions = resolve_conventions(convention)
     mean = np.asarray(case.prior.mean if prior_mean is None else prior_mean, dtype=float)
     sd = np.asarray(case.prior.sd if prior_sd is None else prior_sd, dtype=float)
     b0 = laminate.stiffness_from_engineering(mean)
@@ -126,9 +146,60 @@ def estimate(
     return _assigned(s.result, s.pair, first.rounds + s.rounds, note)
 
 
+def estimate_on_fast(case, method="MVE", model=None, fast=None, *, rng=None, **options):
+    """:func:`estimate` on the certified fast model, confirmed by the full model.
+
+    Parameters
+    ----------
+    case : bayesplate.io.Case
+    method : {"B", "MVE", "MVE-mod"}
+    model : PlateModel, optional
+        The full model (default the case's mesh): builds the fast model, pairs at the prior
+        mean and checks the answer.
+    fast : bayesplate.reduced.CertifiedModel, optional
+        Built over the prior's box when not given (:func:`.fast.case_fast_model`).
+    rng : numpy.random.Generator or int, optional
+        Seed of the build.
+    **options
+        The other keywords of :func:`estimate` (not ``forward``).
+
+    Returns
+    -------
+    result : EstimateResult
+        With its ``check`` (:class:`FullModelCheck`).
+    fast : CertifiedModel
+        The fast model, enriched where the full model corrected it: share it.
+    """
+    model = model or PlateModel.from_case(case)
+    pairing = options.pop("pairing", "auto")
+    mean = case.prior.mean if options.get("prior_mean") is None else options["prior_mean"]
+    b0 = laminate.stiffness_from_engineering(np.asarray(mean, dtype=float))
+    if not isinstance(pairing, Pairing):
+        how = resolve_pairing(case.measured, pairing)
+        # a fixed pairing is made as the full path makes it: on the full model at the prior
+        pairing = how if how == "likelihood" else pair_measured(case, model, b0, how)
+    if isinstance(pairing, Pairing):
+        n_modes = pairing.n_modes()
+    else:  # by likelihood, the assignment may reach this far
+        n_modes = case.measured.size + MAC_EXTRA_MODES
+    if fast is None:
+        prior = {k: options.get(k) for k in ("prior_mean", "prior_sd")}
+        fast = case_fast_model(case, model, n_modes, rng=rng, **prior)
+    elif n_modes > fast.reduced.n_modes + fast.reduced.margin:
+        raise ValueError(
+            f"the fast model holds {fast.reduced.n_modes + fast.reduced.margin} modes; "
+            f"the pairing needs {n_modes}"
+        )
+
+    def run_on(reduced):
+        return estimate(case, method, model=reduced, pairing=pairing, forward="full", **options)
+
+    return confirmed_run(run_on, model, fast)
+
+
 def settle_pairing(
     case, model, how="auto", *, tol=1e-3, convention="paper", prior_mean=None, prior_sd=None,
-    modal=None,
+    modal=None, forward="auto", fast=None,
 ):  # fmt: skip
     """The pairing for a case, and the B run that settled it when it is by likelihood.
 
@@ -148,6 +219,8 @@ def settle_pairing(
         As for :func:`estimate` (SI).
     modal : ModalResult, optional
         Modes already computed at the prior mean (for :func:`pair_measured`).
+    forward, fast
+        The settling B run's model (as for :func:`estimate`).
 
     Returns
     -------
@@ -158,7 +231,7 @@ def settle_pairing(
     if resolve_pairing(case.measured, how) == "likelihood":
         settled = estimate(
             case, "B", model=model, tol=tol, convention=convention, prior_mean=prior_mean,
-            prior_sd=prior_sd, pairing="likelihood",
+            prior_sd=prior_sd, pairing="likelihood", forward=forward, fast=fast,
         )  # fmt: skip
         return settled.pairing, settled
     mean = case.prior.mean if prior_mean is None else prior_mean

@@ -19,6 +19,7 @@ from .. import laminate
 from ..pairing import track
 from ..posterior import Prediction
 from ..quantities import engineering_covariance, hz_from_eigenvalue
+from ..reduced.model import ReducedModalResult
 from .conventions import CONVENTIONS
 from .result import EstimateResult
 from .steps import b_step, mve_step
@@ -77,7 +78,8 @@ def _track(state, new, k, tracking, weight):
     if tracking == "off":
         return new
     modes = state.prediction.modes
-    moved, _ = track(state.prediction.modal.vectors, new.modal.vectors, modes, weight)
+    old_shapes, new_shapes, weight = _shapes(state.prediction.modal, new.modal, weight)
+    moved, _ = track(old_shapes, new_shapes, modes, weight)
     for i in np.flatnonzero(moved != modes):
         state.swaps.append((k, int(i), int(modes[i]) + 1, int(moved[i]) + 1))
         log.debug("iteration %d: computed mode %d became mode %d", k, modes[i] + 1, moved[i] + 1)
@@ -85,6 +87,19 @@ def _track(state, new, k, tracking, weight):
         modal = new.modal
         return Prediction(modal.eigenvalues[moved], modal.sensitivities[moved], modal, moved)
     return new
+
+
+def _shapes(old, new, weight):
+    """``(old shapes, new shapes, weight)`` for MAC tracking, in the fewest unknowns.
+
+    Two reduced-model results on one basis compare their coefficients: the basis is
+    M-orthonormal, so their plain MAC is the mass-weighted MAC of the full shapes, without
+    forming those (``n_dofs x n`` each).
+    """
+    if isinstance(old, ReducedModalResult) and isinstance(new, ReducedModalResult):
+        if old.basis is new.basis:
+            return old.coefficients, new.coefficients, None
+    return old.vectors, new.vectors, weight
 
 
 def _step(problem, method, state, V):

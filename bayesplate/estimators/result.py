@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["METHODS", "STATUSES", "EstimateResult"]
+__all__ = ["METHODS", "STATUSES", "EstimateResult", "FullModelCheck"]
 
 METHODS = ("B", "MVE", "MVE-mod")
 #: How a run ended (:attr:`EstimateResult.status`); only the first is a success.
@@ -17,7 +17,65 @@ STATUSES = (
     "unphysical",
     "linalg_failed",
     "solve_failed",
+    "unconfirmed",
 )
+
+
+@dataclass(frozen=True, eq=False)
+class FullModelCheck:
+    """The full model at an answer the fast (reduced-basis) model gave.
+
+    Attributes
+    ----------
+    b : numpy.ndarray, shape (6,)
+        The answer checked, Pa.
+    fast_Hz, full_Hz : numpy.ndarray, shape (m,)
+        Paired frequencies there by the fast and by the full model, Hz.
+    tolerance : float
+        Largest relative frequency difference accepted (the fast model's certificate's).
+    rounds : int
+        Runs on the fast model: one, plus one after each enrichment of its basis with the
+        full solution at an answer it got wrong.
+    n_full_solves : int
+        Full solves of the runs (iterates off the certified box) and of the checks (the
+        build's are in ``build_solves``).
+    build_solves : int
+        Full solves spent building and certifying the fast model (0 when it was given).
+    build_seconds : float
+        Seconds spent building it.
+    """
+
+    b: np.ndarray
+    fast_Hz: np.ndarray
+    full_Hz: np.ndarray
+    tolerance: float
+    rounds: int
+    n_full_solves: int
+    build_solves: int = 0
+    build_seconds: float = 0.0
+
+    @property
+    def rel_error(self):
+        """``|f_fast / f_full - 1|`` of each paired frequency, shape (m,)."""
+        return np.abs(self.fast_Hz / self.full_Hz - 1.0)
+
+    @property
+    def max_rel_error(self):
+        """The largest relative difference (NaN where the full solve failed)."""
+        return float(np.max(self.rel_error)) if self.rel_error.size else 0.0
+
+    @property
+    def confirmed(self):
+        """Whether the full model agrees within the tolerance."""
+        return bool(self.max_rel_error <= self.tolerance)
+
+    def __str__(self):
+        verdict = "confirmed" if self.confirmed else "DISAGREES"
+        return (
+            f"full-model check {verdict}: largest relative frequency difference "
+            f"{self.max_rel_error:.1e} (tolerance {self.tolerance:.0e}) after {self.rounds} "
+            f"fast run(s)"
+        )
 
 
 @dataclass(frozen=True)
@@ -71,6 +129,9 @@ class EstimateResult:
     pairing : bayesplate.pairing.Pairing or None
         The measured-to-computed pairing the run used (for ``"likelihood"``, the settled
         assignment, with its unobserved modes and spurious peaks).
+    check : FullModelCheck or None
+        When the run was on the fast model: the full model at its answer (status
+        ``"unconfirmed"`` when they disagree beyond the certificate); None on the full model.
     """
 
     method: str
@@ -95,6 +156,7 @@ class EstimateResult:
     settings: dict = field(default_factory=dict)
     status: str = ""
     pairing: object = field(default=None, repr=False, compare=False)
+    check: object = field(default=None, repr=False, compare=False)
 
     def __post_init__(self):
         if not self.status:

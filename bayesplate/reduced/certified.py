@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import math
+import time
 import warnings
 
 import numpy as np
@@ -89,6 +90,7 @@ def fast_model(
     -------
     CertifiedModel
     """
+    started = time.perf_counter()
     rng = np.random.default_rng(rng)
     reduced = ReducedModel.build(
         model,
@@ -123,7 +125,10 @@ def fast_model(
             log.info("basis cap %d reached (%d needed)", max_basis, enriched.size)
             break
         reduced = enriched
-    return CertifiedModel(model, reduced, certificate, history)
+    solves = 1 + n_snapshots + sum(c.n_test for c in history)
+    return CertifiedModel(
+        model, reduced, certificate, history, time.perf_counter() - started, solves
+    )
 
 
 class CertifiedModel:
@@ -146,6 +151,10 @@ class CertifiedModel:
     certificate : Certificate
     history : sequence of Certificate, optional
         The certificates of every round of :func:`fast_model`, the last one included.
+    build_seconds : float
+        Seconds :func:`fast_model` spent building and certifying it.
+    build_solves : int
+        Full solves it spent (design, held-out points).
 
     Attributes
     ----------
@@ -156,8 +165,10 @@ class CertifiedModel:
         Reduced-model evaluations.
     """
 
-    def __init__(self, model, reduced, certificate, history=()):
+    def __init__(self, model, reduced, certificate, history=(), build_seconds=0.0, build_solves=0):
         self.model = model
+        self.build_seconds = float(build_seconds)
+        self.build_solves = int(build_solves)
         self.reduced = reduced
         self.certificate = certificate
         self.history = tuple(history) or (certificate,)

@@ -11,11 +11,11 @@ import importlib.util
 from dataclasses import dataclass, field
 
 from .. import __version__
-from ..estimators import METHODS
+from ..estimators import METHODS, case_fast_model, resolve_forward
 from ..io import Case
 from ..laminate import stiffness_from_engineering
 from ..model import PlateModel
-from ..pairing import DEFAULT_EXTRA_MODES, Pairing
+from ..pairing import DEFAULT_EXTRA_MODES, MAC_EXTRA_MODES, Pairing
 from .options import ReportOptions
 
 __all__ = ["ESTIMATORS", "ReportData", "sampling_available"]
@@ -63,12 +63,35 @@ class ReportData:
     version: str = __version__
     label: str = ""
     model: object = field(default=None, repr=False)
+    fast: object = field(default=None, repr=False)
 
     def plate_model(self):
         """The working :class:`bayesplate.model.PlateModel` (built when first needed)."""
         if self.model is None:
             self.model = PlateModel.from_case(self.case, mesh=self.mesh)
         return self.model
+
+    def fast_model(self):
+        """The certified fast model the steps share (built when first needed), or None.
+
+        One model over the prior's box (:func:`bayesplate.estimators.case_fast_model`) for
+        the estimators, the sampler and diagnose, on meshes where the estimators' ``"auto"``
+        takes the fast path; None where a full solve is cheap. The estimate steps enrich it
+        where the full model corrected one of their answers (:meth:`share_fast_model`).
+        """
+        model = self.plate_model()
+        if self.fast is None and resolve_forward("auto", model) == "fast":
+            m = self.case.measured.size
+            by_likelihood = self.options.pairing == "likelihood"
+            n_modes = max(self.pairing().n_modes(), m + MAC_EXTRA_MODES * by_likelihood)
+            self.fast = case_fast_model(self.case, model, n_modes, rng=self.options.seed)
+            self.seconds["fast_model"] = self.fast.build_seconds
+        return self.fast
+
+    def share_fast_model(self, fast):
+        """Keep the (enriched) fast model a step returned, for the next steps."""
+        if fast is not None:
+            self.fast = fast
 
     def pairing_for_steps(self):
         """What the estimate, sample and diagnose steps are given as their pairing.

@@ -122,9 +122,10 @@ class _Runner:
             f"estimate {method}",
             {"pairing": self.pairing_options},
             lambda: steps.estimate_step(
-                self.case, self.data.plate_model(), method, self.data.pairing_for_steps()
+                self.case, self.data.plate_model(), method, self.data.pairing_for_steps(),
+                self.data.fast_model(), self.data.share_fast_model,
             ),
-        )
+        )  # fmt: skip
 
     def modes(self):
         data = self.data
@@ -151,8 +152,12 @@ class _Runner:
                 "pairing": self.pairing_options,
             },
             lambda: steps.sample_step(
-                self.case, self.data.plate_model(), self.data.pairing_for_steps(), self.options
-            ),
+                self.case,
+                self.data.plate_model(),
+                self.data.pairing_for_steps(),
+                self.options,
+                self.data.fast_model(),
+            ),  # fmt: skip
             optional=True,
         )
 

@@ -54,11 +54,21 @@ def pairing_step(case, model, how="auto"):
     return data
 
 
-def estimate_step(case, model, method, pairing):
-    """One of the paper's estimators (:func:`bayesplate.estimators.estimate`) as plain data."""
-    from ..estimators import estimate
+def estimate_step(case, model, method, pairing, fast=None, share=None):
+    """One of the paper's estimators (:func:`bayesplate.estimators.estimate`) as plain data.
 
-    r = estimate(case, method, model=model, pairing=pairing)
+    With a fast model (a :class:`bayesplate.reduced.CertifiedModel`) the estimator iterates
+    on it and the full model checks the answer (the ``check`` entry); ``share(fast)`` is
+    given the fast model back, enriched where the check corrected it.
+    """
+    from ..estimators import estimate, estimate_on_fast
+
+    if fast is None:
+        r = estimate(case, method, model=model, pairing=pairing, forward="full")
+    else:
+        r, fast = estimate_on_fast(case, method, model, fast, pairing=pairing)
+        if share is not None:
+            share(fast)
     return {
         "method": r.method,
         "converged": bool(r.converged),
@@ -77,6 +87,22 @@ def estimate_step(case, model, method, pairing):
             {"converged": bool(s.converged), "iterations": int(s.iterations), "message": s.message}
             for s in r.stages
         ],
+        "status": r.status,
+        "check": None if r.check is None else _check_data(r.check),
+    }
+
+
+def _check_data(check):
+    """A :class:`bayesplate.estimators.FullModelCheck` as plain data."""
+    return {
+        "fast_Hz": check.fast_Hz,
+        "full_Hz": check.full_Hz,
+        "max_rel_error": check.max_rel_error,
+        "tolerance": check.tolerance,
+        "confirmed": check.confirmed,
+        "rounds": int(check.rounds),
+        "n_full_solves": int(check.n_full_solves),
+        "text": str(check),
     }
 
 
@@ -117,8 +143,11 @@ def diagnose_step(case, model, pairing, options, progress):
     return data
 
 
-def sample_step(case, model, pairing, options):
+def sample_step(case, model, pairing, options, fast=None):
     """The posterior by :func:`bayesplate.sampling.sample` (only when the module exists).
+
+    With `fast` (the report's shared :class:`bayesplate.reduced.CertifiedModel`) the sampler
+    builds no fast model of its own.
 
     The draws kept for the corner plot (at most ``_CORNER_DRAWS``, shape (n, 6)) are in
     case units (GPa, -).
@@ -129,7 +158,8 @@ def sample_step(case, model, pairing, options):
     chains = _QUICK_CHAINS if options.quick else _CHAINS
     with warnings.catch_warnings(record=True) as caught:  # counted below, not repeated
         warnings.simplefilter("always")
-        r = sample(case, rng=options.seed, model=model, pairing=pairing, progress=False, **chains)
+        r = sample(case, rng=options.seed, model=model, pairing=pairing, progress=False,
+                   fast=fast, **chains)  # fmt: skip
     e = to_case_units(engineering_from_stiffness(r.samples_b))
     keep = np.linspace(0, len(e) - 1, min(len(e), _CORNER_DRAWS)).astype(int)
     return {

@@ -244,7 +244,7 @@ def prepare(
         # pilot too (the pilot mesh may number the upper modes otherwise)
         pairing, settled = settle_pairing(case, model, pairing, tol=PILOT_TOL,
                                           convention=conventions, prior_mean=mean,
-                                          prior_sd=sd)  # fmt: skip
+                                          prior_sd=sd, fast=fast)  # fmt: skip
     pair = replace(pairing, extra=0)
     problem = GaussianProblem.from_case(
         case, model, pair, conventions.observation, conventions.prior, mean, sd
