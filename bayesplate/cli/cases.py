@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-from ..io import bundled_case_names, bundled_case_path
-
 __all__ = ["register"]
 
 
 def run(args):
     """List the bundled cases with their paths."""
+    from ..io import bundled_case_names, bundled_case_path
+
     for name in bundled_case_names():
         print(f"{name:20s} {bundled_case_path(name)}")
     return 0

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import pathlib
 
-from ..io import diagnosis_to_dict, save_figure, write_json
-from ..model import PlateModel
 from .options import (
     add_case_argument,
     add_json_option,
@@ -22,6 +20,8 @@ __all__ = ["register"]
 def run(args):
     """Diagnose the case; print the summary, write JSON and figures on request."""
     from ..discrepancy.diagnose import diagnose
+    from ..io import diagnosis_to_dict, save_figure, write_json
+    from ..model import PlateModel
 
     case = resolve_case(args.case)
     model = PlateModel.from_case(case, mesh=mesh_of(args))

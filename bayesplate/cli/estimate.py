@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import logging
 
-from ..io import estimate_to_dict, write_json
-from ..model import PlateModel
-from ..quantities import ENGINEERING_KEYS, to_case_units
 from .options import (
+    CONVENTION_CHOICES,
+    DEFAULT_MAX_ITER,
+    METHOD_CHOICES,
     add_case_argument,
     add_json_option,
     add_mesh_option,
@@ -21,6 +21,8 @@ __all__ = ["register"]
 
 def estimate_text(case, model, result):
     """Human-readable table of ``bayesplate estimate``."""
+    from ..quantities import ENGINEERING_KEYS, to_case_units
+
     status = "converged" if result.converged else "NOT converged"
     lines = [
         f"{case.name}",
@@ -46,6 +48,8 @@ def estimate_text(case, model, result):
 def run(args):
     """Estimate the constants; print the table, write JSON on request."""
     from ..estimators import estimate
+    from ..io import estimate_to_dict, write_json
+    from ..model import PlateModel
 
     case = resolve_case(args.case)
     model = PlateModel.from_case(case, mesh=mesh_of(args))
@@ -69,8 +73,6 @@ def run(args):
 
 def register(sub):
     """Add the ``estimate`` subcommand."""
-    from ..estimators import CONVENTIONS, DEFAULT_MAX_ITER, METHODS
-
     p = sub.add_parser(
         "estimate",
         help="estimate the elastic constants with the paper's B, MVE or MVE-mod",
@@ -80,12 +82,14 @@ def register(sub):
         "when the run does not converge. Progress goes to standard error.",
     )
     add_case_argument(p)
-    p.add_argument("--method", choices=METHODS, default="MVE", help="estimator (default MVE)")
+    p.add_argument(
+        "--method", choices=METHOD_CHOICES, default="MVE", help="estimator (default MVE)"
+    )
     p.add_argument("--tol", type=float, default=1e-3, help="TOL of section 2.4 (1e-3)")
     p.add_argument("--max-iter", type=int, default=DEFAULT_MAX_ITER, help="iteration cap per stage")
     p.add_argument(
         "--convention",
-        choices=tuple(CONVENTIONS),
+        choices=CONVENTION_CHOICES,
         default="paper",
         help="covariance conventions: 'paper' (default, reproduces the paper's tables; "
         "V_Y = diag(dlambda^2), V_b = diag(dC^2), MVE with fixed V_b), 'full-prior' (the "

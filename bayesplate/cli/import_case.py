@@ -4,16 +4,6 @@ from __future__ import annotations
 
 import pathlib
 
-from ..io import (
-    CaseError,
-    bundled_plate_names,
-    bundled_plate_path,
-    case_from_modal_data,
-    read_modal_data,
-    write_case,
-)
-from ..io.modal_file import is_tap_test, read_spectra
-
 __all__ = ["register"]
 
 _TAP_OPTIONS = ("poles", "chart", "use_poles", "band", "order", "window")
@@ -21,6 +11,16 @@ _TAP_OPTIONS = ("poles", "chart", "use_poles", "band", "order", "window")
 
 def run(args):
     """Read the test file, combine it with the plate sheet, write the case file."""
+    from ..io import (
+        CaseError,
+        bundled_plate_names,
+        bundled_plate_path,
+        case_from_modal_data,
+        read_modal_data,
+        write_case,
+    )
+    from ..io.modal_file import is_tap_test
+
     if args.sigma_rel is not None and not 0 < args.sigma_rel < 1:
         raise CaseError("--sigma-rel", args.sigma_rel, "must be > 0 and < 1")
     plate = args.plate
@@ -42,6 +42,8 @@ def run(args):
 
 def _tap_modal_data(args):
     """Modes of a tap test: poles extracted, written and charted on request, then chosen."""
+    from ..io import CaseError
+    from ..io.modal_file import read_spectra
     from ..io.poles import DEFAULT_ORDER, extract_poles, modal_data_from_poles
     from ..io.poles_file import read_poles, write_chart, write_poles
 
@@ -75,6 +77,8 @@ def _tap_modal_data(args):
 
 def _written(option, path, write, *args):
     """Call ``write(*args)``; an OSError becomes a CaseError naming `option` and `path`."""
+    from ..io import CaseError
+
     try:
         write(*args)
     except OSError as err:

@@ -15,7 +15,6 @@ import argparse
 import logging
 import sys
 
-from ..io import CaseError
 from . import cases, diagnose, estimate, import_case, modes, report, sample
 
 __all__ = ["main", "build_parser"]
@@ -48,6 +47,8 @@ def main(argv=None):
     )
     if getattr(args, "count", None) is not None and args.count < 1:
         parser.error(f"--count {args.count}: must be a positive integer")
+    from ..io import CaseError  # after parsing: --help and usage errors need no numerics
+
     try:
         return args.func(args)
     except CaseError as err:

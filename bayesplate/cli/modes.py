@@ -2,9 +2,6 @@
 
 from __future__ import annotations
 
-from ..io import CaseError, write_json
-from ..laminate import stiffness_from_engineering
-from ..model import PlateModel
 from .options import add_case_argument, add_json_option, add_mesh_option, mesh_of, resolve_case
 
 __all__ = ["register"]
@@ -12,6 +9,8 @@ __all__ = ["register"]
 
 def _constants(case, which):
     """Engineering constants (SI) chosen by ``--constants``."""
+    from ..io import CaseError
+
     if which == "prior":
         return case.prior.mean
     if case.reference is None:
@@ -21,6 +20,10 @@ def _constants(case, which):
 
 def run(args):
     """Solve the plate at the chosen constants; print (or write) the frequencies."""
+    from ..io import write_json
+    from ..laminate import stiffness_from_engineering
+    from ..model import PlateModel
+
     case = resolve_case(args.case)
     e = _constants(case, args.constants)
     measured = case.measured.frequency_Hz

@@ -5,14 +5,15 @@ from __future__ import annotations
 import argparse
 import pathlib
 
-from ..io import bundled_case_names, bundled_case_path, load_case
-
 __all__ = [
     "add_case_argument",
     "add_json_option",
     "add_mesh_option",
     "add_pairing_option",
     "PAIRING_CHOICES",
+    "METHOD_CHOICES",
+    "CONVENTION_CHOICES",
+    "DEFAULT_MAX_ITER",
     "mesh_of",
     "positive_int",
     "resolve_case",
@@ -58,6 +59,8 @@ def mesh_of(args):
 
 def resolve_case(name_or_path):
     """Load a case from a path, or from the bundled cases by name (``plate1``)."""
+    from ..io import bundled_case_names, bundled_case_path, load_case
+
     if not pathlib.Path(name_or_path).exists() and name_or_path in bundled_case_names():
         name_or_path = bundled_case_path(name_or_path)
     return load_case(name_or_path)
@@ -66,6 +69,13 @@ def resolve_case(name_or_path):
 #: The pairings of :data:`bayesplate.pairing.PAIRINGS`, spelled here so that the parser does
 #: not import scipy at start-up (a test holds the two equal).
 PAIRING_CHOICES = ("auto", "mac", "likelihood", "index", "order")
+
+#: :data:`bayesplate.estimators.METHODS`, the keys of :data:`~bayesplate.estimators.CONVENTIONS`
+#: and :data:`~bayesplate.estimators.DEFAULT_MAX_ITER`, spelled here for the same reason
+#: (``tests/test_startup.py`` holds them equal).
+METHOD_CHOICES = ("B", "MVE", "MVE-mod")
+CONVENTION_CHOICES = ("paper", "full-prior", "printed")
+DEFAULT_MAX_ITER = 200
 
 
 def add_pairing_option(p):

@@ -5,9 +5,6 @@ from __future__ import annotations
 import logging
 import pathlib
 
-from ..io import sampling_to_dict, save_figure, write_json, write_netcdf
-from ..model import PlateModel
-from ..quantities import ENGINEERING_KEYS, to_case_units
 from .options import (
     add_case_argument,
     add_json_option,
@@ -22,6 +19,8 @@ __all__ = ["register"]
 
 def sample_text(case, result):
     """Human-readable table of ``bayesplate sample``."""
+    from ..quantities import ENGINEERING_KEYS, to_case_units
+
     est = result.estimate
     lines = [
         f"{case.name}",
@@ -48,6 +47,8 @@ def sample_text(case, result):
 
 def run(args):
     """Sample the posterior; print the table, write JSON, netCDF and figures on request."""
+    from ..io import sampling_to_dict, save_figure, write_json, write_netcdf
+    from ..model import PlateModel
     from ..sampling import prepare, sample
 
     case = resolve_case(args.case)
