@@ -226,8 +226,9 @@ def test_an_unknown_name_is_an_attribute_error():
 
 def test_the_parser_choices_match_the_estimators():
     from bayesplate.cli import options
-    from bayesplate.estimators import CONVENTIONS, DEFAULT_MAX_ITER, METHODS
+    from bayesplate.estimators import CONVENTIONS, DEFAULT_MAX_ITER, FORWARDS, METHODS
 
     assert options.METHOD_CHOICES == METHODS
     assert options.CONVENTION_CHOICES == tuple(CONVENTIONS)
+    assert options.FORWARD_CHOICES == FORWARDS
     assert options.DEFAULT_MAX_ITER == DEFAULT_MAX_ITER

@@ -7,6 +7,7 @@ import logging
 from .options import (
     CONVENTION_CHOICES,
     DEFAULT_MAX_ITER,
+    FORWARD_CHOICES,
     METHOD_CHOICES,
     add_case_argument,
     add_json_option,
@@ -30,6 +31,7 @@ def estimate_text(case, model, result):
         f"{result.iterations} iterations ({result.n_solves} forward solves, "
         f"{result.wall_time:.1f} s)",
         f"  {result.message}",
+        *_check_lines(result),
         f"{'constant':>9} {'estimate':>10} {'sd':>9} {'initial':>9}",
     ]
     prior = result.stages[0] if result.stages else result
@@ -43,6 +45,17 @@ def estimate_text(case, model, result):
         d = fc - fm
         lines.append(f"{result.modes[i]:>4} {fm:12.1f} {fc:12.1f} {d:9.1f} {100 * d / fm:7.2f}")
     return "\n".join(lines)
+
+
+def _check_lines(result):
+    """The full model's check of a fast-model answer, if there is one."""
+    check = result.check
+    if check is None:
+        return []
+    return [
+        f"  fast model: built in {check.build_seconds:.1f} s ({check.build_solves} full "
+        f"solves); {check} ({check.n_full_solves} full solves besides the build)"
+    ]
 
 
 def run(args):
@@ -63,6 +76,7 @@ def run(args):
         max_iter=args.max_iter,
         convention=args.convention,
         pairing=args.pairing,
+        forward=args.forward,
     )
     if args.json:
         write_json(estimate_to_dict(result, case, model), args.json)
@@ -96,6 +110,15 @@ def register(sub):
         "full propagated prior covariance), 'printed' (section 3.6 as printed)",
     )
     add_pairing_option(p)
+    p.add_argument(
+        "--forward",
+        choices=FORWARD_CHOICES,
+        default="auto",
+        help="model iterated on: 'fast' (the certified reduced-basis model over the prior's "
+        "box, each answer checked by the full model; exit status 1 if they disagree), "
+        "'full' (the finite-element model throughout), 'auto' (default: fast above 5,000 "
+        "unknowns)",
+    )
     add_mesh_option(p)
     add_json_option(p)
     p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")

@@ -13,6 +13,7 @@ __all__ = [
     "PAIRING_CHOICES",
     "METHOD_CHOICES",
     "CONVENTION_CHOICES",
+    "FORWARD_CHOICES",
     "DEFAULT_MAX_ITER",
     "mesh_of",
     "positive_int",
@@ -75,6 +76,7 @@ PAIRING_CHOICES = ("auto", "mac", "likelihood", "index", "order")
 #: (``tests/test_startup.py`` holds them equal).
 METHOD_CHOICES = ("B", "MVE", "MVE-mod")
 CONVENTION_CHOICES = ("paper", "full-prior", "printed")
+FORWARD_CHOICES = ("auto", "fast", "full")
 DEFAULT_MAX_ITER = 200
 
 

@@ -9,15 +9,16 @@ its tolerance) and then checks the answer ``b*`` of each run once:
 
     max_i |f_i,fast(b*) / f_i,full(b*) - 1| <= tolerance   (the certificate's).
 
-Iterates inside the certified box use the reduced model; an iterate outside it (a prior far
-from the plate: the path leaves the prior's box before it comes back) is solved by the full
-model, as the full path would: off the box the reduced model is a Ritz model of unknown
-error, and MVE's path through a weakly determined direction is sensitive enough for such
-errors to change how many iterations it takes, or whether it is seen to stall. The answer is
-then checked. When the check fails (a corner the held-out points missed), the full solution
-at ``b*`` (the check's own solve) joins the basis and the run is repeated on the enriched
-model, at most :data:`CONFIRM_ROUNDS` times; an answer still not confirmed gets the status
-``"unconfirmed"``, an error in the log and a :class:`FastModelWarning`.
+Iterates inside the certified box use the reduced model. Off the box (a prior far from the
+plate: the path leaves the prior's box before it comes back; MVE moving a weakly determined
+constant far) the reduced model is a Ritz model of unknown error, and MVE's path through a
+weakly determined direction is sensitive enough for such errors to change how many
+iterations it takes, or whether it is seen to stall: there the full model checks the
+reduced one in a trust region and enriches it where it misses (:class:`BoxedModel`). The
+answer is then checked. When the check fails (a corner the held-out points missed), the
+full solution at ``b*`` (the check's own solve) joins the basis and the run is repeated on
+the enriched model, at most :data:`CONFIRM_ROUNDS` times; an answer still not confirmed
+gets the status ``"unconfirmed"``, an error in the log and a :class:`FastModelWarning`.
 
 ``forward="auto"`` takes this path on meshes of more than :data:`FAST_MIN_DOFS` unknowns;
 below that a full solve costs a few hundredths of a second and the build would cost more
@@ -59,6 +60,9 @@ FORWARDS = ("auto", "fast", "full")
 FAST_MIN_DOFS = 5000
 #: Runs on the fast model at most: the first, and one after each enrichment.
 CONFIRM_ROUNDS = 3
+#: Trust radius off the box (relative change of every coefficient) at the start, at least
+#: and at most (see :class:`BoxedModel`).
+RADIUS_START, RADIUS_MIN, RADIUS_MAX = 0.05, 0.01, 0.2
 #: Settings of :func:`bayesplate.reduced.fast_model` for the prior's box: 12 design points
 #: besides the prior mean, rounds of 4 random + 2 probe held-out points.
 FAST_DEFAULTS = {"n_snapshots": 12, "n_test": 4, "n_probe": 2}
@@ -135,8 +139,9 @@ def confirmed_run(run, model, fast):
     tolerance = fast.certificate.tolerance
     reduced, n_full = fast.reduced, 0
     for rounds in range(1, CONFIRM_ROUNDS + 1):
-        forward = BoxedModel(model, reduced)
+        forward = BoxedModel(model, reduced, tolerance)
         result = run(forward)
+        reduced = forward.reduced  # enriched along the path
         full, fast_Hz, full_Hz = _full_at(model, result)
         n_full += (full is not None) + forward.n_full
         check = FullModelCheck(
@@ -152,20 +157,33 @@ def confirmed_run(run, model, fast):
 
 
 class BoxedModel:
-    """The reduced model inside its certified box, the full model outside it (quietly).
+    """The reduced model where it is known to be right; the full model checks it elsewhere.
 
-    A :class:`bayesplate.forward.ForwardModel` for the estimators' iterations; the full
-    solves are counted in :attr:`n_full` (they are expected on a path from a far prior, so
-    they are not warned of as :class:`bayesplate.reduced.CertifiedModel` warns).
+    Inside the certified box the reduced model answers. Outside it, an iterate farther than
+    :attr:`radius` (relative, in every coefficient) from every point already checked is
+    solved by the full model too: if the reduced model missed it by more than the tolerance,
+    the full modes there join the basis (so that the path goes on in a model that is right
+    where it goes); the point is then trusted, and so are the iterates near it. The radius
+    doubles after a check the reduced model passed and halves after one it failed (between
+    :data:`RADIUS_MIN` and :data:`RADIUS_MAX`), as a trust region does. Iterates off the box
+    are expected on a path from a far prior or along a weakly determined constant, so they
+    are counted (:attr:`n_full`, :attr:`n_enriched`), not warned of.
+
+    A :class:`bayesplate.forward.ForwardModel`.
 
     Parameters
     ----------
     model : bayesplate.model.PlateModel
     reduced : bayesplate.reduced.ReducedModel
+    tolerance : float
+        Largest relative frequency error accepted (the certificate's).
     """
 
-    def __init__(self, model, reduced):
-        self.model, self.reduced, self.n_full = model, reduced, 0
+    def __init__(self, model, reduced, tolerance):
+        self.model, self.reduced, self.tolerance = model, reduced, float(tolerance)
+        self.n_full = self.n_enriched = 0
+        self.radius = RADIUS_START
+        self._trusted = np.empty((0, 6))
         self._most = reduced.n_modes + reduced.margin
 
     @property
@@ -179,15 +197,39 @@ class BoxedModel:
         return self.model.mass
 
     def solve(self, b, n_modes):
-        """Modes and sensitivities at `b`: reduced inside the box, full outside."""
-        if n_modes <= self._most and self.reduced.box.contains(b):
-            return self.reduced.solve(b, n_modes)
-        self.n_full += 1
-        return self.model.solve(np.asarray(b, dtype=float), n_modes)
+        """Modes and sensitivities at `b` (Pa), `n_modes` of them, from a model right there."""
+        b = np.asarray(b, dtype=float)
+        if n_modes > self._most:
+            self.n_full += 1
+            return self.model.solve(b, n_modes)
+        if not (self.reduced.box.contains(b) or self._near_trusted(b)):
+            self._check(b)
+        return self.reduced.solve(b, n_modes)
 
     def eigenvalues(self, b, n_modes):
-        """Eigenvalues at `b`, shape (n_modes,): reduced inside the box, full outside."""
+        """Eigenvalues at `b`, shape (n_modes,) (see :meth:`solve`)."""
         return self.solve(b, n_modes).eigenvalues
+
+    def _near_trusted(self, b):
+        if not len(self._trusted):
+            return False
+        gap = np.abs(b - self._trusted) / np.abs(self._trusted)
+        return bool(np.any(np.max(gap, axis=1) <= self.radius))
+
+    def _check(self, b):
+        """Solve the full model at `b`; enrich the basis if the reduced one misses it."""
+        n = self.reduced.n_modes
+        full = self.model.solve(b, self._most)
+        self.n_full += 1
+        error = np.max(np.abs(np.sqrt(self.reduced.eigenvalues(b, n) / full.eigenvalues[:n]) - 1))
+        if error > self.tolerance:
+            self.reduced = self.reduced.enrich(self.model, b[None, :], [full])
+            self.n_enriched += 1
+            self.radius = max(self.radius / 2.0, RADIUS_MIN)
+        else:
+            self.radius = min(self.radius * 2.0, RADIUS_MAX)
+        log.debug("off the box: reduced error %.1e, radius now %.3g", error, self.radius)
+        self._trusted = np.vstack([self._trusted, b])
 
 
 def _full_at(model, result):
