@@ -123,12 +123,16 @@ class PlateModel:
         self.mesh = RectangularMesh(float(length), float(width), int(mesh[0]), int(mesh[1]))
         self.element = TSDTRectangle(self.mesh.dx, self.mesh.dy, shear_order=shear_order)
         self.assembler = Assembler(self.mesh.element_dofs, self.mesh.n_dofs)
-        self.stiffness_terms = self.assembler.uniform_data(self.element_stiffness_terms())
+        element_terms = self.element_stiffness_terms()
+        self.stiffness_terms = self.assembler.uniform_data(element_terms)
+        # the same K_j^e on every element: sensitivities element by element (see there)
+        self._uniform_terms = (self.stiffness_terms, element_terms)
         self.mass_data = self.assembler.uniform_data(self.element_mass())
         self.extra_stiffness_data = None
         self.free_dofs = self._free_dofs()
         self._ordering = self._free_ordering()
         self._rigid_basis = self._rigid_basis_on_free_dofs()
+        self._maps = None  # index maps to the free-dof matrices, built on the first solve
 
     @classmethod
     def from_case(cls, case, mesh=None, **kwargs):
@@ -273,7 +277,7 @@ class PlateModel:
         span = max(self.mesh.a, self.mesh.b)
         return -0.1 * (np.pi / span) ** 4 * min(D[0, 0], D[1, 1], D[2, 2]) / I0
 
-    def solve(self, b, n_modes=14):
+    def solve(self, b, n_modes=14, method="block"):
         """Lowest ``n_modes`` elastic modes and their sensitivities.
 
         Parameters
@@ -281,31 +285,159 @@ class PlateModel:
         b : array_like, shape (6,)
             ``(C11, C22, C12, C66, C44, C55)`` in Pa.
         n_modes : int
+        method : {"block", "arpack"}
+            Eigensolver (:func:`bayesplate.fem.eigen.lowest_modes`).
 
         Returns
         -------
         ModalResult
         """
         b = np.asarray(b, dtype=float)
-        free = self.free_dofs
-        K = self.stiffness(b)[free][:, free]
-        M = self.mass[free][:, free]
-        n_rigid = 6 if self.boundary == "free" else 0
-        rigid = None if self._rigid_basis is None else self._rigid_basis[free]
-        sol = lowest_modes(
-            K,
-            M,
-            n_modes,
-            self.spectral_shift(b),
-            n_rigid_max=n_rigid,
-            ordering=self._ordering,
-            rigid_basis=rigid,
-        )
-        vectors = np.zeros((self.mesh.n_dofs, len(sol.eigenvalues)))
-        vectors[free] = sol.vectors
+        k_data = self._stiffness_data(b)
+        shift = self.spectral_shift(b)
+        parts = [self._free_maps()]
+        if method == "block" and self._decoupled(k_data):
+            parts = self._split_maps()
+        values, shapes, rigid_values = [], [], []
+        for part in parts:
+            sol = self._solve_part(part, k_data, shift, n_modes, method)
+            values.append(sol.eigenvalues)
+            rigid_values.append(sol.rigid_eigenvalues)
+            vectors = np.zeros((self.mesh.n_dofs, len(sol.eigenvalues)))
+            vectors[part["dofs"]] = sol.vectors
+            shapes.append(vectors)
+        values = np.concatenate(values)
+        keep = np.argsort(values, kind="stable")[:n_modes]
+        vectors = np.hstack(shapes)[:, keep]
         return ModalResult(
-            b, sol.eigenvalues, vectors, self.sensitivities(vectors), sol.rigid_eigenvalues
+            b,
+            values[keep],
+            vectors,
+            self.sensitivities(vectors),
+            np.sort(np.concatenate(rigid_values)),
         )
+
+    def _solve_part(self, part, k_data, shift, n_modes, method):
+        """:func:`lowest_modes` on the unknowns of one index map (see :meth:`_free_maps`)."""
+        n = len(part["dofs"])
+        K = sp.csr_matrix(
+            (k_data[part["csr"]], part["csr_indices"], part["csr_indptr"]), shape=(n, n)
+        )
+        A = (k_data - shift * self.mass_data)[part["csc"]]
+        shifted = sp.csc_matrix((A, part["csc_indices"], part["csc_indptr"]), shape=(n, n))
+        rigid = None
+        if self._rigid_basis is not None:
+            rigid = self._rigid_basis[part["dofs"]][:, part["rigid"]]
+        return lowest_modes(
+            K,
+            self._part_mass(part),
+            n_modes,
+            shift,
+            n_rigid_max=0 if rigid is None else rigid.shape[1],
+            ordering="given",
+            rigid_basis=rigid,
+            method=method,
+            shifted=shifted,
+        )
+
+    def _stiffness_data(self, b):
+        """CSR data of ``K(b)`` on all unknowns, shape (nnz,)."""
+        data = np.asarray(b, dtype=float) @ self.stiffness_terms
+        if self.extra_stiffness_data is not None:
+            data = data + self.extra_stiffness_data
+        return data
+
+    def _index_maps(self, dofs):
+        """Index maps from the assembled CSR data to the matrix on ``dofs`` (in that order).
+
+        ``csr``/``csc`` give, for each stored entry of the submatrix in that format, the
+        position of its value in the assembled data; ``bsr`` the same for 8 x 8 blocks (one
+        node's unknowns; padding points at an extra zero appended to the data), or None
+        when ``dofs`` do not come in whole nodes; ``rigid`` the columns of the rigid-body
+        basis that live on ``dofs`` only.
+        """
+        nnz = self.assembler.nnz
+        sub = self.assembler.matrix(np.arange(1.0, nnz + 1.0))[dofs][:, dofs]
+        sub.sort_indices()
+        csc = sub.tocsc()
+        csc.sort_indices()
+        maps = {
+            "dofs": dofs,
+            "csr": sub.data.astype(np.int64) - 1,
+            "csr_indices": sub.indices,
+            "csr_indptr": sub.indptr,
+            "csc": csc.data.astype(np.int64) - 1,
+            "csc_indices": csc.indices,
+            "csc_indptr": csc.indptr,
+            "bsr": None,
+            "rigid": None,
+            "mass": (None, None),  # (mass_data it was made from, the matrix)
+        }
+        if len(dofs) % 8 == 0 and np.all(dofs.reshape(-1, 8) % 8 == np.arange(8)):
+            bsr = sub.tobsr(blocksize=(8, 8))
+            maps["bsr"] = (bsr.data.astype(np.int64) - 1, bsr.indices, bsr.indptr)
+        if self._rigid_basis is not None:
+            outside = np.ones(self.mesh.n_dofs, dtype=bool)
+            outside[dofs] = False
+            maps["rigid"] = np.flatnonzero(~np.any(self._rigid_basis[outside], axis=0))
+        return maps
+
+    def _free_maps(self):
+        """Index maps of all free unknowns in nested-dissection order, built once."""
+        if self._maps is None:
+            self._maps = {"all": self._index_maps(self.free_dofs[self._ordering])}
+        return self._maps["all"]
+
+    def _split_maps(self):
+        """Index maps of the free in-plane (u, v) and bending unknowns, built once."""
+        dofs = self._free_maps()["dofs"]
+        if "split" not in self._maps:
+            in_plane = dofs % 8 < 2
+            self._maps["split"] = [
+                self._index_maps(dofs[in_plane]),
+                self._index_maps(dofs[~in_plane]),
+            ]
+        return self._maps["split"]
+
+    def _decoupled(self, k_data):
+        """Whether K(b) and M have no entry coupling in-plane and bending unknowns.
+
+        True for a symmetric laminate (no B, no odd inertias) whose supports treat the two
+        alike: the eigenproblem is then two smaller ones, solved apart (exactly the same
+        modes, at about half the cost of the factorisation and solves).
+        """
+        self._free_maps()
+        if "coupling" not in self._maps:
+            rows = np.repeat(np.arange(self.mesh.n_dofs), np.diff(self.assembler.indptr))
+            in_plane = np.arange(self.mesh.n_dofs) % 8 < 2
+            self._maps["coupling"] = np.flatnonzero(
+                in_plane[rows] != in_plane[self.assembler.indices]
+            )
+        coupling = self._maps["coupling"]
+        if np.any(k_data[coupling]) or np.any(self.mass_data[coupling]):
+            return False
+        parts = self._split_maps()
+        if self._rigid_basis is not None:
+            # every rigid-body motion is either in-plane or bending
+            return sum(len(part["rigid"]) for part in parts) == self._rigid_basis.shape[1]
+        return True
+
+    def _part_mass(self, part):
+        """Mass on one index map's unknowns (8 x 8 blocks if it can), cached per mass data."""
+        data, mass = part["mass"]
+        if data is self.mass_data:
+            return mass
+        if part["bsr"] is None:
+            mass = sp.csr_matrix(
+                (self.mass_data[part["csr"]], part["csr_indices"], part["csr_indptr"]),
+                shape=(len(part["dofs"]),) * 2,
+            )
+        else:
+            index, indices, indptr = part["bsr"]
+            padded = np.append(self.mass_data, 0.0)  # index -1: the padding of the blocks
+            mass = sp.bsr_matrix((padded[index], indices, indptr), shape=(len(part["dofs"]),) * 2)
+        part["mass"] = (self.mass_data, mass)
+        return mass
 
     def eigenvalues(self, b, n_modes=14):
         """Lowest `n_modes` elastic eigenvalues at `b`, rad^2/s^2, shape (n_modes,).
@@ -339,7 +471,27 @@ class PlateModel:
         return sp.csr_matrix((values.ravel(), (rows, cols)), shape=shape)
 
     def sensitivities(self, vectors):
-        """``d lambda_i / d b_j = a_i^T K_j a_i`` for mass-normalised ``a_i``, shape (n, 6)."""
-        return np.column_stack(
-            [np.einsum("di,di->i", vectors, self.stiffness_term(j) @ vectors) for j in range(6)]
+        """``d lambda_i / d b_j = a_i^T K_j a_i`` for mass-normalised ``a_i``, shape (n, 6).
+
+        While the model's ``K_j`` are those it was built with, every element has the same
+        ``K_j^e`` and ``a^T K_j a = sum_e a_e^T K_j^e a_e = <K_j^e, S>`` with the 32 x 32
+        ``S = sum_e a_e a_e^T`` of each mode: small dense products. Otherwise (terms
+        replaced by :meth:`modified`) the six ``K_j``, which share one pattern, are stacked
+        into one ``(6 n_dofs, n_dofs)`` CSR matrix for one sparse product.
+        """
+        vectors = np.asarray(vectors, dtype=float)
+        data, element_terms = self._uniform_terms
+        if self.stiffness_terms is data:
+            local = vectors[self.mesh.element_dofs]  # (n_elements, 32, n)
+            local = np.ascontiguousarray(local.transpose(2, 1, 0))  # (n, 32, n_elements)
+            S = local @ local.transpose(0, 2, 1)  # (n, 32, 32)
+            return np.einsum("jab,iab->ij", element_terms, S)
+        n, nnz = self.mesh.n_dofs, self.assembler.nnz
+        terms = np.ascontiguousarray(self.stiffness_terms).reshape(-1)
+        indices = np.tile(self.assembler.indices, 6)
+        indptr = np.concatenate(
+            [self.assembler.indptr[:-1] + j * nnz for j in range(6)] + [[6 * nnz]]
         )
+        stacked = sp.csr_matrix((terms, indices, indptr), shape=(6 * n, n))
+        products = (stacked @ vectors).reshape(6, n, -1)
+        return np.einsum("jdi,di->ij", products, vectors)
