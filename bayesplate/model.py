@@ -19,6 +19,7 @@ from .fem.assembly import Assembler
 from .fem.eigen import lowest_modes
 from .fem.element import TSDTRectangle
 from .fem.mesh import RectangularMesh
+from .fem.submatrix import SubPattern
 from .quantities import hz_from_eigenvalue
 
 __all__ = ["BOUNDARIES", "DEFAULT_MESH", "ModalResult", "PlateModel"]
@@ -132,7 +133,7 @@ class PlateModel:
         self.free_dofs = self._free_dofs()
         self._ordering = self._free_ordering()
         self._rigid_basis = self._rigid_basis_on_free_dofs()
-        self._maps = None  # index maps to the free-dof matrices, built on the first solve
+        self._parts = None  # index maps to the free-dof matrices, built on the first solve
 
     @classmethod
     def from_case(cls, case, mesh=None, **kwargs):
@@ -295,16 +296,27 @@ class PlateModel:
         b = np.asarray(b, dtype=float)
         k_data = self._stiffness_data(b)
         shift = self.spectral_shift(b)
-        parts = [self._free_maps()]
+        parts = [self._free_part()]
         if method == "block" and self._decoupled(k_data):
-            parts = self._split_maps()
+            parts = sorted(self._split_parts(), key=lambda part: -len(part["pattern"].dofs))
         values, shapes, rigid_values = [], [], []
+        bound = np.inf  # the largest eigenvalue the merged n_modes can reach
         for part in parts:
-            sol = self._solve_part(part, k_data, shift, n_modes, method)
-            values.append(sol.eigenvalues)
+            # the first part's n_modes bound the others: of those, only the modes below
+            # the bound can count, so ask for 2, 4, ... until one lies above it
+            wanted = n_modes if np.isinf(bound) else min(2, n_modes)
+            while True:
+                sol = self._solve_part(part, k_data, shift, wanted, method)
+                found = sol.eigenvalues
+                if len(found) < wanted or wanted >= n_modes or found[-1] > bound:
+                    break
+                wanted = min(2 * wanted, n_modes)
+            if len(found) == n_modes:
+                bound = min(bound, found[-1])
+            values.append(found)
             rigid_values.append(sol.rigid_eigenvalues)
-            vectors = np.zeros((self.mesh.n_dofs, len(sol.eigenvalues)))
-            vectors[part["dofs"]] = sol.vectors
+            vectors = np.zeros((self.mesh.n_dofs, len(found)))
+            vectors[part["pattern"].dofs] = sol.vectors
             shapes.append(vectors)
         values = np.concatenate(values)
         keep = np.argsort(values, kind="stable")[:n_modes]
@@ -318,26 +330,25 @@ class PlateModel:
         )
 
     def _solve_part(self, part, k_data, shift, n_modes, method):
-        """:func:`lowest_modes` on the unknowns of one index map (see :meth:`_free_maps`)."""
-        n = len(part["dofs"])
-        K = sp.csr_matrix(
-            (k_data[part["csr"]], part["csr_indices"], part["csr_indptr"]), shape=(n, n)
-        )
-        A = (k_data - shift * self.mass_data)[part["csc"]]
-        shifted = sp.csc_matrix((A, part["csc_indices"], part["csc_indptr"]), shape=(n, n))
+        """:func:`lowest_modes` on the unknowns of one part (see :meth:`_part`)."""
+        pattern = part["pattern"]
+        data, mass = part["mass"]
+        if data is not self.mass_data:
+            mass = pattern.blocked(self.mass_data)
+            part["mass"] = (self.mass_data, mass)
         rigid = None
         if self._rigid_basis is not None:
-            rigid = self._rigid_basis[part["dofs"]][:, part["rigid"]]
+            rigid = self._rigid_basis[pattern.dofs][:, part["rigid"]]
         return lowest_modes(
-            K,
-            self._part_mass(part),
+            pattern.csr(k_data),
+            mass,
             n_modes,
             shift,
             n_rigid_max=0 if rigid is None else rigid.shape[1],
             ordering="given",
             rigid_basis=rigid,
             method=method,
-            shifted=shifted,
+            shifted=pattern.csc(k_data - shift * self.mass_data),
         )
 
     def _stiffness_data(self, b):
@@ -347,97 +358,49 @@ class PlateModel:
             data = data + self.extra_stiffness_data
         return data
 
-    def _index_maps(self, dofs):
-        """Index maps from the assembled CSR data to the matrix on ``dofs`` (in that order).
-
-        ``csr``/``csc`` give, for each stored entry of the submatrix in that format, the
-        position of its value in the assembled data; ``bsr`` the same for 8 x 8 blocks (one
-        node's unknowns; padding points at an extra zero appended to the data), or None
-        when ``dofs`` do not come in whole nodes; ``rigid`` the columns of the rigid-body
-        basis that live on ``dofs`` only.
-        """
-        nnz = self.assembler.nnz
-        sub = self.assembler.matrix(np.arange(1.0, nnz + 1.0))[dofs][:, dofs]
-        sub.sort_indices()
-        csc = sub.tocsc()
-        csc.sort_indices()
-        maps = {
-            "dofs": dofs,
-            "csr": sub.data.astype(np.int64) - 1,
-            "csr_indices": sub.indices,
-            "csr_indptr": sub.indptr,
-            "csc": csc.data.astype(np.int64) - 1,
-            "csc_indices": csc.indices,
-            "csc_indptr": csc.indptr,
-            "bsr": None,
-            "rigid": None,
-            "mass": (None, None),  # (mass_data it was made from, the matrix)
-        }
-        if len(dofs) % 8 == 0 and np.all(dofs.reshape(-1, 8) % 8 == np.arange(8)):
-            bsr = sub.tobsr(blocksize=(8, 8))
-            maps["bsr"] = (bsr.data.astype(np.int64) - 1, bsr.indices, bsr.indptr)
+    def _part(self, dofs):
+        """Index maps to the matrices on ``dofs``, the rigid motions living there only."""
+        part = {"pattern": SubPattern(self.assembler, dofs), "rigid": None, "mass": (None, None)}
         if self._rigid_basis is not None:
             outside = np.ones(self.mesh.n_dofs, dtype=bool)
             outside[dofs] = False
-            maps["rigid"] = np.flatnonzero(~np.any(self._rigid_basis[outside], axis=0))
-        return maps
+            part["rigid"] = np.flatnonzero(~np.any(self._rigid_basis[outside], axis=0))
+        return part
 
-    def _free_maps(self):
-        """Index maps of all free unknowns in nested-dissection order, built once."""
-        if self._maps is None:
-            self._maps = {"all": self._index_maps(self.free_dofs[self._ordering])}
-        return self._maps["all"]
+    def _free_part(self):
+        """All free unknowns in nested-dissection order, built on the first solve."""
+        if self._parts is None:
+            self._parts = {"all": self._part(self.free_dofs[self._ordering])}
+        return self._parts["all"]
 
-    def _split_maps(self):
-        """Index maps of the free in-plane (u, v) and bending unknowns, built once."""
-        dofs = self._free_maps()["dofs"]
-        if "split" not in self._maps:
+    def _split_parts(self):
+        """The free in-plane (u, v) and bending unknowns apart, built once."""
+        dofs = self._free_part()["pattern"].dofs
+        if "split" not in self._parts:
             in_plane = dofs % 8 < 2
-            self._maps["split"] = [
-                self._index_maps(dofs[in_plane]),
-                self._index_maps(dofs[~in_plane]),
-            ]
-        return self._maps["split"]
+            self._parts["split"] = [self._part(dofs[in_plane]), self._part(dofs[~in_plane])]
+        return self._parts["split"]
 
     def _decoupled(self, k_data):
         """Whether K(b) and M have no entry coupling in-plane and bending unknowns.
 
         True for a symmetric laminate (no B, no odd inertias) whose supports treat the two
-        alike: the eigenproblem is then two smaller ones, solved apart (exactly the same
-        modes, at about half the cost of the factorisation and solves).
+        alike, and whose every rigid motion is either in-plane or bending: the eigenproblem
+        is then two smaller ones, solved apart (the same modes, at about half the cost).
         """
-        self._free_maps()
-        if "coupling" not in self._maps:
+        self._free_part()
+        if "coupling" not in self._parts:
             rows = np.repeat(np.arange(self.mesh.n_dofs), np.diff(self.assembler.indptr))
             in_plane = np.arange(self.mesh.n_dofs) % 8 < 2
-            self._maps["coupling"] = np.flatnonzero(
-                in_plane[rows] != in_plane[self.assembler.indices]
-            )
-        coupling = self._maps["coupling"]
+            across = in_plane[rows] != in_plane[self.assembler.indices]
+            self._parts["coupling"] = np.flatnonzero(across)
+        coupling = self._parts["coupling"]
         if np.any(k_data[coupling]) or np.any(self.mass_data[coupling]):
             return False
-        parts = self._split_maps()
-        if self._rigid_basis is not None:
-            # every rigid-body motion is either in-plane or bending
-            return sum(len(part["rigid"]) for part in parts) == self._rigid_basis.shape[1]
-        return True
-
-    def _part_mass(self, part):
-        """Mass on one index map's unknowns (8 x 8 blocks if it can), cached per mass data."""
-        data, mass = part["mass"]
-        if data is self.mass_data:
-            return mass
-        if part["bsr"] is None:
-            mass = sp.csr_matrix(
-                (self.mass_data[part["csr"]], part["csr_indices"], part["csr_indptr"]),
-                shape=(len(part["dofs"]),) * 2,
-            )
-        else:
-            index, indices, indptr = part["bsr"]
-            padded = np.append(self.mass_data, 0.0)  # index -1: the padding of the blocks
-            mass = sp.bsr_matrix((padded[index], indices, indptr), shape=(len(part["dofs"]),) * 2)
-        part["mass"] = (self.mass_data, mass)
-        return mass
+        if self._rigid_basis is None:
+            return True
+        n_rigid = sum(len(part["rigid"]) for part in self._split_parts())
+        return n_rigid == self._rigid_basis.shape[1]
 
     def eigenvalues(self, b, n_modes=14):
         """Lowest `n_modes` elastic eigenvalues at `b`, rad^2/s^2, shape (n_modes,).
