@@ -209,10 +209,7 @@ class PlateModel:
 
     def stiffness(self, b):
         """Assembled ``K(b) = sum_j b_j K_j`` (+ any extra stiffness; CSR, all unknowns)."""
-        data = sum(bj * term for bj, term in zip(b, self.stiffness_terms, strict=True))
-        if self.extra_stiffness_data is not None:
-            data = data + self.extra_stiffness_data
-        return self.assembler.matrix(data)
+        return self.assembler.matrix(self._stiffness_data(b))
 
     def stiffness_term(self, j):
         """Assembled ``K_j = d K / d b_j`` (CSR, all unknowns)."""
@@ -353,7 +350,7 @@ class PlateModel:
 
     def _stiffness_data(self, b):
         """CSR data of ``K(b)`` on all unknowns, shape (nnz,)."""
-        data = np.asarray(b, dtype=float) @ self.stiffness_terms
+        data = sum(bj * term for bj, term in zip(b, self.stiffness_terms, strict=True))
         if self.extra_stiffness_data is not None:
             data = data + self.extra_stiffness_data
         return data

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse.linalg as spla
-from threadpoolctl import threadpool_limits
+from threadpoolctl import ThreadpoolController
 
 from .block_eigen import block_lanczos
 
@@ -34,6 +34,9 @@ BLOCK_SIZE = 4
 #: Relative residual ``||T x - mu x||_M / mu`` of the block method's Ritz pairs, with
 #: ``T = (K - sigma M)^-1 M``: eigenvalues then agree with ARPACK's to about 1e-12.
 BLOCK_TOL = 1e-8
+#: BLAS threads during the solve: SuperLU and the Lanczos work on vectors and small blocks,
+#: where threads only contend (benchmarks/bench_forward.py measures 1 against 2).
+BLAS_THREADS = 1
 
 
 @dataclass(frozen=True)
@@ -107,10 +110,9 @@ def lowest_modes(
         raise ValueError(f"method = {method!r}: must be one of {METHODS}")
     n = K.shape[0]
     A = K - shift * M if shifted is None else shifted
-    # BLAS threads only contend here (SuperLU and the Lanczos work on vectors and small
-    # blocks): measured 3x to 7x slower with OpenBLAS's default threads on a loaded 2-core
+    # ARPACK with OpenBLAS's default threads: measured 3x to 7x slower on a loaded 2-core
     # machine
-    with threadpool_limits(limits=1, user_api="blas"):
+    with _blas().limit(limits=BLAS_THREADS, user_api="blas"):
         solve = _shift_invert(A, ordering)
         found = None
         if method == "block":
@@ -146,6 +148,17 @@ def lowest_modes(
         vecs /= np.sqrt(np.einsum("di,di->i", vecs, M @ vecs))
         refined = np.einsum("di,di->i", vecs, K @ vecs)
     return EigenSolution(refined, vecs, vals[rigid])
+
+
+def _blas():
+    """One thread-pool controller for the process (making one inspects the libraries, ~5 ms)."""
+    global _CONTROLLER
+    if _CONTROLLER is None:
+        _CONTROLLER = ThreadpoolController()
+    return _CONTROLLER
+
+
+_CONTROLLER = None
 
 
 def _shift_invert(A, ordering):
