@@ -134,6 +134,10 @@ class PlateModel:
         self._ordering = self._free_ordering()
         self._rigid_basis = self._rigid_basis_on_free_dofs()
         self._parts = None  # index maps to the free-dof matrices, built on the first solve
+        #: Solve in-plane and bending unknowns apart when K and M do not couple them (see
+        #: :meth:`_decoupled`). Off by default: the in-plane modes' w is then exactly zero,
+        #: not round-off, and code that divides by a mode's w norm (MAC) must allow for it.
+        self.split_decoupled = False
 
     @classmethod
     def from_case(cls, case, mesh=None, **kwargs):
@@ -294,7 +298,7 @@ class PlateModel:
         k_data = self._stiffness_data(b)
         shift = self.spectral_shift(b)
         parts = [self._free_part()]
-        if method == "block" and self._decoupled(k_data):
+        if method == "block" and self.split_decoupled and self._decoupled(k_data):
             parts = sorted(self._split_parts(), key=lambda part: -len(part["pattern"].dofs))
         values, shapes, rigid_values = [], [], []
         bound = np.inf  # the largest eigenvalue the merged n_modes can reach

@@ -75,11 +75,17 @@ def test_frederiksen_50x50_matches_arpack(frederiksen):
     _assert_same_modes(block, arpack, M)
 
 
-def test_frederiksen_model_fast_path_matches_arpack_path(frederiksen):
-    """model.solve: split in-plane / bending (single ply), index maps, element sensitivities."""
+@pytest.mark.parametrize("split", [False, True])
+def test_frederiksen_model_fast_path_matches_arpack_path(frederiksen, split):
+    """model.solve: index maps, element sensitivities, and (split) in-plane / bending apart."""
     model, b = frederiksen
-    fast, old = model.solve(b, 14), model.solve(b, 14, method="arpack")
-    assert model._decoupled(model._stiffness_data(b))  # the split path is the one tested
+    model.split_decoupled = split
+    try:
+        fast = model.solve(b, 14)
+    finally:
+        model.split_decoupled = False
+    old = model.solve(b, 14, method="arpack")
+    assert model._decoupled(model._stiffness_data(b))  # single ply: the split applies
     assert fast.n_rigid == old.n_rigid == 6
     _assert_same_modes(fast, old, model.mass)
     scale = fast.eigenvalues[:, None] / b[None, :]
@@ -93,8 +99,10 @@ def test_square_isotropic_plate_degenerate_pairs():
     lam = arpack.eigenvalues
     assert np.sum(np.diff(lam) < 1e-8 * lam[1:]) >= 2  # the case has degenerate pairs
     _assert_same_modes(block, arpack, M)
-    fast = model.solve(B_ISO, 12)  # the split path
-    _assert_same_modes(fast, model.solve(B_ISO, 12, method="arpack"), model.mass)
+    arpack = model.solve(B_ISO, 12, method="arpack")
+    _assert_same_modes(model.solve(B_ISO, 12), arpack, model.mass)
+    model.split_decoupled = True
+    _assert_same_modes(model.solve(B_ISO, 12), arpack, model.mass)
 
 
 def test_simply_supported_plate_has_no_rigid_modes():
