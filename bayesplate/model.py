@@ -19,6 +19,7 @@ from .fem.assembly import Assembler
 from .fem.eigen import lowest_modes
 from .fem.element import TSDTRectangle
 from .fem.mesh import RectangularMesh
+from .fem.submatrix import SubPattern
 from .quantities import hz_from_eigenvalue
 
 __all__ = ["BOUNDARIES", "DEFAULT_MESH", "ModalResult", "PlateModel"]
@@ -123,12 +124,20 @@ class PlateModel:
         self.mesh = RectangularMesh(float(length), float(width), int(mesh[0]), int(mesh[1]))
         self.element = TSDTRectangle(self.mesh.dx, self.mesh.dy, shear_order=shear_order)
         self.assembler = Assembler(self.mesh.element_dofs, self.mesh.n_dofs)
-        self.stiffness_terms = self.assembler.uniform_data(self.element_stiffness_terms())
+        element_terms = self.element_stiffness_terms()
+        self.stiffness_terms = self.assembler.uniform_data(element_terms)
+        # the same K_j^e on every element: sensitivities element by element (see there)
+        self._uniform_terms = (self.stiffness_terms, element_terms)
         self.mass_data = self.assembler.uniform_data(self.element_mass())
         self.extra_stiffness_data = None
         self.free_dofs = self._free_dofs()
         self._ordering = self._free_ordering()
         self._rigid_basis = self._rigid_basis_on_free_dofs()
+        self._parts = None  # index maps to the free-dof matrices, built on the first solve
+        #: Solve in-plane and bending unknowns apart when K and M do not couple them (see
+        #: :meth:`_decoupled`). Off by default: the in-plane modes' w is then exactly zero,
+        #: not round-off, and code that divides by a mode's w norm (MAC) must allow for it.
+        self.split_decoupled = False
 
     @classmethod
     def from_case(cls, case, mesh=None, **kwargs):
@@ -204,10 +213,7 @@ class PlateModel:
 
     def stiffness(self, b):
         """Assembled ``K(b) = sum_j b_j K_j`` (+ any extra stiffness; CSR, all unknowns)."""
-        data = sum(bj * term for bj, term in zip(b, self.stiffness_terms, strict=True))
-        if self.extra_stiffness_data is not None:
-            data = data + self.extra_stiffness_data
-        return self.assembler.matrix(data)
+        return self.assembler.matrix(self._stiffness_data(b))
 
     def stiffness_term(self, j):
         """Assembled ``K_j = d K / d b_j`` (CSR, all unknowns)."""
@@ -273,7 +279,7 @@ class PlateModel:
         span = max(self.mesh.a, self.mesh.b)
         return -0.1 * (np.pi / span) ** 4 * min(D[0, 0], D[1, 1], D[2, 2]) / I0
 
-    def solve(self, b, n_modes=14):
+    def solve(self, b, n_modes=14, method="block"):
         """Lowest ``n_modes`` elastic modes and their sensitivities.
 
         Parameters
@@ -281,31 +287,121 @@ class PlateModel:
         b : array_like, shape (6,)
             ``(C11, C22, C12, C66, C44, C55)`` in Pa.
         n_modes : int
+        method : {"block", "arpack"}
+            Eigensolver (:func:`bayesplate.fem.eigen.lowest_modes`).
 
         Returns
         -------
         ModalResult
         """
         b = np.asarray(b, dtype=float)
-        free = self.free_dofs
-        K = self.stiffness(b)[free][:, free]
-        M = self.mass[free][:, free]
-        n_rigid = 6 if self.boundary == "free" else 0
-        rigid = None if self._rigid_basis is None else self._rigid_basis[free]
-        sol = lowest_modes(
-            K,
-            M,
-            n_modes,
-            self.spectral_shift(b),
-            n_rigid_max=n_rigid,
-            ordering=self._ordering,
-            rigid_basis=rigid,
-        )
-        vectors = np.zeros((self.mesh.n_dofs, len(sol.eigenvalues)))
-        vectors[free] = sol.vectors
+        k_data = self._stiffness_data(b)
+        shift = self.spectral_shift(b)
+        parts = [self._free_part()]
+        if method == "block" and self.split_decoupled and self._decoupled(k_data):
+            parts = sorted(self._split_parts(), key=lambda part: -len(part["pattern"].dofs))
+        values, shapes, rigid_values = [], [], []
+        bound = np.inf  # the largest eigenvalue the merged n_modes can reach
+        for part in parts:
+            # the first part's n_modes bound the others: of those, only the modes below
+            # the bound can count, so ask for 2, 4, ... until one lies above it
+            wanted = n_modes if np.isinf(bound) else min(2, n_modes)
+            while True:
+                sol = self._solve_part(part, k_data, shift, wanted, method)
+                found = sol.eigenvalues
+                if len(found) < wanted or wanted >= n_modes or found[-1] > bound:
+                    break
+                wanted = min(2 * wanted, n_modes)
+            if len(found) == n_modes:
+                bound = min(bound, found[-1])
+            values.append(found)
+            rigid_values.append(sol.rigid_eigenvalues)
+            vectors = np.zeros((self.mesh.n_dofs, len(found)))
+            vectors[part["pattern"].dofs] = sol.vectors
+            shapes.append(vectors)
+        values = np.concatenate(values)
+        keep = np.argsort(values, kind="stable")[:n_modes]
+        vectors = np.hstack(shapes)[:, keep]
         return ModalResult(
-            b, sol.eigenvalues, vectors, self.sensitivities(vectors), sol.rigid_eigenvalues
+            b,
+            values[keep],
+            vectors,
+            self.sensitivities(vectors),
+            np.sort(np.concatenate(rigid_values)),
         )
+
+    def _solve_part(self, part, k_data, shift, n_modes, method):
+        """:func:`lowest_modes` on the unknowns of one part (see :meth:`_part`)."""
+        pattern = part["pattern"]
+        data, mass = part["mass"]
+        if data is not self.mass_data:
+            mass = pattern.blocked(self.mass_data)
+            part["mass"] = (self.mass_data, mass)
+        rigid = None
+        if self._rigid_basis is not None:
+            rigid = self._rigid_basis[pattern.dofs][:, part["rigid"]]
+        return lowest_modes(
+            pattern.csr(k_data),
+            mass,
+            n_modes,
+            shift,
+            n_rigid_max=0 if rigid is None else rigid.shape[1],
+            ordering="given",
+            rigid_basis=rigid,
+            method=method,
+            shifted=pattern.csc(k_data - shift * self.mass_data),
+        )
+
+    def _stiffness_data(self, b):
+        """CSR data of ``K(b)`` on all unknowns, shape (nnz,)."""
+        data = sum(bj * term for bj, term in zip(b, self.stiffness_terms, strict=True))
+        if self.extra_stiffness_data is not None:
+            data = data + self.extra_stiffness_data
+        return data
+
+    def _part(self, dofs):
+        """Index maps to the matrices on ``dofs``, the rigid motions living there only."""
+        part = {"pattern": SubPattern(self.assembler, dofs), "rigid": None, "mass": (None, None)}
+        if self._rigid_basis is not None:
+            outside = np.ones(self.mesh.n_dofs, dtype=bool)
+            outside[dofs] = False
+            part["rigid"] = np.flatnonzero(~np.any(self._rigid_basis[outside], axis=0))
+        return part
+
+    def _free_part(self):
+        """All free unknowns in nested-dissection order, built on the first solve."""
+        if self._parts is None:
+            self._parts = {"all": self._part(self.free_dofs[self._ordering])}
+        return self._parts["all"]
+
+    def _split_parts(self):
+        """The free in-plane (u, v) and bending unknowns apart, built once."""
+        dofs = self._free_part()["pattern"].dofs
+        if "split" not in self._parts:
+            in_plane = dofs % 8 < 2
+            self._parts["split"] = [self._part(dofs[in_plane]), self._part(dofs[~in_plane])]
+        return self._parts["split"]
+
+    def _decoupled(self, k_data):
+        """Whether K(b) and M have no entry coupling in-plane and bending unknowns.
+
+        True for a symmetric laminate (no B, no odd inertias) whose supports treat the two
+        alike, and whose every rigid motion is either in-plane or bending: the eigenproblem
+        is then two smaller ones, solved apart (the same modes, at about half the cost).
+        """
+        self._free_part()
+        if "coupling" not in self._parts:
+            rows = np.repeat(np.arange(self.mesh.n_dofs), np.diff(self.assembler.indptr))
+            in_plane = np.arange(self.mesh.n_dofs) % 8 < 2
+            across = in_plane[rows] != in_plane[self.assembler.indices]
+            self._parts["coupling"] = np.flatnonzero(across)
+        coupling = self._parts["coupling"]
+        if np.any(k_data[coupling]) or np.any(self.mass_data[coupling]):
+            return False
+        if self._rigid_basis is None:
+            return True
+        n_rigid = sum(len(part["rigid"]) for part in self._split_parts())
+        return n_rigid == self._rigid_basis.shape[1]
 
     def eigenvalues(self, b, n_modes=14):
         """Lowest `n_modes` elastic eigenvalues at `b`, rad^2/s^2, shape (n_modes,).
@@ -339,7 +435,27 @@ class PlateModel:
         return sp.csr_matrix((values.ravel(), (rows, cols)), shape=shape)
 
     def sensitivities(self, vectors):
-        """``d lambda_i / d b_j = a_i^T K_j a_i`` for mass-normalised ``a_i``, shape (n, 6)."""
-        return np.column_stack(
-            [np.einsum("di,di->i", vectors, self.stiffness_term(j) @ vectors) for j in range(6)]
+        """``d lambda_i / d b_j = a_i^T K_j a_i`` for mass-normalised ``a_i``, shape (n, 6).
+
+        While the model's ``K_j`` are those it was built with, every element has the same
+        ``K_j^e`` and ``a^T K_j a = sum_e a_e^T K_j^e a_e = <K_j^e, S>`` with the 32 x 32
+        ``S = sum_e a_e a_e^T`` of each mode: small dense products. Otherwise (terms
+        replaced by :meth:`modified`) the six ``K_j``, which share one pattern, are stacked
+        into one ``(6 n_dofs, n_dofs)`` CSR matrix for one sparse product.
+        """
+        vectors = np.asarray(vectors, dtype=float)
+        data, element_terms = self._uniform_terms
+        if self.stiffness_terms is data:
+            local = vectors[self.mesh.element_dofs]  # (n_elements, 32, n)
+            local = np.ascontiguousarray(local.transpose(2, 1, 0))  # (n, 32, n_elements)
+            S = local @ local.transpose(0, 2, 1)  # (n, 32, 32)
+            return np.einsum("jab,iab->ij", element_terms, S)
+        n, nnz = self.mesh.n_dofs, self.assembler.nnz
+        terms = np.ascontiguousarray(self.stiffness_terms).reshape(-1)
+        indices = np.tile(self.assembler.indices, 6)
+        indptr = np.concatenate(
+            [self.assembler.indptr[:-1] + j * nnz for j in range(6)] + [[6 * nnz]]
         )
+        stacked = sp.csr_matrix((terms, indices, indptr), shape=(6 * n, n))
+        products = (stacked @ vectors).reshape(6, n, -1)
+        return np.einsum("jdi,di->ij", products, vectors)

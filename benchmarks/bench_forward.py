@@ -1,27 +1,34 @@
-"""Speed and memory of the forward model on the Frederiksen plate, mesh by mesh.
+"""One full forward solve of the Frederiksen plate: the block eigensolver against ARPACK.
 
-Every mesh runs in its own Python process, so that its peak resident memory (``ru_maxrss``)
-is its own. Per mesh it times, separately:
+The issue's figure: ``PlateModel.solve(b, 14)`` on the bundled case ``frederiksen_t300``
+at 50 x 50 elements (20 808 unknowns), model already built: K(b), M, the shift-invert
+factorisation, 14 elastic modes (6 rigid-body modes dropped) and their sensitivities.
+Target: median under 0.5 s on the project's 2-core machine.
 
-- assembly: ``PlateModel(...)`` (element matrices, sparsity pattern, the six ``K_j`` and
-  ``M``, the nested-dissection order);
-- solve: ``model.solve(b, 20)``, which is ``K(b)``, the shift-invert factorisation, the
-  Lanczos iterations and the sensitivities; the eigen solve is ``solve - sensitivities``;
-- factorisation alone (``bayesplate.fem.eigen._shift_invert``) and sensitivities alone
-  (``model.sensitivities``).
+Two paths, timed in the same run, alternating run by run so that the machine's load falls
+on both alike:
 
-Writes ``benchmark_forward.md``. Run: ``python benchmarks/bench_forward.py [--quick]``.
+- ``old``: the solve as it was before the block method (kept callable): ``K(b)[free][:,
+  free]`` sliced per solve, the factorisation on the nested-dissection permutation,
+  ARPACK (``lowest_modes(..., method="arpack")``, one vector per LU solve), six sparse
+  ``K_j @ vectors`` products;
+- ``new``: ``model.solve(b, n)``: free-dof matrices gathered through fixed index maps,
+  in-plane and bending unknowns solved apart when the laminate does not couple them, block
+  Lanczos with multi-right-hand-side LU solves, sensitivities element by element.
+
+Each figure is the median over ``--runs`` runs of wall time (``perf_counter``) and of the
+process's CPU time (``process_time``, less sensitive to other work on the machine). Also:
+how the cost grows with the mesh and with the number of modes, and the solve with two BLAS
+threads instead of one. Writes ``reports/benchmark_forward.md``.
+Run: ``python benchmarks/bench_forward.py [--quick] [--runs N]``.
 """
 
 from __future__ import annotations
 
 import argparse
 import datetime
-import json
 import os
 import pathlib
-import resource
-import subprocess
 import sys
 import time
 
@@ -32,200 +39,166 @@ import _machine  # noqa: E402  (this folder's shared helper)
 
 REPORT = "benchmark_forward.md"
 CASE = "frederiksen_t300"
-N_MODES = 20
-MESHES = [(8, 8), (16, 16), (24, 24), (32, 32), (50, 50), (70, 70), (100, 100)]
-QUICK_MESHES = [(4, 4), (8, 8)]
-TARGET_S = 1.0  # the issue's target for one 50 x 50 forward solve (assembly + solve)
+TARGET_S = 0.5
 TARGET_MESH = (50, 50)
-STOP_S = 60.0  # do not go to a larger mesh once assembly + solve takes longer than this
-CHILD_TIMEOUT_S = 900
-REPEAT_BELOW_DOFS = 30_000  # best of 3 below this many unknowns, a single run above
-BLAS_THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+TARGET_MODES = 14
+MESHES = [(16, 16), (24, 24), (32, 32), (50, 50), (70, 70)]
+MODES = [10, 14, 20, 30]
+QUICK_MESHES = [(8, 8), (16, 16)]
+QUICK_MODES = [10, 14]
 
 
-# ----------------------------------------------------------------------------- one mesh
+def old_solve(model, b, n_modes):
+    """The forward solve as it was before the block method: ARPACK, sliced matrices.
+
+    Returns ``(eigenvalues, vectors, sensitivities)``.
+    """
+    from bayesplate.fem.eigen import lowest_modes
+
+    free = model.free_dofs
+    K = model.stiffness(b)[free][:, free]
+    M = model.mass[free][:, free]
+    rigid = None if model._rigid_basis is None else model._rigid_basis[free]
+    sol = lowest_modes(
+        K,
+        M,
+        n_modes,
+        model.spectral_shift(b),
+        n_rigid_max=6 if model.boundary == "free" else 0,
+        ordering=model._ordering,
+        rigid_basis=rigid,
+        method="arpack",
+    )
+    vectors = np.zeros((model.mesh.n_dofs, len(sol.eigenvalues)))
+    vectors[free] = sol.vectors
+    sens = np.column_stack(
+        [np.einsum("di,di->i", vectors, model.stiffness_term(j) @ vectors) for j in range(6)]
+    )
+    return sol.eigenvalues, vectors, sens
 
 
-def _timed(fn, *args, **kwargs):
-    """``(fn(*args, **kwargs), wall seconds, CPU seconds of this process)``."""
+def _model_solve(model, b, n_modes, split):
+    saved = model.split_decoupled
+    model.split_decoupled = split
+    try:
+        r = model.solve(b, n_modes)
+    finally:
+        model.split_decoupled = saved
+    return r.eigenvalues, r.vectors, r.sensitivities
+
+
+def new_solve(model, b, n_modes):
+    """``model.solve`` without the in-plane / bending split; ``(values, vectors, sens)``."""
+    return _model_solve(model, b, n_modes, split=False)
+
+
+def split_solve(model, b, n_modes):
+    """``model.solve`` with the in-plane / bending split; ``(values, vectors, sens)``."""
+    return _model_solve(model, b, n_modes, split=True)
+
+
+def _time(fn, *args):
     wall, cpu = time.perf_counter(), time.process_time()
-    out = fn(*args, **kwargs)
+    out = fn(*args)
     return out, time.perf_counter() - wall, time.process_time() - cpu
 
 
-def measure(nx, ny):
-    """Time and memory of one mesh in this process; a dict of numbers.
+def compare(model, b, n_modes, runs, paths=("old", "new", "split")):
+    """Median wall and CPU seconds of each path, alternating; and their agreement."""
+    solvers = {"old": old_solve, "new": new_solve, "split": split_solve}
+    for name in paths:  # warm-up: first-solve caches (index maps), imports
+        solvers[name](model, b, n_modes)
+    times = {name: [] for name in paths}
+    outs = {}
+    for _ in range(runs):
+        for name in paths:
+            outs[name], wall, cpu = _time(solvers[name], model, b, n_modes)
+            times[name].append((wall, cpu))
+    row = {f"{name}_{k}": float(np.median([t[i] for t in times[name]])) for name in paths
+           for i, k in enumerate(("wall", "cpu"))}  # fmt: skip
+    if "old" in paths:
+        lo, vo, _ = outs["old"]
+        diffs, overlaps = [], []
+        for name in paths[1:]:
+            ln, vn, _ = outs[name]
+            diffs.append(np.max(np.abs(ln / lo - 1)))
+            overlaps.append(np.min(np.abs(np.sum(vo * (model.mass @ vn), axis=0))))
+        row["eig_rel_diff"] = float(max(diffs))
+        row["min_diag_overlap"] = float(min(overlaps))
+    return row
 
-    The whole forward run (assembly, solve, sensitivities) is repeated ``repeats`` times
-    and the smallest time of each stage kept; the peak memory is read after the first run,
-    before anything else is allocated, so it is that of one forward run.
-    """
-    from bayesplate.fem.eigen import _shift_invert
+
+def sensitivities_only(model, b, runs):
+    """Median CPU seconds of the old six sparse products and of ``model.sensitivities``."""
+    vectors = model.solve(b, TARGET_MODES).vectors
+    terms = [model.stiffness_term(j) for j in range(6)]
+
+    def old():
+        return [np.einsum("di,di->i", vectors, K @ vectors) for K in terms]
+
+    out = {}
+    for name, fn in (("old", old), ("new", lambda: model.sensitivities(vectors))):
+        out[name] = float(np.median([_time(fn)[2] for _ in range(runs)]))
+    return out
+
+
+def blas_threads(model, b, runs):
+    """Median wall and CPU seconds of the new solve with 1 and with 2 BLAS threads."""
+    from bayesplate.fem import eigen
+
+    out = {}
+    for threads in (1, 2):
+        eigen.BLAS_THREADS = threads
+        try:
+            out[threads] = compare(model, b, TARGET_MODES, runs, paths=("split",))
+        finally:
+            eigen.BLAS_THREADS = 1
+    return out
+
+
+def run(quick=False, runs=7):
+    """All measurements; a dict."""
     from bayesplate.io import bundled_case_path, load_case
     from bayesplate.laminate import stiffness_from_engineering
     from bayesplate.model import PlateModel
 
     case = load_case(bundled_case_path(CASE))
     b = stiffness_from_engineering(case.reference)
-    PlateModel.from_case(case, mesh=(2, 2)).solve(b, 4)  # warm up imports and caches
-    rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    n_dofs = 8 * (nx + 1) * (ny + 1)
-    repeats = 3 if n_dofs < REPEAT_BELOW_DOFS else 1
-
-    best = {}
-    for rep in range(repeats):
-        model = result = None  # free the previous run before the next
-        model, *t_asm = _timed(PlateModel.from_case, case, mesh=(nx, ny))
-        result, *t_solve = _timed(model.solve, b, N_MODES)
-        _, *t_sens = _timed(model.sensitivities, result.vectors)
-        if rep == 0:
-            rss1 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-        for key, t in (("assembly", t_asm), ("solve", t_solve), ("sensitivities", t_sens)):
-            best[key] = min(best.get(key, (np.inf, np.inf)), tuple(t))
-    free = model.free_dofs
-    K = model.stiffness(b)[free][:, free]
-    A = K - model.spectral_shift(b) * model.mass[free][:, free]
-    t_fact = min(_timed(_shift_invert, A, model._ordering)[1] for _ in range(repeats))
-    op = _shift_invert(A, model._ordering)
-    x = np.random.default_rng(0).standard_normal(A.shape[0])
-    t_apply = min(_timed(op.matvec, x)[1] for _ in range(5))
-    n_apply = _count_applications(model, b)
-    return {
-        "mesh": [nx, ny],
-        "n_dofs": model.mesh.n_dofs,
-        "nnz": int(K.nnz),
-        "repeats": repeats,
-        "assembly_s": best["assembly"][0],
-        "solve_s": best["solve"][0],
-        "sensitivities_s": best["sensitivities"][0],
-        "eigen_s": best["solve"][0] - best["sensitivities"][0],
-        "factorisation_s": t_fact,
-        "lu_apply_s": t_apply,
-        "n_apply": n_apply,
-        "total_s": best["assembly"][0] + best["solve"][0],
-        "total_cpu_s": best["assembly"][1] + best["solve"][1],
-        "peak_rss_MB": rss1 / 1024,  # ru_maxrss is in KiB on Linux
-        "baseline_rss_MB": rss0 / 1024,
-        "f1_Hz": float(result.frequency_Hz[0]),
-        "n_rigid": result.n_rigid,
-    }
-
-
-def _count_applications(model, b):
-    """Number of shift-invert operator applications (LU solves) ARPACK makes in one solve."""
-    from bayesplate.fem import eigen
-
-    original, count = eigen._shift_invert, [0]
-
-    def counting(A, ordering):
-        op = original(A, ordering)
-
-        def matvec(x):
-            count[0] += 1
-            return op.matvec(x)
-
-        return eigen.spla.LinearOperator(op.shape, matvec=matvec, dtype=op.dtype)
-
-    eigen._shift_invert = counting
-    try:
-        model.solve(b, N_MODES)
-    finally:
-        eigen._shift_invert = original
-    return count[0]
-
-
-def run_child(nx, ny, blas_threads=None):
-    """:func:`measure` in a fresh interpreter, for an honest peak memory.
-
-    ``blas_threads`` limits OpenBLAS/OpenMP threads in the child (None: the library default).
-    """
-    env = dict(os.environ)
-    if blas_threads is not None:
-        for var in BLAS_THREAD_VARS:
-            env[var] = str(blas_threads)
-    out = subprocess.run(
-        [sys.executable, __file__, "--child", str(nx), str(ny)],
-        capture_output=True,
-        text=True,
-        timeout=CHILD_TIMEOUT_S,
-        check=True,
-        env=env,
-    )
-    return json.loads(out.stdout.strip().splitlines()[-1])
-
-
-# ----------------------------------------------------------------------------- the machine
-
-
-def machine():
-    """Processor, core count, memory and library versions (see ``_machine``)."""
-    return _machine.machine()
-
-
-# ----------------------------------------------------------------------------- the run
-
-
-def run(meshes, blas_threads=None):
-    """Run the meshes in order, stopping after one whose total exceeds :data:`STOP_S`."""
-    rows, stopped = [], None
+    meshes, modes = (QUICK_MESHES, QUICK_MODES) if quick else (MESHES, MODES)
+    target_mesh = meshes[-1] if quick else TARGET_MESH
     load = [os.getloadavg()]
-    for k, (nx, ny) in enumerate(meshes):
-        row = run_child(nx, ny, blas_threads)
-        rows.append(row)
-        threads = "default" if blas_threads is None else blas_threads
+    out = {"runs": runs, "by_mesh": [], "by_modes": []}
+    for nx, ny in meshes:
+        model = PlateModel.from_case(case, mesh=(nx, ny))
+        n_runs = runs if model.mesh.n_dofs < 30_000 else max(3, runs // 2)
+        row = compare(model, b, TARGET_MODES, n_runs)
+        row.update(mesh=[nx, ny], n_dofs=model.mesh.n_dofs, runs=n_runs)
+        out["by_mesh"].append(row)
+        load.append(os.getloadavg())
         print(
-            f"{nx}x{ny} (BLAS threads {threads}): {row['total_s']:.2f} s, "
-            f"{row['peak_rss_MB']:.0f} MB",
+            f"{nx}x{ny}: old {row['old_cpu']:.3f}, block {row['new_cpu']:.3f}, split "
+            f"{row['split_cpu']:.3f} s CPU",
             flush=True,
         )
+    model = PlateModel.from_case(case, mesh=target_mesh)
+    for n in modes:
+        row = compare(model, b, n, runs)
+        row["n_modes"] = n
+        out["by_modes"].append(row)
         load.append(os.getloadavg())
-        if row["total_s"] > STOP_S and k + 1 < len(meshes):
-            stopped = (nx, ny)
-            break
-    return {"rows": rows, "stopped_after": stopped, "load": load}
-
-
-def _ratio_range(single, default):
-    """``"0.9 to 3.1 x"``: range of default-thread over one-thread totals."""
-    by_mesh = {tuple(r["mesh"]): r["total_s"] for r in single}
-    ratios = [r["total_s"] / by_mesh[tuple(r["mesh"])] for r in default]
-    if not ratios:
-        return "not measured against"
-    return f"{min(ratios):.1f} to {max(ratios):.1f} x"
-
-
-def _default_table(single, default):
-    """Totals with default BLAS threads beside those with one thread."""
-    by_mesh = {tuple(r["mesh"]): r for r in single}
-    rows = []
-    for r in default:
-        one = by_mesh[tuple(r["mesh"])]
-        rows.append(
-            [
-                f"{r['mesh'][0]}x{r['mesh'][1]}",
-                f"{r['eigen_s']:.3f}",
-                f"{r['total_s']:.3f}",
-                f"{r['total_cpu_s']:.3f}",
-                f"{r['total_s'] / one['total_s']:.2f}",
-            ]
+        print(
+            f"{n} modes: old {row['old_cpu']:.3f}, block {row['new_cpu']:.3f}, split "
+            f"{row['split_cpu']:.3f} s CPU",
+            flush=True,
         )
-    headers = [
-        "mesh",
-        "eigen solve (s)",
-        "total (s)",
-        "total CPU (s)",
-        "total / one-thread total",
-    ]
-    return _table(headers, rows)
-
-
-def _fit_exponent(rows, key, min_dofs=10_000):
-    """Slope of log(time) against log(unknowns) over the meshes with >= ``min_dofs``."""
-    pts = [(r["n_dofs"], r[key]) for r in rows if r["n_dofs"] >= min_dofs and r[key] > 0]
-    if len(pts) < 2:
-        return None
-    x, y = np.log(np.array(pts)).T
-    return float(np.polyfit(x, y, 1)[0])
+    out["target"] = compare(model, b, TARGET_MODES, runs)
+    out["target"].update(mesh=list(target_mesh), n_dofs=model.mesh.n_dofs)
+    load.append(os.getloadavg())
+    out["sensitivities"] = sensitivities_only(model, b, runs)
+    out["threads"] = blas_threads(model, b, runs)
+    load.append(os.getloadavg())
+    out["load"] = load
+    return out
 
 
 def _table(headers, rows):
@@ -234,166 +207,140 @@ def _table(headers, rows):
     return "\n".join(lines)
 
 
+def _cells(r):
+    return [
+        f"{r['old_wall']:.3f}",
+        f"{r['new_wall']:.3f}",
+        f"{r['split_wall']:.3f}",
+        f"{r['old_cpu']:.3f}",
+        f"{r['new_cpu']:.3f}",
+        f"{r['split_cpu']:.3f}",
+        f"{r['old_cpu'] / r['new_cpu']:.2f}",
+        f"{r['old_cpu'] / r['split_cpu']:.2f}",
+        f"{r['eig_rel_diff']:.1e}",
+        f"{r['min_diag_overlap']:.12f}",
+    ]
+
+
+HEADERS = [
+    "old wall (s)",
+    "block wall (s)",
+    "block + split wall (s)",
+    "old CPU (s)",
+    "block CPU (s)",
+    "block + split CPU (s)",
+    "old / block (CPU)",
+    "old / block + split (CPU)",
+    "max rel. eigenvalue diff.",
+    "min |a_old^T M a_new|",
+]
+
+
+#: Measured once by hand while building the block method (2026-11-25, 50x50, one BLAS
+#: thread, load average 1.6 to 4.8 on 2 processors), not re-run by this script.
+OPTIONS_TRIED = [
+    "## Options tried and not kept (measured by hand, 2026-11-25, 50x50, load 1.6 to 4.8)",
+    "",
+    "- SuperLU `relax` / `panel_size` (1/1, 4/8, 8/16, 16/16, 32/32): factorisation 0.21 to "
+    "0.24 s against 0.23 s by default, 24-vector solve 60 to 77 ms against 68 ms: noise.",
+    "- `permc_spec`: `MMD_AT_PLUS_A` 0.21 s and 5.27 M entries in L + U, `COLAMD` 0.54 s "
+    "and 10.2 M, against the nested-dissection order's 0.23 s and 4.98 M: kept the latter.",
+    "- `cholespy` 2.2.0 (CHOLMOD, pip wheel): factorisation 0.25 s, 24-vector solve 53 ms, "
+    "against SuperLU's 0.23 s and 62 to 68 ms: no clear win, not added as a dependency.",
+    "- Block size of the Lanczos (full problem, tolerance 1e-8): 2, 4, 8 vectors per block "
+    "need 58, 74, 102 LU solves; a single-vector LU solve costs 10.6 ms, a block of 4 "
+    "15 ms, of 8 25 ms, of 24 64 ms: 4 kept.",
+    "- Two Python threads each solving half of a block: slower under load (76 ms against "
+    "56 ms for 8 vectors).",
+    "- The six sensitivity products stacked into one sparse matrix: as slow as six "
+    "(memory-bound); the element-wise sums above replaced them.",
+    "",
+]
+
+
 def write_report(bench, info, out_dir, quick=False, date=None):
     """Write the Markdown report."""
-    rows = bench["rows"]
     flag = " --quick" if quick else ""
+    if bench["runs"] != (2 if quick else 7):
+        flag += f" --runs {bench['runs']}"
     date = date or datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    default = bench.get("default_threads", {"rows": [], "load": []})
-    loads = np.array(bench["load"] + default["load"])
-    table = _table(
-        [
-            "mesh",
-            "unknowns",
-            "nnz(K)",
-            "runs",
-            "assembly (s)",
-            "eigen solve, 20 modes (s)",
-            "of which factorisation (s)",
-            "LU solves x one solve",
-            "sensitivities (s)",
-            "total (s)",
-            "total CPU (s)",
-            "peak RSS (MB)",
-            "f1 (Hz)",
-        ],
-        [
-            [
-                f"{r['mesh'][0]}x{r['mesh'][1]}",
-                r["n_dofs"],
-                r["nnz"],
-                f"best of {r['repeats']}" if r["repeats"] > 1 else "1",
-                f"{r['assembly_s']:.3f}",
-                f"{r['eigen_s']:.3f}",
-                f"{r['factorisation_s']:.3f}",
-                f"{r['n_apply']} x {r['lu_apply_s'] * 1e3:.2f} ms",
-                f"{r['sensitivities_s']:.3f}",
-                f"{r['total_s']:.3f}",
-                f"{r['total_cpu_s']:.3f}",
-                f"{r['peak_rss_MB']:.0f}",
-                f"{r['f1_Hz']:.2f}",
-            ]
-            for r in rows
-        ],
-    )
+    loads = np.array(bench["load"])
+    t = bench["target"]
+    mesh = f"{t['mesh'][0]}x{t['mesh'][1]}"
+    verdict = {k: "meets" if t[f"{k}_wall"] <= TARGET_S else "misses" for k in ("new", "split")}
+    sens, threads = bench["sensitivities"], bench["threads"]
     lines = [
-        f"Made by `python benchmarks/bench_forward.py{flag}` on {date}; not part of "
-        "`studies/run_all.py` (timings belong to a machine).",
+        f"Made by `python benchmarks/bench_forward.py{flag}` on {date} ({bench['runs']} runs); "
+        "not part of `studies/run_all.py` (timings belong to a machine).",
         "",
-        "# Forward-model benchmark (Frederiksen plate, free-free, 20 elastic modes)",
+        f"# Forward-solve benchmark (Frederiksen plate, free-free, {TARGET_MODES} elastic modes)",
         "",
         f"Machine: {info['cpu']}, {info['nproc']} processors available, {info['memory']} "
         f"memory; {info['platform']}; Python {info['python']}, numpy {info['numpy']}, scipy "
         f"{info['scipy']} (BLAS: {info['blas']}). Load average (1 min) before the run "
         f"{loads[0][0]:.2f}, during it {loads[1:, 0].min():.2f} to {loads[1:, 0].max():.2f} "
         f"on {info['nproc']} processors: the machine is shared with other work, so wall times "
-        "are inflated by it; `total CPU` is the CPU time of the benchmark process.",
+        "are inflated by it; the CPU time of the process is the steadier figure.",
         "",
-        "The main table runs with BLAS limited to one thread (`OPENBLAS_NUM_THREADS=1`, "
-        "likewise OMP and MKL): the sparse LU (SuperLU) is single-threaded anyway. The second "
-        "table runs the same meshes with the default BLAS threads, which ARPACK's dense "
-        f"vector operations go through: {_ratio_range(rows, default['rows'])} the one-thread "
-        "total on this machine at this load.",
-        "",
-        "Each mesh runs in a fresh process (peak RSS is `ru_maxrss` of that process, including "
-        f"about {rows[0]['baseline_rss_MB']:.0f} MB of interpreter and libraries). `assembly` "
-        "is `PlateModel(...)`; `eigen solve` is `model.solve(b, 20)` minus its sensitivities "
-        "(K(b), the shift-invert LU with nested-dissection order, ARPACK Lanczos, Ritz "
-        "vectors); `factorisation` is the LU alone, timed separately; `LU solves` is how "
-        "many times ARPACK applied the shift-invert operator in one solve, times one "
-        "application (forward and back substitution), timed separately; `sensitivities` is "
-        "`model.sensitivities` (six sparse products); `total` = assembly + `model.solve` "
-        "(sensitivities included).",
-        "",
-        "## BLAS limited to one thread",
-        "",
-        table,
-        "",
-        "## Default BLAS threads",
-        "",
-        _default_table(rows, default["rows"]),
+        "`old` is the solve as it was before the block method (sliced free-dof matrices, "
+        "ARPACK with one LU solve per vector, six sparse sensitivity products); `block` is "
+        "`model.solve(b, n)` with `split_decoupled = False` (index-mapped matrices, block "
+        "Lanczos with multi-right-hand-side LU solves, element-wise sensitivities); `block + "
+        "split` the same with `split_decoupled = True` (this single-ply plate's in-plane and "
+        "bending unknowns solved apart). All on a built model, medians over the runs, the "
+        "paths alternating run by run; BLAS limited to one thread in the solve.",
         "",
         "## Against the target",
         "",
+        f"- {mesh} ({t['n_dofs']} unknowns), {TARGET_MODES} modes + sensitivities: old "
+        f"{t['old_wall']:.3f} s wall (CPU {t['old_cpu']:.3f} s); block {t['new_wall']:.3f} s "
+        f"(CPU {t['new_cpu']:.3f} s), {t['old_cpu'] / t['new_cpu']:.2f} x faster in CPU "
+        f"time, {verdict['new']} the {TARGET_S:g} s target at this load; block + split "
+        f"{t['split_wall']:.3f} s (CPU {t['split_cpu']:.3f} s), "
+        f"{t['old_cpu'] / t['split_cpu']:.2f} x faster in CPU time, {verdict['split']} it.",
+        f"- Eigenvalues of the paths agree with the old one to {t['eig_rel_diff']:.1e} "
+        f"(relative), mode shapes to |a_old^T M a_new| >= {t['min_diag_overlap']:.12f}.",
+        f"- Sensitivities alone ({TARGET_MODES} modes): old six sparse products "
+        f"{sens['old'] * 1e3:.1f} ms CPU, new element sums {sens['new'] * 1e3:.1f} ms.",
+        f"- BLAS threads in the solve (block + split): 1 thread {threads[1]['split_wall']:.3f} "
+        f"s wall (CPU {threads[1]['split_cpu']:.3f} s), 2 threads "
+        f"{threads[2]['split_wall']:.3f} s (CPU {threads[2]['split_cpu']:.3f} s).",
+        "",
+        f"## Mesh size ({TARGET_MODES} modes)",
+        "",
+        _table(
+            ["mesh", "unknowns", "runs", *HEADERS],
+            [
+                [f"{r['mesh'][0]}x{r['mesh'][1]}", r["n_dofs"], r["runs"], *_cells(r)]
+                for r in bench["by_mesh"]
+            ],
+        ),
+        "",
+        f"## Number of modes ({mesh})",
+        "",
+        _table(["modes", *HEADERS], [[r["n_modes"], *_cells(r)] for r in bench["by_modes"]]),
+        "",
+        *OPTIONS_TRIED,
     ]
-    target = next((r for r in rows if tuple(r["mesh"]) == TARGET_MESH), None)
-    if target is not None:
-        verdict = "meets" if target["total_s"] <= TARGET_S else "misses"
-        lines += [
-            f"- 50x50 ({target['n_dofs']} unknowns): total {target['total_s']:.2f} s = "
-            f"{target['total_s'] / TARGET_S:.2f} x the {TARGET_S:g} s target ({verdict} it); "
-            f"assembly {target['assembly_s']:.2f} s, eigen solve {target['eigen_s']:.2f} s "
-            f"(factorisation {target['factorisation_s']:.2f} s = "
-            f"{target['factorisation_s'] / target['eigen_s']:.0%} of it; {target['n_apply']} LU "
-            f"solves = {target['n_apply'] * target['lu_apply_s']:.2f} s = "
-            f"{target['n_apply'] * target['lu_apply_s'] / target['eigen_s']:.0%}; the rest is "
-            "ARPACK's own work, K(b) and the Ritz vectors), sensitivities "
-            f"{target['sensitivities_s']:.3f} s. Its CPU time, {target['total_cpu_s']:.2f} s "
-            f"= {target['total_cpu_s'] / TARGET_S:.2f} x the target, is close to what it would "
-            "take on an idle machine (wall / CPU = "
-            f"{target['total_s'] / target['total_cpu_s']:.2f}: the rest is waiting for the "
-            "processor). A "
-            "solve at new constants on an existing model (what an estimator repeats) is "
-            f"{target['solve_s']:.2f} s = {target['solve_s'] / TARGET_S:.2f} x the target.",
-        ]
-        other = next((r for r in default["rows"] if tuple(r["mesh"]) == TARGET_MESH), None)
-        if other is not None:
-            lines.append(
-                f"- With the default BLAS threads the same 50x50 total is {other['total_s']:.2f} s"
-                f" = {other['total_s'] / target['total_s']:.2f} x the one-thread total "
-                f"(CPU {other['total_cpu_s']:.2f} s against {target['total_cpu_s']:.2f} s)."
-            )
-    else:
-        lines.append("- The 50x50 mesh was not run (quick mode).")
-    for key, label in (
-        ("assembly_s", "assembly"),
-        ("eigen_s", "eigen solve"),
-        ("factorisation_s", "factorisation"),
-        ("total_s", "total"),
-        ("peak_rss_MB", "peak RSS"),
-    ):
-        slope = _fit_exponent(rows, key)
-        if slope is not None:
-            lines.append(
-                f"- {label} grows as (unknowns)^{slope:.2f} (least-squares slope over the "
-                "meshes with at least 10 000 unknowns)."
-            )
-    last = rows[-1]
-    if bench["stopped_after"] is not None:
-        lines.append(
-            f"- Stopped after {last['mesh'][0]}x{last['mesh'][1]}: its total "
-            f"{last['total_s']:.1f} s exceeds {STOP_S:g} s."
-        )
-    else:
-        lines.append(
-            f"- Largest mesh run: {last['mesh'][0]}x{last['mesh'][1]}, total "
-            f"{last['total_s']:.1f} s (under the {STOP_S:g} s stop), peak RSS "
-            f"{last['peak_rss_MB']:.0f} MB."
-        )
     path = pathlib.Path(out_dir) / REPORT
     path.write_text("\n".join(lines) + "\n")
     return path
 
 
-def main(out_dir, quick=False):
-    """Benchmark every mesh and write the report; return the measurements."""
+def main(out_dir, quick=False, runs=None):
+    """Benchmark and write the report; return the measurements."""
+    runs = runs or (2 if quick else 7)
     out_dir = pathlib.Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    info = machine()
-    meshes = QUICK_MESHES if quick else MESHES
-    bench = run(meshes, blas_threads=1)
-    bench["default_threads"] = run(meshes[: len(bench["rows"])], blas_threads=None)
-    write_report(bench, info, out_dir, quick=quick)
+    bench = run(quick=quick, runs=runs)
+    write_report(bench, _machine.machine(), out_dir, quick=quick)
     return bench
 
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="two tiny meshes only")
+    parser.add_argument("--quick", action="store_true", help="two small meshes only")
+    parser.add_argument("--runs", type=int, help="runs per figure (median; 7, or 2 quick)")
     parser.add_argument("--out", default=pathlib.Path(__file__).resolve().parents[1] / "reports")
-    parser.add_argument("--child", nargs=2, type=int, metavar=("NX", "NY"), help=argparse.SUPPRESS)
     args = parser.parse_args()
-    if args.child:
-        print(json.dumps(measure(*args.child)))
-    else:
-        main(args.out, quick=args.quick)
+    main(args.out, quick=args.quick, runs=args.runs)
