@@ -135,9 +135,10 @@ class PlateModel:
         self._rigid_basis = self._rigid_basis_on_free_dofs()
         self._parts = None  # index maps to the free-dof matrices, built on the first solve
         #: Solve in-plane and bending unknowns apart when K and M do not couple them (see
-        #: :meth:`_decoupled`). Off by default: the in-plane modes' w is then exactly zero,
-        #: not round-off, and code that divides by a mode's w norm (MAC) must allow for it.
-        self.split_decoupled = False
+        #: :meth:`_decoupled`): the same modes at about half the cost (reports/
+        #: benchmark_forward.md). The in-plane modes' w is then exactly zero, not round-off;
+        #: the MAC (pairing.mac_matrix) counts both as no shape.
+        self.split_decoupled = True
 
     @classmethod
     def from_case(cls, case, mesh=None, **kwargs):

@@ -1,5 +1,6 @@
 """The paper's estimators B, MVE and MVE-mod against closed forms and the paper's tables."""
 
+import copy
 import json
 import sys
 from dataclasses import dataclass
@@ -352,10 +353,17 @@ def test_shape_pairing_recovers_a_test_that_missed_a_mode(plate1):
 
 
 def _missed_mode_case(plate1, nudge=None):
-    """Plate 1 without mode 5, with w at 28 points computed at the target (`nudge`d)."""
+    """Plate 1 without mode 5, with w at 28 points computed at the target (`nudge`d).
+
+    The shapes come from a solve that does not split in-plane from bending unknowns: the two
+    in-plane modes' w is round-off there, as a transverse sensor records noise for them (a
+    row of exact zeros is not a measured shape, and the case reader refuses it).
+    """
     case, model = plate1
     target = case.reference if nudge is None else nudge(case.reference)
-    modal = model.solve(laminate.stiffness_from_engineering(target), 14)
+    coupled = copy.copy(model)
+    coupled.split_decoupled = False
+    modal = coupled.solve(laminate.stiffness_from_engineering(target), 14)
     x, y = np.meshgrid(np.linspace(0.01, 0.19, 7), np.linspace(0.01, 0.09, 4))
     points = np.column_stack([x.ravel(), y.ravel()])
     shapes = (model.interpolation(points) @ modal.vectors).T
