@@ -412,3 +412,28 @@ def test_report_names_a_missed_mode_by_likelihood(tmp_path):
         np.testing.assert_array_equal(
             data.results[method]["modes"], np.delete(np.arange(14), 4) + 1
         )
+
+
+def test_the_estimate_steps_share_one_fast_model_checked_by_the_full_one(tmp_path, monkeypatch):
+    # above FAST_MIN_DOFS unknowns the report builds one fast model and the three estimators
+    # iterate on it; plate 1's 8 x 4 mesh is made to count as large
+    from bayesplate.estimators import fast as fast_module
+
+    monkeypatch.setattr(fast_module, "FAST_MIN_DOFS", 0)
+    built = []
+    original = fast_module.fast_model
+
+    def counting(*args, **kwargs):
+        built.append(1)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(fast_module, "fast_model", counting)
+    path, data = make_report(bundled_case_path("plate1"), tmp_path, FAST, None, "plate1")
+    assert len(built) == 1 and data.fast is not None
+    full = estimate(data.case, "B", model=data.plate_model(), forward="full")
+    for method in ("B", "MVE", "MVE-mod"):
+        check = data.results[method]["check"]
+        assert check["confirmed"] and check["max_rel_error"] <= check["tolerance"]
+        assert data.results[method]["status"] == "converged"
+    np.testing.assert_allclose(data.results["B"]["b"], full.b, rtol=1e-3)
+    assert "| full-model check | confirmed" in path.read_text(encoding="utf-8")
