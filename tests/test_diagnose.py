@@ -205,3 +205,30 @@ def test_diagnosis_does_not_depend_on_round_off(model):
         np.testing.assert_allclose(
             d.chosen.fit.constants, reference.chosen.fit.constants, rtol=1e-5
         )
+
+
+def test_a_fit_is_reported_at_one_canonical_mirror_image(model):
+    # a point mass and its mirror images fit alike: whichever a fit reached, the report
+    # gives the same one, with the covariance carried by the reflection
+    from bayesplate.discrepancy.fit import JointFit
+    from bayesplate.discrepancy.rank import canonical_image
+
+    physics = PointMass()
+    b = stiffness_from_engineering(_plate1_case().prior.mean)
+    rng = np.random.default_rng(5)
+    A = rng.standard_normal((9, 9))
+    cov = A @ A.T
+    reached = [np.array([15.0, 150.0, 71.4]), *physics.mirror_images(model, [15.0, 150.0, 71.4])]
+    out = []
+    for theta in reached:
+        fit_ = JointFit(physics, b, theta, cov, 1.0, 0.5, -3.0, np.zeros(3), np.zeros(3), 3.0, 1,
+                        True, "")  # fmt: skip
+        out.append(canonical_image(physics, model, fit_))
+    for o in out:
+        np.testing.assert_allclose(o.theta, out[0].theta, rtol=1e-12)
+    a_mm, b_mm = 1e3 * model.mesh.a, 1e3 * model.mesh.b
+    np.testing.assert_allclose(out[0].theta, [15.0, a_mm - 150.0, b_mm - 71.4], rtol=1e-12)
+    # reflected about both mid-lines: x and y change sign in the covariance, the mass does not
+    s = np.r_[np.ones(7), -1.0, -1.0]
+    np.testing.assert_allclose(out[0].covariance, cov * np.outer(s, s), rtol=1e-12)
+    np.testing.assert_array_equal(out[3].covariance, cov)  # reached the canonical one

@@ -8,7 +8,7 @@ The candidates are ranked by their Laplace evidence gain over the nominal model.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -87,6 +87,7 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
         starts = [problem.pack(nominal.b, np.clip(t, lo, hi)) for t in thetas]
         result = fit(problem, starts, max_nfev=25, coarse=level["coarse"],
                      scale=level["scale"], refine=promising)  # fmt: skip
+        result = canonical_image(physics, model, result)
         gain = result.log_evidence - nominal.log_evidence
         params = {**physics.settings(), **physics.labelled(model, nominal.b, result.theta)}
         sds = physics.labelled(model, nominal.b, result.theta_sd)
@@ -110,6 +111,46 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
         ):
             best_by_name[r.name] = r
     return sorted(best_by_name.values(), key=lambda r: -r.log_evidence_gain)
+
+
+def canonical_image(physics, model, result):
+    """The fit expressed at the first of its mirror images in ``(x, y)`` order.
+
+    A located effect and its mirror images fit equally well (the plate's symmetry), so which
+    of them a fit reaches depends on its path, and on round-off where two paths part: a
+    point mass found at ``y = 28.6`` or ``71.4`` mm on a 100 mm plate is one answer. The
+    fit is reported at the image whose parameters come first (lexicographically, position
+    first); the reflection is affine with slopes +-1, read from
+    :meth:`~.base.Physics.mirror_images` itself, and carries the covariance along.
+    Fits without mirror images are returned as they are. The fit's ``modal`` stays the one
+    computed (its eigenvalues are the image's too).
+    """
+    theta = np.asarray(result.theta, dtype=float)
+    images = physics.mirror_images(model, theta)
+    if not images:
+        return result
+    key = _position_first(physics, model, result.b, theta)
+    best = min(range(-1, len(images)), key=lambda i: key(theta if i < 0 else images[i]))
+    if best < 0:
+        return result
+    image = np.asarray(images[best], dtype=float)
+    # slopes of the reflection, from the same method at a nudged theta (+-1 or 0 each)
+    slopes = np.empty(theta.size)
+    for i in range(theta.size):
+        step = np.zeros(theta.size)
+        step[i] = 1e-3 * max(abs(theta[i]), 1.0)
+        moved = np.asarray(physics.mirror_images(model, theta + step)[best], dtype=float)
+        slopes[i] = np.round((moved[i] - image[i]) / step[i])
+    T = np.diag(np.concatenate([np.ones(6), slopes]))
+    return replace(result, theta=image, covariance=T @ result.covariance @ T)
+
+
+def _position_first(physics, model, b, theta):
+    """Sort key of parameter values: the position columns first, then the rest in order."""
+    labels = list(physics.labelled(model, b, theta))
+    position = [i for i, name in enumerate(labels) if name.startswith(("x", "y"))]
+    order = position + [i for i in range(len(labels)) if i not in position]
+    return lambda t: tuple(np.round(np.asarray(t, dtype=float)[order], 9))
 
 
 def _located_starts(physics, model, scans, n=3):
