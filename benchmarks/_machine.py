@@ -5,14 +5,17 @@ Shared by every script of this folder (each puts the folder on ``sys.path`` to i
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import os
 import pathlib
 import platform
+import subprocess
+import tempfile
 
 import numpy as np
 
-__all__ = ["machine"]
+__all__ = ["base_checkout", "machine"]
 
 
 def _proc_field(path, key):
@@ -51,3 +54,27 @@ def machine(*libraries):
     for name in ("numpy", "scipy", *libraries):
         info[name] = importlib.import_module(name).__version__
     return info
+
+
+@contextlib.contextmanager
+def base_checkout(rev, base_dir=None, prefix="bench-base-"):
+    """A checkout of commit `rev` for a benchmark's ratio, removed afterwards.
+
+    Yields `base_dir` itself when given (an existing checkout, kept), else a throwaway
+    ``git worktree add --detach`` of `rev` in a temporary folder of this repository.
+    """
+    if base_dir is not None:
+        yield pathlib.Path(base_dir).resolve()
+        return
+    root = pathlib.Path(__file__).resolve().parents[1]
+    made = pathlib.Path(tempfile.mkdtemp(prefix=prefix)) / "base"
+
+    def git(*args):
+        subprocess.run(["git", "-C", str(root), *args], check=True, capture_output=True)
+
+    git("worktree", "add", "--detach", str(made), rev)
+    try:
+        yield made.resolve()
+    finally:
+        git("worktree", "remove", "--force", str(made))
+        made.parent.rmdir()

@@ -116,10 +116,6 @@ def write_report(bench, info, out_dir, base_rev=None):
     return path
 
 
-def _git(*args):
-    subprocess.run(["git", "-C", str(ROOT), *args], check=True, capture_output=True)
-
-
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=2, help="runs per tree (2)")
@@ -129,17 +125,11 @@ def main(argv=None):
     parser.add_argument("--out", default=str(ROOT / "reports"), help="report folder")
     args = parser.parse_args(argv)
     info = _machine.machine()
-    base_dir, made = args.base_dir, None
-    if base_dir is None and not args.no_base:
-        made = pathlib.Path(tempfile.mkdtemp(prefix="bench-report-base-")) / "base"
-        _git("worktree", "add", "--detach", str(made), args.base_rev)
-        base_dir = made
-    try:
-        bench = run_benchmark(args.runs, None if args.no_base else base_dir.resolve())
-    finally:
-        if made is not None:
-            _git("worktree", "remove", "--force", str(made))
-            made.parent.rmdir()
+    if args.no_base:
+        bench = run_benchmark(args.runs)
+    else:
+        with _machine.base_checkout(args.base_rev, args.base_dir, "bench-report-") as base:
+            bench = run_benchmark(args.runs, base)
     path = write_report(bench, info, args.out, base_rev=None if args.no_base else args.base_rev)
     print(path.read_text())
 

@@ -23,7 +23,6 @@ import pathlib
 import statistics
 import subprocess
 import sys
-import tempfile
 import time
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
@@ -151,10 +150,6 @@ def write_report(bench, info, out_dir, base_rev=None, date=None):
     return path
 
 
-def _git(*args):
-    subprocess.run(["git", "-C", str(ROOT), *args], check=True, capture_output=True)
-
-
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=10, help="counted runs per command (10)")
@@ -164,21 +159,14 @@ def main(argv=None):
     parser.add_argument("--out", default=str(ROOT / "reports"), help="report folder")
     args = parser.parse_args(argv)
     info = _machine.machine()
-    base_dir, made = args.base_dir, None
-    if base_dir is None and not args.no_base:
-        made = pathlib.Path(tempfile.mkdtemp(prefix="bench-startup-")) / "base"
-        _git("worktree", "add", "--detach", str(made), args.base_rev)
-        base_dir = made
     head = None
-    if not args.no_base:
-        rev = ["git", "-C", str(base_dir), "rev-parse", "--short", "HEAD"]
-        head = subprocess.run(rev, check=True, capture_output=True, text=True).stdout.strip()
-    try:
-        bench = run_benchmark(args.runs, None if args.no_base else base_dir.resolve())
-    finally:
-        if made is not None:
-            _git("worktree", "remove", "--force", str(made))
-            made.parent.rmdir()
+    if args.no_base:
+        bench = run_benchmark(args.runs)
+    else:
+        with _machine.base_checkout(args.base_rev, args.base_dir, "bench-startup-") as base:
+            rev = ["git", "-C", str(base), "rev-parse", "--short", "HEAD"]
+            head = subprocess.run(rev, check=True, capture_output=True, text=True).stdout.strip()
+            bench = run_benchmark(args.runs, base)
     base_rev = None if args.no_base else head
     path = write_report(bench, info, args.out, base_rev=base_rev)
     print(path.read_text())
