@@ -15,7 +15,7 @@ import tempfile
 
 import numpy as np
 
-__all__ = ["base_checkout", "machine"]
+__all__ = ["add_base_arguments", "base_checkout", "machine"]
 
 
 def _proc_field(path, key):
@@ -78,3 +78,11 @@ def base_checkout(rev, base_dir=None, prefix="bench-base-"):
     finally:
         git("worktree", "remove", "--force", str(made))
         made.parent.rmdir()
+
+
+def add_base_arguments(parser, base_rev, out):
+    """``--base-rev``, ``--base-dir``, ``--no-base`` and ``--out`` of a benchmark with a base."""
+    parser.add_argument("--base-rev", default=base_rev, help=f"base commit (default {base_rev})")
+    parser.add_argument("--base-dir", type=pathlib.Path, help="an existing checkout of the base")
+    parser.add_argument("--no-base", action="store_true", help="time this tree only")
+    parser.add_argument("--out", default=str(out), help="report folder")

@@ -119,10 +119,7 @@ def write_report(bench, info, out_dir, base_rev=None):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=2, help="runs per tree (2)")
-    parser.add_argument("--base-rev", default=BASE_REV, help=f"base commit (default {BASE_REV})")
-    parser.add_argument("--base-dir", type=pathlib.Path, help="an existing checkout of the base")
-    parser.add_argument("--no-base", action="store_true", help="time this tree only")
-    parser.add_argument("--out", default=str(ROOT / "reports"), help="report folder")
+    _machine.add_base_arguments(parser, BASE_REV, ROOT / "reports")
     args = parser.parse_args(argv)
     info = _machine.machine()
     if args.no_base:

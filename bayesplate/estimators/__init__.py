@@ -34,7 +34,14 @@ fast model, each answer confirmed by the full model), :mod:`~.result` (:class:`E
 
 from .conventions import CONVENTIONS, Conventions, resolve_conventions
 from .estimate import estimate, estimate_on_fast, settle_pairing
-from .fast import FAST_MIN_DOFS, FORWARDS, FastModelWarning, case_fast_model, resolve_forward
+from .fast import (
+    FAST_MIN_DOFS,
+    FORWARDS,
+    FastModelWarning,
+    case_fast_model,
+    modes_to_certify,
+    resolve_forward,
+)
 from .iteration import DEFAULT_MAX_ITER, TRACKING, run
 from .result import METHODS, STATUSES, EstimateResult, FullModelCheck
 from .steps import b_step, mve_step
@@ -56,6 +63,7 @@ __all__ = [
     "estimate",
     "estimate_on_fast",
     "resolve_forward",
+    "modes_to_certify",
     "settle_pairing",
     "run",
     "b_step",

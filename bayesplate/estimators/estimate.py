@@ -8,10 +8,10 @@ import numpy as np
 
 from .. import laminate
 from ..model import PlateModel
-from ..pairing import MAC_EXTRA_MODES, Pairing, pair_measured, resolve_pairing
+from ..pairing import Pairing, pair_measured, resolve_pairing
 from ..posterior import GaussianProblem, prior_in_stiffness
 from .conventions import resolve_conventions
-from .fast import case_fast_model, confirmed_run, resolve_forward
+from .fast import case_fast_model, confirmed_run, modes_to_certify, resolve_forward
 from .iteration import DEFAULT_MAX_ITER, run
 from .result import METHODS
 
@@ -172,16 +172,10 @@ def estimate_on_fast(case, method="MVE", model=None, fast=None, *, rng=None, **o
     """
     model = model or PlateModel.from_case(case)
     pairing = options.pop("pairing", "auto")
-    mean = case.prior.mean if options.get("prior_mean") is None else options["prior_mean"]
-    b0 = laminate.stiffness_from_engineering(np.asarray(mean, dtype=float))
-    if not isinstance(pairing, Pairing):
-        how = resolve_pairing(case.measured, pairing)
+    if not isinstance(pairing, Pairing) and resolve_pairing(case.measured, pairing) != "likelihood":
         # a fixed pairing is made as the full path makes it: on the full model at the prior
-        pairing = how if how == "likelihood" else pair_measured(case, model, b0, how)
-    if isinstance(pairing, Pairing):
-        n_modes = pairing.n_modes()
-    else:  # by likelihood, the assignment may reach this far
-        n_modes = case.measured.size + MAC_EXTRA_MODES
+        pairing, _ = settle_pairing(case, model, pairing, prior_mean=options.get("prior_mean"))
+    n_modes = modes_to_certify(case, pairing)
     if fast is None:
         prior = {k: options.get(k) for k in ("prior_mean", "prior_sd")}
         fast = case_fast_model(case, model, n_modes, rng=rng, **prior)

@@ -33,9 +33,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from .. import laminate
-from ..quantities import hz_from_eigenvalue, stiffness_covariance
-from ..reduced import Box, CertifiedModel, fast_model
+from ..pairing import MAC_EXTRA_MODES, Pairing
+from ..posterior import prior_in_stiffness
+from ..quantities import hz_from_eigenvalue
+from ..reduced import Box, CertifiedModel, fast_model, relative_errors
 from .result import FullModelCheck
 
 __all__ = [
@@ -47,6 +48,7 @@ __all__ = [
     "FastModelWarning",
     "case_fast_model",
     "confirmed_run",
+    "modes_to_certify",
     "resolve_forward",
 ]
 
@@ -81,6 +83,18 @@ def resolve_forward(forward, model):
     return "fast" if model.mesh.n_dofs > FAST_MIN_DOFS else "full"
 
 
+def modes_to_certify(case, pairing):
+    """Elastic modes a fast model must hold for `pairing` (a Pairing, or a pairing's name).
+
+    A :class:`~bayesplate.pairing.Pairing` needs its own ``n_modes()``; an assignment by
+    likelihood, still to be made, may reach any of the ``m + MAC_EXTRA_MODES`` modes it is
+    offered.
+    """
+    if isinstance(pairing, Pairing):
+        return pairing.n_modes()
+    return case.measured.size + MAC_EXTRA_MODES
+
+
 def case_fast_model(case, model, n_modes, *, prior_mean=None, prior_sd=None, rng=None, **options):
     """The certified fast model of a case over its prior's 3-sigma box in ``b``.
 
@@ -104,10 +118,10 @@ def case_fast_model(case, model, n_modes, *, prior_mean=None, prior_sd=None, rng
     -------
     CertifiedModel
     """
-    mean = np.asarray(case.prior.mean if prior_mean is None else prior_mean, dtype=float)
-    sd = np.asarray(case.prior.sd if prior_sd is None else prior_sd, dtype=float)
-    mean_b = laminate.stiffness_from_engineering(mean)
-    box = Box.from_covariance(mean_b, stiffness_covariance(mean, np.diag(sd**2)), BOX_SIGMA)
+    mean = case.prior.mean if prior_mean is None else prior_mean
+    sd = case.prior.sd if prior_sd is None else prior_sd
+    mean_b, cov_b = prior_in_stiffness(mean, sd, "full")
+    box = Box.from_covariance(mean_b, cov_b, BOX_SIGMA)
     settings = {**FAST_DEFAULTS, **options}
     rng = 0 if rng is None else rng
     fast = fast_model(model, mean_b, box, int(n_modes), rng=rng, **settings)
@@ -167,7 +181,7 @@ class BoxedModel:
     doubles after a check the reduced model passed and halves after one it failed (between
     :data:`RADIUS_MIN` and :data:`RADIUS_MAX`), as a trust region does. Iterates off the box
     are expected on a path from a far prior or along a weakly determined constant, so they
-    are counted (:attr:`n_full`, :attr:`n_enriched`), not warned of.
+    are counted (:attr:`n_full`), not warned of.
 
     A :class:`bayesplate.forward.ForwardModel`.
 
@@ -181,7 +195,7 @@ class BoxedModel:
 
     def __init__(self, model, reduced, tolerance):
         self.model, self.reduced, self.tolerance = model, reduced, float(tolerance)
-        self.n_full = self.n_enriched = 0
+        self.n_full = 0
         self.radius = RADIUS_START
         self._trusted = np.empty((0, 6))
         self._most = reduced.n_modes + reduced.margin
@@ -218,13 +232,11 @@ class BoxedModel:
 
     def _check(self, b):
         """Solve the full model at `b`; enrich the basis if the reduced one misses it."""
-        n = self.reduced.n_modes
         full = self.model.solve(b, self._most)
         self.n_full += 1
-        error = np.max(np.abs(np.sqrt(self.reduced.eigenvalues(b, n) / full.eigenvalues[:n]) - 1))
+        error = np.max(np.abs(relative_errors(self.reduced, [full], self.reduced.n_modes)))
         if error > self.tolerance:
             self.reduced = self.reduced.enrich(self.model, b[None, :], [full])
-            self.n_enriched += 1
             self.radius = max(self.radius / 2.0, RADIUS_MIN)
         else:
             self.radius = min(self.radius * 2.0, RADIUS_MAX)

@@ -41,7 +41,7 @@ certificate failed or a point lies outside the certified box.
 
 from .box import Box, prior_stiffness, stiffness_box
 from .certified import CertifiedModel, ReducedModelWarning, fast_model
-from .certify import DEFAULT_TOLERANCE, Certificate, certify
+from .certify import DEFAULT_TOLERANCE, Certificate, certify, relative_errors
 from .model import ReducedModalResult, ReducedModel
 
 __all__ = [
@@ -55,5 +55,6 @@ __all__ = [
     "certify",
     "fast_model",
     "prior_stiffness",
+    "relative_errors",
     "stiffness_box",
 ]

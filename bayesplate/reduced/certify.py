@@ -15,7 +15,7 @@ import numpy as np
 
 from .basis import _solve_many
 
-__all__ = ["DEFAULT_TOLERANCE", "Certificate", "certify"]
+__all__ = ["DEFAULT_TOLERANCE", "Certificate", "certify", "relative_errors"]
 
 DEFAULT_TOLERANCE = 1e-4
 """Largest relative frequency error the certificate accepts (issue 4)."""
@@ -74,8 +74,16 @@ class Certificate:
         )
 
 
-def _relative_errors(reduced, results, n_modes):
-    """``f_reduced / f_full - 1`` at the points of ``results``, shape (k, n_modes)."""
+def relative_errors(reduced, results, n_modes):
+    """``f_reduced / f_full - 1`` at the points of ``results``, shape (k, n_modes).
+
+    Parameters
+    ----------
+    reduced : ReducedModel
+    results : sequence of ModalResult
+        Full-model solutions (at least ``n_modes`` modes each), at their own ``b``.
+    n_modes : int
+    """
     errors = []
     for r in results:
         ritz = reduced.solve(r.b, n_modes).eigenvalues
@@ -86,7 +94,7 @@ def _relative_errors(reduced, results, n_modes):
 def _certify(model, reduced, points, tolerance, n_modes, n_solve, n_probe=0):
     """Certificate and the full solutions (with ``n_solve`` modes) at ``points``."""
     results = _solve_many(model, points, n_solve)
-    errors = _relative_errors(reduced, results, n_modes)
+    errors = relative_errors(reduced, results, n_modes)
     per_mode = np.max(np.abs(errors), axis=0)
     worst = float(per_mode.max())
     certificate = Certificate(

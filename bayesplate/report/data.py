@@ -11,11 +11,11 @@ import importlib.util
 from dataclasses import dataclass, field
 
 from .. import __version__
-from ..estimators import METHODS, case_fast_model, resolve_forward
+from ..estimators import METHODS, case_fast_model, modes_to_certify, resolve_forward
 from ..io import Case
 from ..laminate import stiffness_from_engineering
 from ..model import PlateModel
-from ..pairing import DEFAULT_EXTRA_MODES, MAC_EXTRA_MODES, Pairing
+from ..pairing import DEFAULT_EXTRA_MODES, Pairing
 from .options import ReportOptions
 
 __all__ = ["ESTIMATORS", "ReportData", "sampling_available"]
@@ -81,9 +81,9 @@ class ReportData:
         """
         model = self.plate_model()
         if self.fast is None and resolve_forward("auto", model) == "fast":
-            m = self.case.measured.size
-            by_likelihood = self.options.pairing == "likelihood"
-            n_modes = max(self.pairing().n_modes(), m + MAC_EXTRA_MODES * by_likelihood)
+            # what the steps' pairing needs, and at least the modes of the pairing shown
+            needed = modes_to_certify(self.case, self.pairing_for_steps())
+            n_modes = max(self.pairing().n_modes(), needed)
             self.fast = case_fast_model(self.case, model, n_modes, rng=self.options.seed)
             self.seconds["fast_model"] = self.fast.build_seconds
         return self.fast

@@ -271,7 +271,7 @@ def prepare(
         center = box.center if pilot is None else pilot.b
         fast = fast_model(model, center, box, pair.n_modes(), rng=rng, **options)
         timings["build"] = time.perf_counter() - started
-        solves += 1 + options["n_snapshots"] + sum(c.n_test for c in fast.history)
+        solves += fast.build_solves
         log.info("fast model: %s", fast.certificate)
     setup = SamplingSetup(problem, model, fast if forward == "reduced" else None, None,
                           pilot, None if fast is None else fast.box, timings, solves)  # fmt: skip
