@@ -36,6 +36,8 @@ __all__ = ["JointFit", "JointProblem", "fit"]
 log = logging.getLogger(__name__)
 
 _UNPHYSICAL_RESIDUAL = 1e4  # residual returned outside the lamina's physical region
+DISTINCT = 0.05  # whitened distance under which two optima are the same
+REFINE_TOL = 1e-5  # relative change of the cost / step that ends a refinement
 
 
 @dataclass(frozen=True)
@@ -150,6 +152,7 @@ class JointProblem:
         self.theta_upper = np.array([p.upper for p in params])
         self.n_solves = 0
         self.scale = None
+        self.pencil = None
         self._cache = {}
 
     def on(self, model, scale=None):
@@ -161,6 +164,16 @@ class JointProblem:
         other = copy.copy(self)
         other.model, other.n_solves, other._cache = model, 0, {}
         other.scale = None if scale is None else np.asarray(scale, dtype=float)
+        other.pencil = None
+        return other
+
+    def on_pencil(self, pencil, scale=None):
+        """The same problem on a reduced candidate model (:class:`.pencil.CandidatePencil`).
+
+        ``scale`` as for :meth:`on` (the pencil's mesh to this problem's).
+        """
+        other = self.on(self.model, scale)
+        other.pencil = pencil
         return other
 
     @property
@@ -204,6 +217,8 @@ class JointProblem:
         b, theta = self.unpack(z)
         if not laminate.is_physical(b):
             return None
+        if self.pencil is not None:
+            return self._evaluate_reduced(b, theta)
         plate = self.plate(theta)
         modal = plate.solve(b, int(self.modes.max()) + 3)
         self.n_solves += 1
@@ -213,6 +228,15 @@ class JointProblem:
         J[:, :6] = modal.sensitivities[self.modes] @ self.L
         for i in range(self.k):
             J[:, 6 + i] = self.theta_sd[i] * self._theta_derivative(theta, i, b, lam, vectors)
+        if self.scale is not None:
+            lam, J = lam * self.scale, J * self.scale[:, None]
+        return lam, J, modal
+
+    def _evaluate_reduced(self, b, theta):
+        modal, d_theta = self.pencil.solve(b, theta, int(self.modes.max()) + 1)
+        lam = modal.eigenvalues[self.modes]
+        J = np.hstack([modal.sensitivities[self.modes] @ self.L,
+                       d_theta[self.modes] * self.theta_sd])  # fmt: skip
         if self.scale is not None:
             lam, J = lam * self.scale, J * self.scale[:, None]
         return lam, J, modal
@@ -252,7 +276,8 @@ class JointProblem:
         return float(np.sum(np.log(hi - lo)))
 
 
-def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None, keep=1, workers=1):
+def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None, keep=1, workers=1,
+        rough=None, distinct=False):  # fmt: skip
     """Best joint fit over several starts, with its Laplace evidence.
 
     Parameters
@@ -274,24 +299,43 @@ def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None, keep
         How many of the best coarse results to refine (the best fine one is returned).
     workers : int
         Processes for the local fits from the starts (see :func:`.parallel.fork_map`).
+    rough : JointProblem, optional
+        A cheaper version of ``problem`` (a reduced model: :meth:`JointProblem.on_pencil`)
+        used as ``coarse`` is; it takes precedence over ``coarse``.
+    distinct : bool
+        Refine the ``keep`` best *distinct* rough optima (whitened distance above
+        ``DISTINCT``), not the ``keep`` best ones (many starts reach the same optimum).
 
     Returns
     -------
     JointFit
     """
-    if coarse is not None:
-        rough_problem = problem.on(coarse, scale)
+    if rough is None and coarse is not None:
+        rough = problem.on(coarse, scale)
+    if rough is not None:
+        rough_problem = rough
         rough = _local_fits(rough_problem, starts, max_nfev, workers)
         if refine is not None and not refine(_summarise(rough_problem, rough[0], refined=False)):
             return _summarise(rough_problem, rough[0], refined=False)
-        starts = [r.x for r in rough[:keep]]
-    results = _local_fits(problem, starts, max_nfev, workers)
+        starts = [r.x for r in (_distinct(rough) if distinct else rough)[:keep]]
+    # from a rough optimum the working mesh only polishes: a looser stop saves solves
+    results = _local_fits(problem, starts, max_nfev, workers,
+                          REFINE_TOL if rough is not None else 1e-8)  # fmt: skip
     others = tuple((problem.unpack(r.x)[0], 2.0 * r.cost) for r in results[1:])
     return replace(_summarise(problem, results[0]), alternatives=others)
 
 
-def _local_fits(problem, starts, max_nfev, workers=1):
-    """Least-squares results from every start, lowest cost first."""
+def _distinct(results):
+    """Results (best first) farther than ``DISTINCT`` from every better one."""
+    chosen = []
+    for r in results:
+        if all(np.linalg.norm(r.x - c.x) > DISTINCT for c in chosen):
+            chosen.append(r)
+    return chosen
+
+
+def _local_fits(problem, starts, max_nfev, workers=1, tol=1e-8):
+    """Least-squares results from every start, lowest cost first (``tol``: ftol and xtol)."""
     lo, hi = problem.bounds()
 
     def local_fit(z0):
@@ -305,6 +349,8 @@ def _local_fits(problem, starts, max_nfev, workers=1):
             method="trf",
             x_scale="jac",
             max_nfev=max_nfev,
+            ftol=tol,
+            xtol=tol,
         )
         log.info(
             "%s start %s: cost %.3g (%s)",

@@ -2,8 +2,11 @@
 
 Each candidate's joint fit starts from the prior mean of its parameters, its own extra
 starting points and, for a located candidate, the best distinct places of its Ritz scan; it
-runs on the coarse mesh corrected to the working one and is refined only when promising.
-The candidates are ranked by their Laplace evidence gain over the nominal model.
+runs on a reduced model of the modified plate on the coarse mesh (:mod:`.pencil`; the
+coarse finite-element model for a candidate without a Ritz form), corrected to the working
+mesh, and is refined on the working mesh when promising. Every variant of a candidate (a
+taper along x and along y) is fitted and refined on its own; the candidates are ranked by
+their Laplace evidence gain over the nominal model.
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ import numpy as np
 
 from .fit import JointFit, JointProblem, fit
 from .parallel import fork_map
+from .pencil import candidate_pencil
 
 __all__ = ["CandidateResult", "improved_nominal", "rank"]
 
@@ -25,7 +29,8 @@ class CandidateResult:
     Attributes
     ----------
     name : str
-        The candidate's :attr:`~.base.Physics.name`.
+        The candidate's :attr:`~.base.Physics.name` (its variant, a taper's direction, is
+        in ``parameters``, first).
     fit : JointFit
     log_evidence_gain : float
         ``ln Z(candidate) - ln Z(nominal)``, nats.
@@ -48,17 +53,19 @@ class CandidateResult:
 def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list, say):
     """Fit every candidate jointly with the constants; best evidence gain first.
 
-    Every start is fitted on the coarse mesh corrected by the fine-to-coarse eigenvalue
-    ratio at the nominal fit; candidates that gain at least ``level["margin"]`` there are
-    refined on the working mesh. Only refined candidates can be chosen. Candidates of one
-    name (a taper per direction) keep the better.
+    Every start is fitted on a reduced model of the modified plate on the coarse mesh
+    (:func:`.pencil.candidate_pencil`), corrected by the fine-to-coarse eigenvalue ratio at
+    the nominal fit; candidates that gain at least ``level["margin"]`` there are refined on
+    the working mesh. Only refined candidates can be chosen. Every variant (a taper per
+    direction) is a candidate of its own.
 
     Parameters
     ----------
     model : PlateModel
     level : dict
         ``coarse`` (PlateModel), ``scale`` (fine / coarse eigenvalues, shape (m,)),
-        ``margin`` (nats), ``workers`` (int).
+        ``margin`` (nats), ``workers`` (int), ``coarse_modes`` (the coarse nominal modes
+        at ``nominal.b`` for the Ritz bases, shape (n_dofs, n); optional).
     Y, sigma : numpy.ndarray, shape (m,)
         Measured eigenvalues and their deviations, rad^2/s^2.
     mu_b : numpy.ndarray, shape (6,)
@@ -84,9 +91,11 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
         thetas = [problem.theta_mean, *physics.starting_points(model, nominal.b),
                   *_located_starts(physics, model, scans)]  # fmt: skip
         lo, hi = problem.theta_lower, problem.theta_upper
-        starts = [problem.pack(nominal.b, np.clip(t, lo, hi)) for t in thetas]
+        thetas = [np.clip(t, lo, hi) for t in thetas]
+        starts = [problem.pack(nominal.b, t) for t in thetas]
+        rough = _reduced(problem, physics, model, level, nominal, thetas)
         result = fit(problem, starts, max_nfev=25, coarse=level["coarse"],
-                     scale=level["scale"], refine=promising)  # fmt: skip
+                     scale=level["scale"], refine=promising, rough=rough)  # fmt: skip
         gain = result.log_evidence - nominal.log_evidence
         params = {**physics.settings(), **physics.labelled(model, nominal.b, result.theta)}
         sds = physics.labelled(model, nominal.b, result.theta_sd)
@@ -99,17 +108,30 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
                    key=lambda i: -len(physics_list[i].parameters(model, nominal.b)))  # fmt: skip
     fitted = fork_map(candidate, [physics_list[i] for i in order], level["workers"])
     results = [fitted[order.index(i)] for i in range(len(physics_list))]
-    for r in results:
+    for r, physics in zip(results, physics_list, strict=True):
         where = "" if r.fit.refined else " (coarse mesh, not refined)"
-        say(f"{r.name}: chi2 = {r.fit.chi2:.1f}, evidence gain {r.log_evidence_gain:+.1f}{where}")
-    best_by_name = {}
-    for r in results:  # the taper is fitted once per direction; keep the better
-        if (
-            r.name not in best_by_name
-            or r.log_evidence_gain > best_by_name[r.name].log_evidence_gain
-        ):
-            best_by_name[r.name] = r
-    return sorted(best_by_name.values(), key=lambda r: -r.log_evidence_gain)
+        variant = "".join(f" ({v})" for v in physics.settings().values())
+        say(f"{r.name}{variant}: chi2 = {r.fit.chi2:.1f}, evidence gain "
+            f"{r.log_evidence_gain:+.1f}{where}")  # fmt: skip
+    return sorted(results, key=lambda r: -r.log_evidence_gain)
+
+
+def _reduced(problem, physics, model, level, nominal, thetas):
+    """The candidate's problem on its reduced coarse model, or None (no Ritz form).
+
+    The Ritz basis holds the coarse nominal modes and the modified plate's at the starting
+    parameters and, for a single parameter, four prior deviations either side of the mean.
+    """
+    coarse = level["coarse"]
+    n = int(problem.modes.max()) + 1
+    snapshots = [t for t in thetas if not np.allclose(t, problem.theta_mean)]
+    if problem.k == 1:
+        for s in (-4.0, 4.0):
+            t = problem.theta_mean + s * problem.theta_sd
+            snapshots.append(np.clip(t, problem.theta_lower, problem.theta_upper))
+    pencil = candidate_pencil(coarse, physics, nominal.b, snapshots, n + 4,
+                              nominal_modes=level.get("coarse_modes"))  # fmt: skip
+    return None if pencil is None else problem.on_pencil(pencil, level["scale"])
 
 
 def _located_starts(physics, model, scans, n=3):
