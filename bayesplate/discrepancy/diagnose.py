@@ -39,6 +39,7 @@ from . import candidates as all_candidates
 from .base import mirror_positions
 from .fit import JointFit, JointProblem, fit
 from .locate import absorbable_projector, mode_kinds
+from .pencil import candidate_pencil
 from .rank import CandidateResult, improved_nominal, rank
 from .scan import RitzBasis
 from .verdict import basins_note, predictive_p_values, unidentified, verdict
@@ -275,8 +276,10 @@ def diagnose(
     coarse_nominal = coarse.solve(nominal.b, int(modes.max()) + 1 + RITZ_EXTRA_MODES)
     level = {"coarse": coarse, "scale": nominal.eigenvalues / coarse_nominal.eigenvalues[modes],
              "margin": refine_margin, "workers": workers,
-             "coarse_modes": coarse_nominal.vectors}  # fmt: skip
-    scans = _scans(physics, model, nominal, modes, Y, sigma, P)
+             "coarse_modes": coarse_nominal.vectors, "rough": rough}  # fmt: skip
+    ritz = model.solve(nominal.b, int(modes.max()) + 1 + RITZ_EXTRA_MODES)
+    level["modes"] = ritz.vectors
+    scans = _scans(physics, model, nominal, modes, Y, sigma, P, ritz)
     ranked = rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics, say)
     better = improved_nominal(nominal_problem, nominal, ranked, level)
     if better is not None:
@@ -351,7 +354,14 @@ def fit_nominal(problem, rough, rng, n_starts=DEFAULTS["n_starts"], workers=1, k
     if not isinstance(rough, JointProblem):
         rough = problem.on(rough)
     starts = [np.zeros(6)] + [rng.standard_normal(6) for _ in range(n_starts)]
-    return fit(problem, starts, rough=rough, keep=keep, workers=workers, distinct=True)
+    n = int(problem.modes.max()) + 1 + RITZ_EXTRA_MODES
+
+    def polish(z):  # the working mesh's modes at and around the rough optimum
+        b = problem.unpack(z)[0]
+        return problem.on_pencil(candidate_pencil(problem.model, None, b, [], n))
+
+    return fit(problem, starts, rough=rough, keep=keep, workers=workers, distinct=True,
+               polish=polish)  # fmt: skip
 
 
 def nominal_reduced(coarse, mu_b, V_b, n_modes, rng, n_snapshots=8):
@@ -427,14 +437,13 @@ def _region(model, maps):
     return best[1], [tuple(float(v) for v in p) for p in mirror_positions(model, *best[1])]
 
 
-def _scans(physics_list, model, nominal, modes, Y, sigma, P):
+def _scans(physics_list, model, nominal, modes, Y, sigma, P, ritz):
     """Ritz scans of the located candidates at the nominal fit, keyed by name.
 
     The Ritz basis (:mod:`.scan`) holds the nominal modes up to ``RITZ_EXTRA_MODES`` beyond
-    the highest paired one.
+    the highest paired one (``ritz``: the nominal fit's modes).
     """
-    n_basis = int(modes.max()) + 1 + RITZ_EXTRA_MODES
-    basis = RitzBasis.from_modes(model, model.solve(nominal.b, n_basis))
+    basis = RitzBasis.from_modes(model, ritz)
     scans = {}
     for physics in physics_list:
         result = physics.scan(model, basis, nominal.b, Y, sigma, modes, P)

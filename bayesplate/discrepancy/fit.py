@@ -277,7 +277,7 @@ class JointProblem:
 
 
 def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None, keep=1, workers=1,
-        rough=None, distinct=False):  # fmt: skip
+        rough=None, distinct=False, rough_nfev=None, polish=None):  # fmt: skip
     """Best joint fit over several starts, with its Laplace evidence.
 
     Parameters
@@ -302,6 +302,14 @@ def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None, keep
     rough : JointProblem, optional
         A cheaper version of ``problem`` (a reduced model: :meth:`JointProblem.on_pencil`)
         used as ``coarse`` is; it takes precedence over ``coarse``.
+    rough_nfev : int, optional
+        Evaluation cap of each local fit on ``rough`` (default ``max_nfev``).
+    polish : callable, optional
+        ``polish(z) -> JointProblem``: a reduced model of ``problem`` on its own mesh,
+        accurate near the rough optimum ``z`` (:meth:`JointProblem.on_pencil`). The rough
+        optima are then refined on it instead of ``problem``, and only the best one is
+        evaluated on ``problem`` (the fit reported: chi-square, evidence and derivatives are
+        the finite-element model's at that point).
     distinct : bool
         Refine the ``keep`` best *distinct* rough optima (whitened distance above
         ``DISTINCT``), not the ``keep`` best ones (many starts reach the same optimum).
@@ -314,10 +322,15 @@ def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None, keep
         rough = problem.on(coarse, scale)
     if rough is not None:
         rough_problem = rough
-        rough = _local_fits(rough_problem, starts, max_nfev, workers)
+        rough = _local_fits(rough_problem, starts, rough_nfev or max_nfev, workers)
         if refine is not None and not refine(_summarise(rough_problem, rough[0], refined=False)):
             return _summarise(rough_problem, rough[0], refined=False)
         starts = [r.x for r in (_distinct(rough) if distinct else rough)[:keep]]
+        if polish is not None:
+            polished = sorted((_local_fits(polish(z), [z], 100)[0] for z in starts),
+                              key=lambda r: r.cost)  # fmt: skip
+            others = tuple((problem.unpack(r.x)[0], 2.0 * r.cost) for r in polished[1:])
+            return replace(_summarise(problem, polished[0]), alternatives=others)
     # from a rough optimum the working mesh only polishes: a looser stop saves solves
     results = _local_fits(problem, starts, max_nfev, workers,
                           REFINE_TOL if rough is not None else 1e-8)  # fmt: skip

@@ -191,7 +191,8 @@ def candidate_pencil(model, physics, b, thetas, n_modes, nominal_modes=None):
     ----------
     model : PlateModel
         The nominal plate (the mesh the pencil lives on).
-    physics : Physics
+    physics : Physics or None
+        None: the nominal plate, its basis the nominal modes alone.
     b : numpy.ndarray, shape (6,)
         Stiffness coefficients of the snapshots, Pa.
     thetas : sequence of numpy.ndarray, each shape (k,)
@@ -205,11 +206,15 @@ def candidate_pencil(model, physics, b, thetas, n_modes, nominal_modes=None):
     -------
     CandidatePencil or None
     """
-    if not _has_ritz(physics):
+    if physics is not None and not _has_ritz(physics):
         return None
     if nominal_modes is None:
         nominal_modes = model.solve(b, n_modes).vectors
     blocks = [nominal_modes]
+    if physics is None:  # the nominal plate itself
+        V = ritz_basis(model, blocks)
+        projected = project(model, V)
+        return CandidatePencil(V, lambda theta: projected, [])
     blocks += [physics.apply(model, np.asarray(t, dtype=float)).solve(b, n_modes).vectors
                for t in thetas]  # fmt: skip
     V = ritz_basis(model, blocks)

@@ -21,6 +21,9 @@ from .pencil import candidate_pencil
 
 __all__ = ["CandidateResult", "improved_nominal", "rank"]
 
+#: Evaluation cap of a candidate's refinement on the working mesh, from its reduced optimum.
+REFINE_NFEV = 10
+
 
 @dataclass(frozen=True)
 class CandidateResult:
@@ -65,7 +68,9 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
     level : dict
         ``coarse`` (PlateModel), ``scale`` (fine / coarse eigenvalues, shape (m,)),
         ``margin`` (nats), ``workers`` (int), ``coarse_modes`` (the coarse nominal modes
-        at ``nominal.b`` for the Ritz bases, shape (n_dofs, n); optional).
+        at ``nominal.b`` for the Ritz bases, shape (n_dofs, n); optional), ``rough`` (the
+        nominal problem on its reduced model; optional), ``modes`` (the nominal modes at
+        ``nominal.b`` on ``model``, shape (n_dofs, n), for the refinement; optional).
     Y, sigma : numpy.ndarray, shape (m,)
         Measured eigenvalues and their deviations, rad^2/s^2.
     mu_b : numpy.ndarray, shape (6,)
@@ -94,8 +99,14 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
         thetas = [np.clip(t, lo, hi) for t in thetas]
         starts = [problem.pack(nominal.b, t) for t in thetas]
         rough = _reduced(problem, physics, model, level, nominal, thetas)
-        result = fit(problem, starts, max_nfev=25, coarse=level["coarse"],
-                     scale=level["scale"], refine=promising, rough=rough)  # fmt: skip
+        # on a reduced model the local fits run to convergence; a reduced model of the
+        # working mesh around the rough optimum polishes it, checked by one full solve
+        polish = None
+        if rough is not None and level.get("modes") is not None:
+            polish = _polisher(problem, physics, model, level["modes"])
+        result = fit(problem, starts, max_nfev=REFINE_NFEV if rough else 25,
+                     coarse=level["coarse"], scale=level["scale"], refine=promising,
+                     rough=rough, rough_nfev=100, polish=polish)  # fmt: skip
         gain = result.log_evidence - nominal.log_evidence
         params = {**physics.settings(), **physics.labelled(model, nominal.b, result.theta)}
         sds = physics.labelled(model, nominal.b, result.theta_sd)
@@ -114,6 +125,18 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
         say(f"{r.name}{variant}: chi2 = {r.fit.chi2:.1f}, evidence gain "
             f"{r.log_evidence_gain:+.1f}{where}")  # fmt: skip
     return sorted(results, key=lambda r: -r.log_evidence_gain)
+
+
+def _polisher(problem, physics, model, modes):
+    """``polish(z)``: the candidate's pencil on the working mesh with a snapshot at ``z``."""
+    n = int(problem.modes.max()) + 1
+
+    def polish(z):
+        b, theta = problem.unpack(z)
+        pencil = candidate_pencil(model, physics, b, [theta], n + 4, nominal_modes=modes)
+        return problem.on_pencil(pencil)
+
+    return polish
 
 
 def _reduced(problem, physics, model, level, nominal, thetas):
@@ -145,8 +168,9 @@ def improved_nominal(problem, nominal, ranked, level):
 
     A candidate's fit starts from the nominal constants and may walk into a better basin of
     the constants alone; its gain would then be credited to the physics. Re-fitting the
-    nominal model from there keeps the gains honest. Each re-fit runs on the corrected
-    coarse mesh first and is refined only when it beats the nominal evidence there.
+    nominal model from there keeps the gains honest. Each re-fit runs on the nominal
+    reduced model (``level["rough"]``; else the corrected coarse mesh) first and is refined
+    only when it beats the nominal evidence there.
 
     Returns
     -------
@@ -162,6 +186,7 @@ def improved_nominal(problem, nominal, ranked, level):
                 [problem.pack(c.fit.b)],
                 coarse=level["coarse"],
                 scale=level["scale"],
+                rough=level.get("rough"),
                 refine=lambda rough, bar=best.log_evidence: rough.log_evidence > bar,
             )
             if trial.refined and trial.log_evidence > best.log_evidence:
