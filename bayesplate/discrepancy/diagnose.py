@@ -1,15 +1,17 @@
 """Diagnose a mismatch between the model and the recordings: the steps, in order.
 
-1. Fit the nominal model globally (several starts) and check it: chi-square of the
+1. Fit the nominal model globally (many starts on a reduced model, the best refined on the
+   working mesh: :mod:`.nominal`) and check it: chi-square of the
    standardised residuals against ``m - p_eff`` degrees of freedom (``p_eff``: parameters
    the data fix), and a predictive check per mode (:mod:`.verdict`).
 2. Locate: which modes carry the misfit, what kind of modes they are, and where on the plate
    a local change would explain the residuals (after the constants took their share): the
    location map and the Ritz scan of every located candidate (its
    :meth:`~.base.Physics.location_map` and :meth:`~.base.Physics.scan`).
-3. Name: fit every candidate physics jointly with the constants and rank the candidates by
-   their Laplace evidence gain over the nominal model (what the constants cannot absorb;
-   :mod:`.rank`).
+3. Name: fit every candidate physics (every variant: a taper along x and along y) jointly
+   with the constants, on a reduced model of the modified plate (:mod:`.pencil`) refined on
+   the working mesh, and rank the candidates by their Laplace evidence gain over the nominal
+   model (what the constants cannot absorb; :mod:`.rank`).
 4. Model: the chosen candidate's joint fit is the refit, with its Laplace posterior.
 5. Verdict: ``consistent``, ``explained`` or ``unexplained`` (:mod:`.verdict`).
 
@@ -34,12 +36,11 @@ from ..model import PlateModel
 from ..pairing import Pairing
 from ..posterior import observed_eigenvalues, prior_in_stiffness
 from ..quantities import hz_from_eigenvalue
-from ..reduced import ReducedModel
 from . import candidates as all_candidates
 from .base import mirror_positions
-from .fit import JointFit, JointProblem, fit
+from .fit import JointFit, JointProblem
 from .locate import absorbable_projector, mode_kinds
-from .pencil import candidate_pencil
+from .nominal import N_STARTS, check_fast, fit_nominal, nominal_reduced
 from .rank import CandidateResult, improved_nominal, rank
 from .scan import RitzBasis
 from .verdict import basins_note, predictive_p_values, unidentified, verdict
@@ -61,7 +62,7 @@ log = logging.getLogger(__name__)
 DEFAULTS = {
     "alpha": 0.01,  # significance of the chi-square test
     "evidence_threshold": 3.0,  # nats (about 20:1): a candidate must gain this much
-    "n_starts": 32,  # random starts of the nominal fit (reduced model), besides the prior mean
+    "n_starts": N_STARTS,  # random starts of the nominal fit (reduced model), and the mean
     "unidentified_ratio": 0.7,  # posterior sd / prior sd above which a constant is unidentified
     "mesh_error_ratio": 0.3,  # mesh error / sigma above which sigma is inflated
     "refine_margin": 1.0,  # nats: candidates below this on the coarse mesh are not refined
@@ -96,7 +97,8 @@ class Diagnosis:
     region_mm : tuple or None
         Best location of a local change, mm; ``region_mirrors_mm`` fit equally.
     candidates : list of CandidateResult
-        Best first.
+        Best first; every variant of a candidate is one (a taper along x and one along y,
+        told apart by ``parameters["direction"]``).
     chosen : CandidateResult or None
     refit_dof, refit_p_value : float
     unidentified : list of str
@@ -197,13 +199,14 @@ def diagnose(
     evidence_threshold : float
         Laplace evidence gain a candidate needs to be chosen, nats (3: about 20 to 1).
     n_starts : int
-        Random starts of the nominal fit, besides the prior mean.
+        Random starts of the nominal fit (on the reduced model), besides the prior mean.
     unidentified_ratio : float
         Posterior sd / prior sd above which a constant is reported as unidentified.
     mesh_error_ratio : float
         Mesh error / measurement deviation above which the deviation is inflated.
     refine_margin : float
-        Candidates gaining less than this on the coarse mesh are not refined, nats.
+        Candidates gaining less than this on their reduced coarse model are not refined on
+        the working mesh, nats.
     basin_margin : float
         Another nominal optimum whose ``chi2 + chi2_prior`` is this close fits as well.
     workers : int
@@ -259,7 +262,7 @@ def diagnose(
         rough = nominal_problem.on(fast.reduced)
     nominal = fit_nominal(nominal_problem, rough, rng, n_starts, workers)
     if fast is not None:
-        _check_reduced(fast, nominal, modes, notes)
+        check_fast(fast, nominal, modes, notes)
     dof = max(m - nominal.effective_parameters, 1.0)
     p_value = float(chi2_dist.sf(nominal.chi2, dof))
     say(f"nominal fit: chi2 = {nominal.chi2:.1f} on {dof:.1f} dof, p = {p_value:.3g}")
@@ -318,92 +321,6 @@ def diagnose(
         outcome, nominal, dof, p_value, mode_p, located, kinds, maps, region, mirrors, ranked,
         chosen, refit_dof, refit_p, loose, sigma_Hz, err, measured.frequency_Hz, notes, scans,
     )  # fmt: skip
-
-
-def fit_nominal(problem, rough, rng, n_starts=DEFAULTS["n_starts"], workers=1, keep=2):
-    """Global fit of the nominal model.
-
-    The prior mean and ``n_starts`` random draws from the prior are each fitted on
-    ``rough`` (the same problem on a reduced model: each evaluation costs a small dense
-    eigenproblem); the ``keep`` best distinct optima are refined on the working mesh, and
-    the other optima reached there are kept as ``alternatives``.
-
-    Not a guarantee, but many starts are cheap on the reduced model: on the measured
-    Frederiksen plate at 0.2 % deviations they reach the better basin (objective 14.1, the
-    one reached from Frederiksen's own constants; 4 starts on the half mesh stopped at
-    18.4; see reports/diagnose_frederiksen.md).
-
-    A single local fit from the prior mean, with modes paired by order, can stop in a false
-    minimum where the model's mode order differs from the plate's (see tests/test_diagnose.py).
-
-    Parameters
-    ----------
-    problem : JointProblem
-        The nominal problem on the working mesh.
-    rough : JointProblem or PlateModel
-        The same problem on a cheaper model (:meth:`.fit.JointProblem.on`); a plate model
-        is taken as a coarse mesh without correction.
-    rng : numpy.random.Generator
-    n_starts, workers, keep : int
-        Random starts; processes; optima refined on the working mesh.
-
-    Returns
-    -------
-    JointFit
-    """
-    if not isinstance(rough, JointProblem):
-        rough = problem.on(rough)
-    starts = [np.zeros(6)] + [rng.standard_normal(6) for _ in range(n_starts)]
-    n = int(problem.modes.max()) + 1 + RITZ_EXTRA_MODES
-
-    def polish(z):  # the working mesh's modes at and around the rough optimum
-        b = problem.unpack(z)[0]
-        return problem.on_pencil(candidate_pencil(problem.model, None, b, [], n))
-
-    return fit(problem, starts, rough=rough, keep=keep, workers=workers, distinct=True,
-               polish=polish)  # fmt: skip
-
-
-def nominal_reduced(coarse, mu_b, V_b, n_modes, rng, n_snapshots=8):
-    """A reduced model of the nominal plate over the prior's 3-sigma box (uncertified).
-
-    Snapshots at the prior mean and ``n_snapshots`` points of a Latin hypercube of the box
-    (:meth:`bayesplate.reduced.ReducedModel.build`); used for the global stage only.
-
-    Parameters
-    ----------
-    coarse : PlateModel
-    mu_b : numpy.ndarray, shape (6,)
-    V_b : numpy.ndarray, shape (6, 6)
-        Prior of ``b``, Pa and Pa^2.
-    n_modes : int
-        Elastic modes to reproduce (two more are kept for crossings).
-    rng : numpy.random.Generator
-    n_snapshots : int
-
-    Returns
-    -------
-    ReducedModel
-    """
-    seed = int(rng.integers(2**31))
-    return ReducedModel.build(coarse, mu_b, V_b, n_modes + 2, n_snapshots=n_snapshots,
-                              margin=6, rng=seed)  # fmt: skip
-
-
-def _check_reduced(fast, nominal, modes, notes):
-    """Log and note a disagreement of a shared fast model with the full one at the optimum."""
-    if not fast.box.contains(nominal.b):
-        return
-    lam = fast.reduced.solve(nominal.b, int(modes.max()) + 1).eigenvalues[modes]
-    error = float(np.max(np.abs(np.sqrt(lam / nominal.eigenvalues) - 1.0)))
-    tolerance = fast.certificate.tolerance
-    if error > tolerance:
-        log.error("the fast model is off by %.2g at the nominal fit (certified %.2g)",
-                  error, tolerance)  # fmt: skip
-        notes.append(
-            f"the shared fast model is off by {error:.2g} in frequency at the nominal fit, "
-            f"beyond its certificate ({tolerance:.2g}); the full model was used"
-        )
 
 
 def _paired(fit_, modes):
