@@ -23,6 +23,9 @@ __all__ = ["CandidateResult", "improved_nominal", "rank"]
 
 #: Evaluation cap of a candidate's refinement on the working mesh, from its reduced optimum.
 REFINE_NFEV = 10
+#: Extra starts (prior deviations from the mean) of a one-parameter candidate's reduced fit:
+#: a large effect that reorders modes has local optima on the way from the mean.
+SIZE_GRID = (-8.0, -6.0, -4.0, -3.0, -2.0, 2.0, 3.0, 4.0, 6.0, 8.0)
 
 
 @dataclass(frozen=True)
@@ -97,8 +100,11 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
                   *_located_starts(physics, model, scans)]  # fmt: skip
         lo, hi = problem.theta_lower, problem.theta_upper
         thetas = [np.clip(t, lo, hi) for t in thetas]
-        starts = [problem.pack(nominal.b, t) for t in thetas]
         rough = _reduced(problem, physics, model, level, nominal, thetas)
+        if rough is not None and problem.k == 1:  # cheap there: a grid of sizes as well
+            thetas += [np.clip(problem.theta_mean + s * problem.theta_sd, lo, hi)
+                       for s in SIZE_GRID]  # fmt: skip
+        starts = [problem.pack(nominal.b, t) for t in thetas]
         # on a reduced model the local fits run to convergence; a reduced model of the
         # working mesh around the rough optimum polishes it, checked by one full solve
         polish = None
