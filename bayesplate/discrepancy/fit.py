@@ -43,7 +43,6 @@ log = logging.getLogger(__name__)
 
 _UNPHYSICAL_RESIDUAL = 1e4  # residual returned outside the lamina's physical region
 DISTINCT = 0.3  # whitened distance under which two optima are the same
-REFINE_TOL = 1e-5  # relative change of the cost / step that ends a refinement
 
 
 @dataclass(frozen=True)
@@ -283,7 +282,7 @@ class JointProblem:
 
 
 def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None, keep=1, workers=1,
-        rough=None, distinct=False, rough_nfev=None, polish=None, tol=REFINE_TOL):  # fmt: skip
+        rough=None, distinct=False, rough_nfev=None, polish=None, tol=1e-8):  # fmt: skip
     """Best joint fit over several starts, with its Laplace evidence.
 
     Parameters
@@ -317,8 +316,7 @@ def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None, keep
         evaluated on ``problem`` (the fit reported: chi-square, evidence and derivatives are
         the finite-element model's at that point).
     tol : float
-        ``ftol`` and ``xtol`` of the fits on ``problem`` after a rough stage (they only
-        polish a rough optimum).
+        ``ftol`` and ``xtol`` of the fits on ``problem`` after a rough stage.
     distinct : bool
         Refine the ``keep`` best *distinct* rough optima (whitened distance above
         ``DISTINCT``), not the ``keep`` best ones (many starts reach the same optimum).
@@ -343,7 +341,6 @@ def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None, keep
             # accurate): the optimum reported is the finite-element model's
             best = _local_fits(problem, [polished[0].x], max_nfev, 1, tol)[0]
             return replace(_summarise(problem, best), alternatives=others)
-    # from a rough optimum the working mesh only polishes: a looser stop saves solves
     results = _local_fits(problem, starts, max_nfev, workers,
                           tol if rough is not None else 1e-8)  # fmt: skip
     others = tuple((problem.unpack(r.x)[0], 2.0 * r.cost) for r in results[1:])

@@ -22,7 +22,7 @@ from .pencil import candidate_pencil
 __all__ = ["CandidateResult", "improved_nominal", "rank"]
 
 #: Evaluation cap of a candidate's refinement on the working mesh, from its reduced optimum.
-REFINE_NFEV = 10
+REFINE_NFEV = 25
 #: Extra starts (prior deviations from the mean) of a one-parameter candidate's reduced fit:
 #: a large effect that reorders modes has local optima on the way from the mean.
 SIZE_GRID = (-8.0, -6.0, -4.0, -3.0, -2.0, 2.0, 3.0, 4.0, 6.0, 8.0)
