@@ -18,7 +18,8 @@ volume is its prior volume, which is the right Occam penalty.
 
 Each fit may run on three levels: every start on a cheap model (a reduced model, or the
 coarse mesh), the best optima polished on a reduced model of the working mesh, and the
-result evaluated on the working mesh (:func:`fit`). Over 400 lines (a written reason, as the
+result finished on the working mesh (:func:`fit`; tightly, at a canonical mirror image:
+:mod:`.finish`). Over 400 lines (a written reason, as the
 project asks): the problem, its levels and the Laplace summary share the whitened unknowns
 and the cached evaluation; split, each part would reach into the others' internals.
 """
@@ -35,6 +36,7 @@ from scipy.stats import norm
 
 from .. import laminate
 from ..quantities import engineering_covariance, hz_from_eigenvalue
+from .finish import finish
 from .parallel import fork_map
 
 __all__ = ["JointFit", "JointProblem", "fit"]
@@ -311,10 +313,10 @@ def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None, keep
         Evaluation cap of each local fit on ``rough`` (default ``max_nfev``).
     polish : callable, optional
         ``polish(z) -> JointProblem``: a reduced model of ``problem`` on its own mesh,
-        accurate near the rough optimum ``z`` (:meth:`JointProblem.on_pencil`). The rough
-        optima are then refined on it instead of ``problem``, and only the best one is
-        evaluated on ``problem`` (the fit reported: chi-square, evidence and derivatives are
-        the finite-element model's at that point).
+        accurate near the rough optimum ``z`` (:meth:`JointProblem.on_pencil`). Each of the
+        ``keep`` rough optima is then polished on it and finished on ``problem``; the best
+        finished one is reported (chosen, and its chi-square, evidence and derivatives
+        computed, on the finite-element model).
     tol : float
         ``ftol`` and ``xtol`` of the fits on ``problem`` after a rough stage.
     distinct : bool
@@ -334,17 +336,28 @@ def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None, keep
             return _summarise(rough_problem, rough[0], refined=False)
         starts = [r.x for r in (_distinct(rough) if distinct else rough)[:keep]]
         if polish is not None:
-            polished = sorted((_local_fits(polish(z), [z], 100)[0] for z in starts),
+            # every polished optimum is finished on the working mesh itself (a few steps
+            # when the polish was accurate) and the best is chosen there: a reduced model
+            # only chooses where to start, the optimum reported is the finite-element one's
+            finished = sorted((_finished(problem, polish(z), z, max_nfev, tol) for z in starts),
                               key=lambda r: r.cost)  # fmt: skip
-            others = tuple((problem.unpack(r.x)[0], 2.0 * r.cost) for r in polished[1:])
-            # the last steps on the working mesh itself (one or two when the polish was
-            # accurate): the optimum reported is the finite-element model's
-            best = _local_fits(problem, [polished[0].x], max_nfev, 1, tol)[0]
-            return replace(_summarise(problem, best), alternatives=others)
+            others = tuple((problem.unpack(r.x)[0], 2.0 * r.cost) for r in finished[1:])
+            return replace(_summarise(problem, finished[0]), alternatives=others)
     results = _local_fits(problem, starts, max_nfev, workers,
                           tol if rough is not None else 1e-8)  # fmt: skip
     others = tuple((problem.unpack(r.x)[0], 2.0 * r.cost) for r in results[1:])
-    return replace(_summarise(problem, results[0]), alternatives=others)
+    best = results[0] if rough is None else finish(problem, results[0], max_nfev)
+    return replace(_summarise(problem, best), alternatives=others)
+
+
+def _finished(problem, polisher, z, max_nfev, tol):
+    """The rough optimum ``z`` polished on ``polisher``, then finished on ``problem``."""
+    polished = _local_fits(polisher, [z], 100)[0]
+    best = _local_fits(problem, [polished.x], max_nfev, 1, tol)[0]
+    best = finish(problem, best, max_nfev)  # tight, at its canonical image
+    log.info("%s: polished %.6g, finished %.6g", _name(problem), 2 * polished.cost,
+             2 * best.cost)  # fmt: skip
+    return best
 
 
 def _distinct(results):

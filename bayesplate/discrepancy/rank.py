@@ -1,12 +1,15 @@
 """Step 3 of diagnose, name: every candidate fitted jointly with the constants, ranked.
 
 Each candidate's joint fit starts from the prior mean of its parameters, its own extra
-starting points and, for a located candidate, the best distinct places of its Ritz scan; it
+starting points and, for a located candidate, the best distinct places of its Ritz scan,
+each with the nominal optimum's constants and those of the other nominal basins found; it
 runs on a reduced model of the modified plate on the coarse mesh (:mod:`.pencil`; the
 coarse finite-element model for a candidate without a Ritz form), corrected to the working
-mesh, and is refined on the working mesh when promising. Every variant of a candidate (a
-taper along x and along y) is fitted and refined on its own; the candidates are ranked by
-their Laplace evidence gain over the nominal model.
+mesh; when promising, its best distinct reduced optima are finished on the working mesh and
+the best one there is its fit (a reduced model only chooses the starting points). Every
+variant of a candidate (a taper along x and along y) is fitted and refined on its own; the
+candidates are ranked by the Laplace evidence gain of these working-mesh fits over the
+nominal model.
 """
 
 from __future__ import annotations
@@ -23,6 +26,12 @@ __all__ = ["CandidateResult", "improved_nominal", "rank"]
 
 #: Evaluation cap of a candidate's refinement on the working mesh, from its reduced optimum.
 REFINE_NFEV = 25
+#: Other nominal optima (``nominal.alternatives``, best first) whose constants start the
+#: candidates' reduced fits too.
+OTHER_BASINS = 2
+#: Distinct reduced optima of a candidate finished on the working mesh (the best one there
+#: is its fit: a reduced model of a strong taper can misjudge which basin is best).
+FINISHED = 3
 #: Extra starts (prior deviations from the mean) of a one-parameter candidate's reduced fit:
 #: a large effect that reorders modes has local optima on the way from the mean.
 SIZE_GRID = (-8.0, -6.0, -4.0, -3.0, -2.0, 2.0, 3.0, 4.0, 6.0, 8.0)
@@ -104,7 +113,10 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
         if rough is not None and problem.k == 1:  # cheap there: a grid of sizes as well
             thetas += [np.clip(problem.theta_mean + s * problem.theta_sd, lo, hi)
                        for s in SIZE_GRID]  # fmt: skip
-        starts = [problem.pack(nominal.b, t) for t in thetas]
+        # from the nominal optimum and from the other nominal basins: the constants that
+        # fit best with an effect may lie in another basin than those that fit best without
+        bases = [nominal.b, *(b for b, _ in nominal.alternatives[:OTHER_BASINS])]
+        starts = [problem.pack(b, t) for b in bases for t in thetas]
         # on a reduced model the local fits run to convergence; a reduced model of the
         # working mesh around the rough optimum polishes it, checked by one full solve
         polish = None
@@ -112,7 +124,8 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
             polish = _polisher(problem, physics, model, level["modes"])
         result = fit(problem, starts, max_nfev=REFINE_NFEV if rough else 25,
                      coarse=level["coarse"], scale=level["scale"], refine=promising,
-                     rough=rough, rough_nfev=100, polish=polish)  # fmt: skip
+                     rough=rough, rough_nfev=100, polish=polish, keep=FINISHED,
+                     distinct=True)  # fmt: skip
         gain = result.log_evidence - nominal.log_evidence
         params = {**physics.settings(), **physics.labelled(model, nominal.b, result.theta)}
         sds = physics.labelled(model, nominal.b, result.theta_sd)
