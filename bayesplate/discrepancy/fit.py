@@ -339,8 +339,10 @@ def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None, keep
             # every polished optimum is finished on the working mesh itself (a few steps
             # when the polish was accurate) and the best is chosen there: a reduced model
             # only chooses where to start, the optimum reported is the finite-element one's
-            finished = sorted((_finished(problem, polish(z), z, max_nfev, tol) for z in starts),
-                              key=lambda r: r.cost)  # fmt: skip
+            finished = [_finished(problem, polish, z, max_nfev, tol) for z in starts]
+            finished = sorted((r for r in finished if r is not None), key=lambda r: r.cost)
+            if not finished:  # no rough optimum has a solvable plate: the best one's error
+                _finished(problem, polish, starts[0], max_nfev, tol, strict=True)
             others = tuple((problem.unpack(r.x)[0], 2.0 * r.cost) for r in finished[1:])
             return replace(_summarise(problem, finished[0]), alternatives=others)
     results = _local_fits(problem, starts, max_nfev, workers,
@@ -350,11 +352,22 @@ def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None, keep
     return replace(_summarise(problem, best), alternatives=others)
 
 
-def _finished(problem, polisher, z, max_nfev, tol):
-    """The rough optimum ``z`` polished on ``polisher``, then finished on ``problem``."""
-    polished = _local_fits(polisher, [z], 100)[0]
-    best = _local_fits(problem, [polished.x], max_nfev, 1, tol)[0]
-    best = finish(problem, best, max_nfev)  # tight, at its canonical image
+def _finished(problem, polish, z, max_nfev, tol, strict=False):
+    """The rough optimum ``z`` polished on ``polish(z)``, then finished on ``problem``.
+
+    None (unless ``strict``) when the plate at ``z`` cannot be solved (a far rough optimum
+    of an inaccurate reduced model: its modified plate is not positive definite).
+    """
+    try:
+        polished = _local_fits(polish(z), [z], 100)[0]
+        best = _local_fits(problem, [polished.x], max_nfev, 1, tol)[0]
+        best = finish(problem, best, max_nfev)  # tight, at its canonical image
+    except (ValueError, np.linalg.LinAlgError) as error:
+        if strict:
+            raise
+        log.warning("%s: rough optimum %s not finished (%s)", _name(problem), np.round(z, 2),
+                    error)  # fmt: skip
+        return None
     log.info("%s: polished %.6g, finished %.6g", _name(problem), 2 * polished.cost,
              2 * best.cost)  # fmt: skip
     return best

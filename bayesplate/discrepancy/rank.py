@@ -29,6 +29,9 @@ REFINE_NFEV = 25
 #: Other nominal optima (``nominal.alternatives``, best first) whose constants start the
 #: candidates' reduced fits too.
 OTHER_BASINS = 2
+#: ... within this much of the nominal optimum's ``chi2 + chi2_prior`` (a fit far worse,
+#: or one that left the physical region, is no basin to start from).
+OTHER_BASIN_MARGIN = 20.0
 #: Distinct reduced optima of a candidate finished on the working mesh (the best one there
 #: is its fit: a reduced model of a strong taper can misjudge which basin is best).
 FINISHED = 3
@@ -115,7 +118,9 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
                        for s in SIZE_GRID]  # fmt: skip
         # from the nominal optimum and from the other nominal basins: the constants that
         # fit best with an effect may lie in another basin than those that fit best without
-        bases = [nominal.b, *(b for b, _ in nominal.alternatives[:OTHER_BASINS])]
+        top = nominal.chi2 + nominal.chi2_prior + OTHER_BASIN_MARGIN
+        others = [b for b, objective in nominal.alternatives if objective < top]
+        bases = [nominal.b, *others[:OTHER_BASINS]]
         starts = [problem.pack(b, t) for b in bases for t in thetas]
         # on a reduced model the local fits run to convergence; a reduced model of the
         # working mesh around the rough optimum polishes it, checked by one full solve
