@@ -1,144 +1,135 @@
-"""Benchmark of `diagnose` (issue 5: a 14-frequency case in under 5 minutes on 2 cores).
+"""Benchmark of `diagnose` over the concealment study's recordings (issue 12: fast everywhere).
 
-Two cases on the case's 50 x 50 mesh: the measured Frederiksen plate (`frederiksen_t300`,
-nothing to find) and the same plate with a concealed 1 g point mass (recordings as in
-studies/concealment.py: 100 x 100 mesh, 0.2 % noise), each with one and with two worker
-processes. Wall time of every step comes from diagnose's progress messages.
+Each recording of ``studies/concealment.py`` (its scenarios, recordings and seeds; the
+Frederiksen plate, 14 frequencies, 50 x 50 mesh) is diagnosed in a fresh process, one at a
+time: wall time, verdict and chosen candidate. With ``--base TREE`` the same recordings are
+also diagnosed by the code of another checkout (``PYTHONPATH=TREE``; e.g. ``git worktree add
+/tmp/diag-base 9f5ebd1``) for the ratio.
 
 Writes ``benchmark_diagnose.md`` to ``out_dir``. Run:
-``python benchmarks/bench_diagnose.py [--quick] [--out DIR]`` (quick: 12 x 6 mesh).
+``python benchmarks/bench_diagnose.py [--runs 0 3 ...] [--base TREE [--base-runs 0 3]]``.
 """
 
 from __future__ import annotations
 
 import argparse
 import datetime
+import json
 import os
 import pathlib
+import statistics
+import subprocess
 import sys
 import time
-
-import numpy as np
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import _machine  # noqa: E402  (this folder's shared helper)
 
+ROOT = pathlib.Path(__file__).resolve().parents[1]
 REPORT = "benchmark_diagnose.md"
-NOISE = 0.002
-SEED = 20261122
-LIMIT_S = 300.0
-CANDIDATES = ("point_mass", "thickness_taper", "ply_misalignment", "elastic_foundation",
-              "local_stiffness_loss")  # fmt: skip
+TARGET_MEDIAN_S, TARGET_WORST_S = 30.0, 90.0
 
 
-def cases(quick=False):
-    """``{label: (case, mesh)}``: the measured plate and a concealed 1 g mass."""
-    from bayesplate import PlateModel, bundled_case_path, load_case, stiffness_from_engineering
-    from bayesplate.discrepancy import PointMass
+def one(index):
+    """Diagnose scenario ``index`` of the concealment study; a JSON line on stdout."""
+    import numpy as np
 
-    case = load_case(bundled_case_path("frederiksen_t300"))
-    mesh = (12, 6) if quick else case.mesh
-    fine = PlateModel.from_case(case, mesh=(2 * mesh[0], 2 * mesh[1]))
-    plate = PointMass().apply(fine, np.array([1.0, 23.0, 14.0]))
-    f = plate.solve(stiffness_from_engineering(case.reference), 14).frequency_Hz
-    f = np.sort(f * (1 + NOISE * np.random.default_rng(SEED).standard_normal(f.size)))
-    concealed = case.with_measured(frequency_Hz=f, sigma_Hz=NOISE * f)
-    return {"measured Frederiksen plate": (case, mesh), "concealed 1 g mass": (concealed, mesh)}
+    sys.path.insert(0, str(ROOT / "studies"))
+    from concealment import NOISE, SEED, recordings, scenarios
 
-
-def time_diagnose(case, mesh, workers):
-    """One timed diagnose: total wall and CPU seconds, the verdict, per-step wall times."""
-    from bayesplate import PlateModel
+    from bayesplate import PlateModel, bundled_case_path, load_case
     from bayesplate.discrepancy.diagnose import diagnose
 
-    steps, last = [], [time.perf_counter()]
-
-    def progress(message):
-        now = time.perf_counter()
-        name = message.split(":")[0]
-        name = "mesh check" if name.startswith("mesh") else name
-        if name in CANDIDATES:  # reported together once all of them are fitted
-            name = "candidates"
-        if steps and steps[-1][0] == name:
-            steps[-1] = (name, steps[-1][1] + now - last[0])
-        else:
-            steps.append((name, now - last[0]))
-        last[0] = now
-
+    label, physics, size, theta = scenarios()[index]
+    case = load_case(bundled_case_path("frederiksen_t300"))
+    model = PlateModel.from_case(case, mesh=case.mesh)
+    fine = PlateModel.from_case(case, mesh=(2 * case.mesh[0], 2 * case.mesh[1]))
+    rng = np.random.default_rng(np.random.SeedSequence(SEED).spawn(index + 1)[index])
+    f = recordings(case, fine, physics, theta, rng)
+    blind = case.with_measured(frequency_Hz=f, sigma_Hz=NOISE * f)
     load = os.getloadavg()[0]
-    wall, cpu = time.perf_counter(), _cpu_seconds()
-    model = PlateModel.from_case(case, mesh=mesh)
-    last[0] = time.perf_counter()
-    d = diagnose(case, model=model, rng=0, workers=workers, progress=progress)
-    return {
-        "wall_s": time.perf_counter() - wall,
-        "cpu_s": _cpu_seconds() - cpu,
-        "verdict": d.verdict + (f" ({d.chosen.name})" if d.chosen else ""),
-        "steps": steps,
-        "load": (load, os.getloadavg()[0]),
-    }
+    start = time.perf_counter()
+    d = diagnose(blind, model=model, rng=SEED)
+    seconds = time.perf_counter() - start
+    chosen = None
+    if d.chosen is not None:
+        chosen = d.chosen.name + "".join(f" ({v})" for v in d.chosen.parameters.values()
+                                         if isinstance(v, str))  # fmt: skip
+    print(json.dumps({"index": index, "effect": label, "size": size, "seconds": seconds,
+                      "verdict": d.verdict, "chosen": chosen, "p_value": d.p_value,
+                      "load": [load, os.getloadavg()[0]]}))  # fmt: skip
 
 
-def _cpu_seconds():
-    """CPU time of this process and its finished children."""
-    t = os.times()
-    return t.user + t.system + t.children_user + t.children_system
+def run(index, tree):
+    """Scenario ``index`` in a fresh process on the code of ``tree``; its result dict."""
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    out = subprocess.run([sys.executable, __file__, "--one", str(index)], env=env, check=True,
+                         capture_output=True, text=True).stdout  # fmt: skip
+    return json.loads(out.strip().splitlines()[-1])
 
 
-def write_report(rows, info, out_dir, quick=False):
-    cmd = f"python benchmarks/bench_diagnose.py{' --quick' if quick else ''}"
+def write_report(rows, base_rows, info, out_dir, base_label):
+    seconds = [r["seconds"] for r in rows]
+    med, worst = statistics.median(seconds), max(seconds)
     lines = [
-        f"Made by `{cmd}` on {datetime.date.today().isoformat()}.",
+        f"Made by `python benchmarks/bench_diagnose.py` on {datetime.date.today().isoformat()}.",
         "",
-        "# diagnose: time on a 14-frequency case",
+        "# diagnose: time over the concealment study's recordings",
         "",
         f"Machine: {info['cpu']}, {info['nproc']} processors; {info['platform']}; Python "
-        f"{info['python']}, numpy {info['numpy']}, scipy {info['scipy']}. Target: under "
-        f"{LIMIT_S / 60:.0f} min on 2 cores. CPU time includes the worker processes.",
+        f"{info['python']}, numpy {info['numpy']}, scipy {info['scipy']}. One worker; each "
+        "run in a fresh process; load = 1-minute load average before / after (the machine "
+        "was shared).",
         "",
-        "| case | mesh | workers | verdict | wall (s) | CPU (s) | load before / after | "
-        "within target |",
-        "|---|---|---|---|---|---|---|---|",
+        f"Targets: median under {TARGET_MEDIAN_S:.0f} s, worst under {TARGET_WORST_S:.0f} s. "
+        f"Here: median {med:.0f} s, worst {worst:.0f} s over {len(rows)} recordings.",
+        "",
+        "| # | effect | size | verdict | chosen | time (s) | load | before (s) | before: verdict |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
+    base = {r["index"]: r for r in base_rows}
     for r in rows:
+        b = base.get(r["index"])
+        before = ("-", "-") if b is None else (
+            f"{b['seconds']:.0f}", f"{b['verdict']} {b['chosen'] or ''}".strip())  # fmt: skip
         lines.append(
-            f"| {r['case']} | {r['mesh'][0]} x {r['mesh'][1]} | {r['workers']} | "
-            f"{r['verdict']} | {r['wall_s']:.0f} | {r['cpu_s']:.0f} | "
-            f"{r['load'][0]:.2f} / {r['load'][1]:.2f} | "
-            f"{'yes' if r['wall_s'] < LIMIT_S else 'NO'} |"
+            f"| {r['index']} | {r['effect']} | {r['size']} | {r['verdict']} | "
+            f"{r['chosen'] or '-'} | {r['seconds']:.0f} | {r['load'][0]:.1f} / "
+            f"{r['load'][1]:.1f} | {before[0]} | {before[1]} |"
         )
-    for case in dict.fromkeys(r["case"] for r in rows):
-        one = [r for r in rows if r["case"] == case and r["workers"] == 1]
-        two = [r for r in rows if r["case"] == case and r["workers"] == 2]
-        if one and two:
-            lines.append(f"\n{case}: two workers take {two[0]['wall_s'] / one[0]['wall_s']:.2f}"
-                         " of one worker's wall time (same run, same machine).")  # fmt: skip
-    lines += ["", "Wall time of each step (s), two workers:", ""]
-    for r in rows:
-        if r["workers"] == 2:
-            steps = ", ".join(f"{name} {s:.0f}" for name, s in r["steps"])
-            lines.append(f"- {r['case']}: {steps}")
+    pairs = [(base[r["index"]]["seconds"], r["seconds"]) for r in rows if r["index"] in base]
+    if pairs:
+        ratios = [b / n for b, n in pairs]
+        lines += ["", f"Before ({base_label}) / now, same recordings: "
+                  + ", ".join(f"{x:.1f}x" for x in ratios)
+                  + f" (median {statistics.median(ratios):.1f}x)."]  # fmt: skip
     path = pathlib.Path(out_dir) / REPORT
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines) + "\n")
     return path
 
 
-def main(out_dir, quick=False):
-    rows = []
-    for label, (case, mesh) in cases(quick).items():
-        for workers in (1, 2):
-            r = time_diagnose(case, mesh, workers)
-            rows.append({"case": label, "mesh": mesh, "workers": workers, **r})
-            print(f"{label}, {workers} worker(s): {r['wall_s']:.0f} s, {r['verdict']}",
-                  flush=True)  # fmt: skip
-    write_report(rows, _machine.machine(), out_dir, quick)
-    return rows
+def main(out_dir, runs, base=None, base_runs=()):
+    rows, base_rows = [], []
+    for i in runs:
+        rows.append(run(i, ROOT))
+        print(json.dumps(rows[-1]), flush=True)
+        if base is not None and i in base_runs:
+            base_rows.append(run(i, base))
+            print("base", json.dumps(base_rows[-1]), flush=True)
+        write_report(rows, base_rows, _machine.machine(), out_dir, str(base))
+    return rows, base_rows
 
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="12 x 6 mesh")
-    parser.add_argument("--out", default=pathlib.Path(__file__).parents[1] / "reports")
+    parser.add_argument("--one", type=int, help=argparse.SUPPRESS)
+    parser.add_argument("--runs", type=int, nargs="*", default=list(range(12)))
+    parser.add_argument("--base", help="another checkout to compare with")
+    parser.add_argument("--base-runs", type=int, nargs="*", default=[0, 3])
+    parser.add_argument("--out", default=ROOT / "reports")
     args = parser.parse_args()
-    main(args.out, quick=args.quick)
+    if args.one is not None:
+        one(args.one)
+    else:
+        main(args.out, args.runs, args.base, args.base_runs)

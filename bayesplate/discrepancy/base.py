@@ -153,6 +153,27 @@ class Physics:
         """
         return None
 
+    def ritz(self, model, b, basis):
+        """The modified plate's matrices projected on a Ritz basis, as functions of ``theta``.
+
+        Parameters
+        ----------
+        model : PlateModel
+            The plate to modify (the mesh of ``basis``).
+        b : numpy.ndarray, shape (6,)
+            Nominal stiffness coefficients, Pa (for priors scaled to the plate).
+        basis : numpy.ndarray, shape (n_dofs, r)
+            From :func:`.pencil.ritz_basis`.
+
+        Returns
+        -------
+        callable or None
+            ``theta -> (terms (6, r, r), constant (r, r), mass (r, r))`` (see
+            :class:`.pencil.CandidatePencil`); None (the default) when the candidate has no
+            cheap reduced form and is fitted on the finite-element model.
+        """
+        return None
+
     def labelled(self, model, b, theta):
         """``{name: value}`` of a parameter vector, for reports and JSON."""
         names = [p.name for p in self.parameters(model, b)]

@@ -1,15 +1,17 @@
 """Diagnose a mismatch between the model and the recordings: the steps, in order.
 
-1. Fit the nominal model globally (several starts) and check it: chi-square of the
+1. Fit the nominal model globally (many starts on a reduced model, the best refined on the
+   working mesh: :mod:`.nominal`) and check it: chi-square of the
    standardised residuals against ``m - p_eff`` degrees of freedom (``p_eff``: parameters
    the data fix), and a predictive check per mode (:mod:`.verdict`).
 2. Locate: which modes carry the misfit, what kind of modes they are, and where on the plate
    a local change would explain the residuals (after the constants took their share): the
    location map and the Ritz scan of every located candidate (its
    :meth:`~.base.Physics.location_map` and :meth:`~.base.Physics.scan`).
-3. Name: fit every candidate physics jointly with the constants and rank the candidates by
-   their Laplace evidence gain over the nominal model (what the constants cannot absorb;
-   :mod:`.rank`).
+3. Name: fit every candidate physics (every variant: a taper along x and along y) jointly
+   with the constants, on a reduced model of the modified plate (:mod:`.pencil`) refined on
+   the working mesh, and rank the candidates by their Laplace evidence gain over the nominal
+   model (what the constants cannot absorb; :mod:`.rank`).
 4. Model: the chosen candidate's joint fit is the refit, with its Laplace posterior.
 5. Verdict: ``consistent``, ``explained`` or ``unexplained`` (:mod:`.verdict`).
 
@@ -33,10 +35,12 @@ from scipy.stats import chi2 as chi2_dist
 from ..model import PlateModel
 from ..pairing import Pairing
 from ..posterior import observed_eigenvalues, prior_in_stiffness
+from ..quantities import hz_from_eigenvalue
 from . import candidates as all_candidates
 from .base import mirror_positions
-from .fit import JointFit, JointProblem, fit
+from .fit import JointFit, JointProblem
 from .locate import absorbable_projector, mode_kinds
+from .nominal import N_STARTS, check_fast, fit_nominal, nominal_reduced
 from .rank import CandidateResult, improved_nominal, rank
 from .scan import RitzBasis
 from .verdict import basins_note, predictive_p_values, unidentified, verdict
@@ -49,6 +53,7 @@ __all__ = [
     "diagnose",
     "fit_nominal",
     "mesh_error",
+    "nominal_reduced",
 ]
 
 log = logging.getLogger(__name__)
@@ -57,7 +62,7 @@ log = logging.getLogger(__name__)
 DEFAULTS = {
     "alpha": 0.01,  # significance of the chi-square test
     "evidence_threshold": 3.0,  # nats (about 20:1): a candidate must gain this much
-    "n_starts": 4,  # random starts of the nominal fit, besides the prior mean
+    "n_starts": N_STARTS,  # random starts of the nominal fit (reduced model), and the mean
     "unidentified_ratio": 0.7,  # posterior sd / prior sd above which a constant is unidentified
     "mesh_error_ratio": 0.3,  # mesh error / sigma above which sigma is inflated
     "refine_margin": 1.0,  # nats: candidates below this on the coarse mesh are not refined
@@ -92,7 +97,8 @@ class Diagnosis:
     region_mm : tuple or None
         Best location of a local change, mm; ``region_mirrors_mm`` fit equally.
     candidates : list of CandidateResult
-        Best first.
+        Best first; every variant of a candidate is one (a taper along x and one along y,
+        told apart by ``parameters["direction"]``).
     chosen : CandidateResult or None
     refit_dof, refit_p_value : float
     unidentified : list of str
@@ -166,6 +172,7 @@ def diagnose(
     refine_margin=DEFAULTS["refine_margin"],
     basin_margin=DEFAULTS["basin_margin"],
     workers=DEFAULTS["workers"],
+    fast=None,
 ):
     """Diagnose a case: nominal fit, location, candidate ranking, refit, verdict.
 
@@ -192,17 +199,23 @@ def diagnose(
     evidence_threshold : float
         Laplace evidence gain a candidate needs to be chosen, nats (3: about 20 to 1).
     n_starts : int
-        Random starts of the nominal fit, besides the prior mean.
+        Random starts of the nominal fit (on the reduced model), besides the prior mean.
     unidentified_ratio : float
         Posterior sd / prior sd above which a constant is reported as unidentified.
     mesh_error_ratio : float
         Mesh error / measurement deviation above which the deviation is inflated.
     refine_margin : float
-        Candidates gaining less than this on the coarse mesh are not refined, nats.
+        Candidates gaining less than this on their reduced coarse model are not refined on
+        the working mesh, nats.
     basin_margin : float
         Another nominal optimum whose ``chi2 + chi2_prior`` is this close fits as well.
     workers : int
         Processes for the independent fits (fork); the results do not depend on it.
+    fast : bayesplate.reduced.CertifiedModel, optional
+        A reduced model of ``model`` for the nominal fit's global stage (its reduced part is
+        used uncertified, also outside its box); default: one built on the half mesh over
+        the prior's 3-sigma box (:func:`nominal_reduced`). The best optima are refined on
+        ``model`` either way.
 
     The defaults are those of :data:`DEFAULTS`.
 
@@ -224,7 +237,10 @@ def diagnose(
     notes = []
 
     coarse = coarse_model(model)
-    err = mesh_error(model, mu_b, int(modes.max()) + 1, coarse)[modes]
+    n_solve = int(modes.max()) + 1
+    fine_lam = model.solve(mu_b, n_solve).eigenvalues
+    coarse_at_mean = coarse.solve(mu_b, n_solve).eigenvalues
+    err = ((hz_from_eigenvalue(coarse_at_mean) - hz_from_eigenvalue(fine_lam)) / 3.0)[modes]
     sigma_Hz = np.asarray(measured.sigma_Hz, dtype=float)
     ratio = np.abs(err) / sigma_Hz
     say(f"mesh {model.mesh.nx} x {model.mesh.ny}: error up to {ratio.max():.2f} sigma")
@@ -239,7 +255,14 @@ def diagnose(
     sigma = 2.0 * Y * sigma_Hz / measured.frequency_Hz  # d lambda = 2 lambda df / f
 
     nominal_problem = JointProblem(model, Y, sigma, mu_b, V_b, modes)
-    nominal = fit_nominal(nominal_problem, coarse, rng, n_starts, workers)
+    if fast is None:
+        rough = nominal_problem.on(nominal_reduced(coarse, mu_b, V_b, n_solve, rng),
+                                   (fine_lam / coarse_at_mean)[modes])  # fmt: skip
+    else:
+        rough = nominal_problem.on(fast.reduced)
+    nominal = fit_nominal(nominal_problem, rough, rng, n_starts, workers)
+    if fast is not None:
+        check_fast(fast, nominal, modes, notes)
     dof = max(m - nominal.effective_parameters, 1.0)
     p_value = float(chi2_dist.sf(nominal.chi2, dof))
     say(f"nominal fit: chi2 = {nominal.chi2:.1f} on {dof:.1f} dof, p = {p_value:.3g}")
@@ -253,10 +276,13 @@ def diagnose(
     region, mirrors = _region(model, maps)
     located = [int(i) + 1 for i in np.flatnonzero(np.abs(nominal.residual_sigma) > 2.0)]
 
-    coarse_lam = coarse.solve(nominal.b, int(modes.max()) + 1).eigenvalues[modes]
-    level = {"coarse": coarse, "scale": nominal.eigenvalues / coarse_lam,
-             "margin": refine_margin, "workers": workers}  # fmt: skip
-    scans = _scans(physics, model, nominal, modes, Y, sigma, P)
+    coarse_nominal = coarse.solve(nominal.b, int(modes.max()) + 1 + RITZ_EXTRA_MODES)
+    level = {"coarse": coarse, "scale": nominal.eigenvalues / coarse_nominal.eigenvalues[modes],
+             "margin": refine_margin, "workers": workers,
+             "coarse_modes": coarse_nominal.vectors, "rough": rough}  # fmt: skip
+    ritz = model.solve(nominal.b, int(modes.max()) + 1 + RITZ_EXTRA_MODES)
+    level["modes"] = ritz.vectors
+    scans = _scans(physics, model, nominal, modes, Y, sigma, P, ritz)
     ranked = rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics, say)
     better = improved_nominal(nominal_problem, nominal, ranked, level)
     if better is not None:
@@ -297,24 +323,6 @@ def diagnose(
     )  # fmt: skip
 
 
-def fit_nominal(problem, coarse, rng, n_starts=DEFAULTS["n_starts"], workers=1):
-    """Global fit of the nominal model.
-
-    The prior mean and ``n_starts`` random draws from the prior are each fitted on the
-    coarse mesh; the three best are refined on the working mesh, and the other optima
-    reached there are kept as ``alternatives``.
-
-    Not a guarantee: on the measured Frederiksen plate at 0.2 % deviations the best optimum
-    found (objective 18.4) is not the best there is (14.1, reached from Frederiksen's own
-    constants); see reports/diagnose_frederiksen.md.
-
-    A single local fit from the prior mean, with modes paired by order, can stop in a false
-    minimum where the model's mode order differs from the plate's (see tests/test_diagnose.py).
-    """
-    starts = [np.zeros(6)] + [rng.standard_normal(6) for _ in range(n_starts)]
-    return fit(problem, starts, coarse=coarse, keep=3, workers=workers)
-
-
 def _paired(fit_, modes):
     """The fit's modal result restricted to the paired modes (measured order)."""
     modal = fit_.modal
@@ -346,14 +354,13 @@ def _region(model, maps):
     return best[1], [tuple(float(v) for v in p) for p in mirror_positions(model, *best[1])]
 
 
-def _scans(physics_list, model, nominal, modes, Y, sigma, P):
+def _scans(physics_list, model, nominal, modes, Y, sigma, P, ritz):
     """Ritz scans of the located candidates at the nominal fit, keyed by name.
 
     The Ritz basis (:mod:`.scan`) holds the nominal modes up to ``RITZ_EXTRA_MODES`` beyond
-    the highest paired one.
+    the highest paired one (``ritz``: the nominal fit's modes).
     """
-    n_basis = int(modes.max()) + 1 + RITZ_EXTRA_MODES
-    basis = RitzBasis.from_modes(model, model.solve(nominal.b, n_basis))
+    basis = RitzBasis.from_modes(model, ritz)
     scans = {}
     for physics in physics_list:
         result = physics.scan(model, basis, nominal.b, Y, sigma, modes, P)

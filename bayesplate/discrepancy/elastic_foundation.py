@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import Parameter, Physics
+from .pencil import interpolated_ritz
 
 __all__ = ["ElasticFoundation"]
 
@@ -36,3 +37,13 @@ class ElasticFoundation(Physics):
         w_block = model.element.mass_kernel[6, 6]  # int N_w^T N_w dA of one element
         extra = k * model.assembler.uniform_data(w_block)
         return model.modified(extra_stiffness_data=extra)
+
+    def ritz(self, model, b, basis):
+        """Exact: the stiffness is affine in ``k``."""
+        (param,) = self.parameters(model, b)
+
+        def features(theta):
+            return np.array([1.0, np.atleast_1d(theta)[0] / param.sd])
+
+        nodes = np.array([[0.0], [param.sd]])
+        return interpolated_ritz(lambda t: self.apply(model, t), basis, nodes, features)

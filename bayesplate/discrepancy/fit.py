@@ -15,6 +15,13 @@ inside each parameter's bounds. It was chosen over nested sampling or WAIC/LOO b
 costs nothing beyond the fit, and with 10-20 frequencies and up to 11 unknowns the posterior
 of a well-identified fit is close to Gaussian; where a parameter is unidentified the Laplace
 volume is its prior volume, which is the right Occam penalty.
+
+Each fit may run on three levels: every start on a cheap model (a reduced model, or the
+coarse mesh), the best optima polished on a reduced model of the working mesh, and the
+result finished on the working mesh (:func:`fit`; tightly, at a canonical mirror image:
+:mod:`.finish`). Over 400 lines (a written reason, as the
+project asks): the problem, its levels and the Laplace summary share the whitened unknowns
+and the cached evaluation; split, each part would reach into the others' internals.
 """
 
 from __future__ import annotations
@@ -29,6 +36,7 @@ from scipy.stats import norm
 
 from .. import laminate
 from ..quantities import engineering_covariance, hz_from_eigenvalue
+from .finish import finish
 from .parallel import fork_map
 
 __all__ = ["JointFit", "JointProblem", "fit"]
@@ -36,6 +44,7 @@ __all__ = ["JointFit", "JointProblem", "fit"]
 log = logging.getLogger(__name__)
 
 _UNPHYSICAL_RESIDUAL = 1e4  # residual returned outside the lamina's physical region
+DISTINCT = 0.3  # whitened distance under which two optima are the same
 
 
 @dataclass(frozen=True)
@@ -150,6 +159,7 @@ class JointProblem:
         self.theta_upper = np.array([p.upper for p in params])
         self.n_solves = 0
         self.scale = None
+        self.pencil = None
         self._cache = {}
 
     def on(self, model, scale=None):
@@ -161,6 +171,16 @@ class JointProblem:
         other = copy.copy(self)
         other.model, other.n_solves, other._cache = model, 0, {}
         other.scale = None if scale is None else np.asarray(scale, dtype=float)
+        other.pencil = None
+        return other
+
+    def on_pencil(self, pencil, scale=None):
+        """The same problem on a reduced candidate model (:class:`.pencil.CandidatePencil`).
+
+        ``scale`` as for :meth:`on` (the pencil's mesh to this problem's).
+        """
+        other = self.on(self.model, scale)
+        other.pencil = pencil
         return other
 
     @property
@@ -204,6 +224,8 @@ class JointProblem:
         b, theta = self.unpack(z)
         if not laminate.is_physical(b):
             return None
+        if self.pencil is not None:
+            return self._evaluate_reduced(b, theta)
         plate = self.plate(theta)
         modal = plate.solve(b, int(self.modes.max()) + 3)
         self.n_solves += 1
@@ -213,6 +235,15 @@ class JointProblem:
         J[:, :6] = modal.sensitivities[self.modes] @ self.L
         for i in range(self.k):
             J[:, 6 + i] = self.theta_sd[i] * self._theta_derivative(theta, i, b, lam, vectors)
+        if self.scale is not None:
+            lam, J = lam * self.scale, J * self.scale[:, None]
+        return lam, J, modal
+
+    def _evaluate_reduced(self, b, theta):
+        modal, d_theta = self.pencil.solve(b, theta, int(self.modes.max()) + 1)
+        lam = modal.eigenvalues[self.modes]
+        J = np.hstack([modal.sensitivities[self.modes] @ self.L,
+                       d_theta[self.modes] * self.theta_sd])  # fmt: skip
         if self.scale is not None:
             lam, J = lam * self.scale, J * self.scale[:, None]
         return lam, J, modal
@@ -252,7 +283,8 @@ class JointProblem:
         return float(np.sum(np.log(hi - lo)))
 
 
-def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None, keep=1, workers=1):
+def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None, keep=1, workers=1,
+        rough=None, distinct=False, rough_nfev=None, polish=None, tol=1e-8):  # fmt: skip
     """Best joint fit over several starts, with its Laplace evidence.
 
     Parameters
@@ -274,24 +306,84 @@ def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None, keep
         How many of the best coarse results to refine (the best fine one is returned).
     workers : int
         Processes for the local fits from the starts (see :func:`.parallel.fork_map`).
+    rough : JointProblem, optional
+        A cheaper version of ``problem`` (a reduced model: :meth:`JointProblem.on_pencil`)
+        used as ``coarse`` is; it takes precedence over ``coarse``.
+    rough_nfev : int, optional
+        Evaluation cap of each local fit on ``rough`` (default ``max_nfev``).
+    polish : callable, optional
+        ``polish(z) -> JointProblem``: a reduced model of ``problem`` on its own mesh,
+        accurate near the rough optimum ``z`` (:meth:`JointProblem.on_pencil`). Each of the
+        ``keep`` rough optima is then polished on it and finished on ``problem``; the best
+        finished one is reported (chosen, and its chi-square, evidence and derivatives
+        computed, on the finite-element model).
+    tol : float
+        ``ftol`` and ``xtol`` of the fits on ``problem`` after a rough stage.
+    distinct : bool
+        Refine the ``keep`` best *distinct* rough optima (whitened distance above
+        ``DISTINCT``), not the ``keep`` best ones (many starts reach the same optimum).
 
     Returns
     -------
     JointFit
     """
-    if coarse is not None:
-        rough_problem = problem.on(coarse, scale)
-        rough = _local_fits(rough_problem, starts, max_nfev, workers)
+    if rough is None and coarse is not None:
+        rough = problem.on(coarse, scale)
+    if rough is not None:
+        rough_problem = rough
+        rough = _local_fits(rough_problem, starts, rough_nfev or max_nfev, workers)
         if refine is not None and not refine(_summarise(rough_problem, rough[0], refined=False)):
             return _summarise(rough_problem, rough[0], refined=False)
-        starts = [r.x for r in rough[:keep]]
-    results = _local_fits(problem, starts, max_nfev, workers)
+        starts = [r.x for r in (_distinct(rough) if distinct else rough)[:keep]]
+        if polish is not None:
+            # every polished optimum is finished on the working mesh itself (a few steps
+            # when the polish was accurate) and the best is chosen there: a reduced model
+            # only chooses where to start, the optimum reported is the finite-element one's
+            finished = [_finished(problem, polish, z, max_nfev, tol) for z in starts]
+            finished = sorted((r for r in finished if r is not None), key=lambda r: r.cost)
+            if not finished:  # no rough optimum has a solvable plate: the best one's error
+                _finished(problem, polish, starts[0], max_nfev, tol, strict=True)
+            others = tuple((problem.unpack(r.x)[0], 2.0 * r.cost) for r in finished[1:])
+            return replace(_summarise(problem, finished[0]), alternatives=others)
+    results = _local_fits(problem, starts, max_nfev, workers,
+                          tol if rough is not None else 1e-8)  # fmt: skip
     others = tuple((problem.unpack(r.x)[0], 2.0 * r.cost) for r in results[1:])
-    return replace(_summarise(problem, results[0]), alternatives=others)
+    best = results[0] if rough is None else finish(problem, results[0], max_nfev)
+    return replace(_summarise(problem, best), alternatives=others)
 
 
-def _local_fits(problem, starts, max_nfev, workers=1):
-    """Least-squares results from every start, lowest cost first."""
+def _finished(problem, polish, z, max_nfev, tol, strict=False):
+    """The rough optimum ``z`` polished on ``polish(z)``, then finished on ``problem``.
+
+    None (unless ``strict``) when the plate at ``z`` cannot be solved (a far rough optimum
+    of an inaccurate reduced model: its modified plate is not positive definite).
+    """
+    try:
+        polished = _local_fits(polish(z), [z], 100)[0]
+        best = _local_fits(problem, [polished.x], max_nfev, 1, tol)[0]
+        best = finish(problem, best, max_nfev)  # tight, at its canonical image
+    except (ValueError, np.linalg.LinAlgError) as error:
+        if strict:
+            raise
+        log.warning("%s: rough optimum %s not finished (%s)", _name(problem), np.round(z, 2),
+                    error)  # fmt: skip
+        return None
+    log.info("%s: polished %.6g, finished %.6g", _name(problem), 2 * polished.cost,
+             2 * best.cost)  # fmt: skip
+    return best
+
+
+def _distinct(results):
+    """Results (best first) farther than ``DISTINCT`` from every better one."""
+    chosen = []
+    for r in results:
+        if all(np.linalg.norm(r.x - c.x) > DISTINCT for c in chosen):
+            chosen.append(r)
+    return chosen
+
+
+def _local_fits(problem, starts, max_nfev, workers=1, tol=1e-8):
+    """Least-squares results from every start, lowest cost first (``tol``: ftol and xtol)."""
     lo, hi = problem.bounds()
 
     def local_fit(z0):
@@ -305,6 +397,8 @@ def _local_fits(problem, starts, max_nfev, workers=1):
             method="trf",
             x_scale="jac",
             max_nfev=max_nfev,
+            ftol=tol,
+            xtol=tol,
         )
         log.info(
             "%s start %s: cost %.3g (%s)",

@@ -6,6 +6,7 @@ import numpy as np
 
 from .base import Parameter, Physics, mirror_positions
 from .locate import effect_map
+from .pencil import project
 from .scan import Scan, misfit
 
 __all__ = [
@@ -93,6 +94,34 @@ class LocalStiffnessLoss(Physics):
         ]
         new = model.stiffness_terms + (multiplier - 1.0)[:, None] * np.array(region)
         return model.modified(stiffness_terms=new)
+
+    def ritz(self, model, b, basis):
+        """``V^T K_j V + (d_j - 1) sum_e frac_e V_e^T K_j^e V_e`` over the cut elements.
+
+        Every element of the plate has the same matrices ``K_j^e``; only the elements the
+        rectangle touches are projected at each evaluation.
+        """
+        terms, constant, mass = project(model, basis)
+        element_terms = model.element_stiffness_terms()
+        dofs = model.mesh.element_dofs
+        lost = np.flatnonzero(_KEPT == 0.0)
+
+        def matrices(theta):
+            x, y, dx, dy, factor = theta
+            frac = area_fractions(model.mesh, 1e-3 * np.array([x, y]),
+                                  1e-3 * np.abs(np.array([dx, dy])))  # fmt: skip
+            inside = np.flatnonzero(frac > 0)
+            if inside.size == 0:
+                return terms, constant, mass
+            A = basis[dofs[inside]]  # (n_in, 32, r)
+            weighted = frac[inside, None, None] * A
+            out = terms.copy()
+            for j in lost:
+                region = np.tensordot(weighted, element_terms[j] @ A, axes=([0, 1], [0, 1]))
+                out[j] += (factor - 1.0) * region
+            return out, constant, mass
+
+        return matrices
 
     def mirror_images(self, model, theta):
         """The same region at the mirror positions of its centre."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import Parameter, Physics, reflection_symmetric
+from .pencil import interpolated_ritz
 
 __all__ = ["PlyMisalignment"]
 
@@ -28,6 +29,16 @@ class PlyMisalignment(Physics):
         (delta,) = theta
         terms = model.element_stiffness_terms(angle_offset_deg=delta)
         return model.modified(stiffness_terms=model.assembler.uniform_data(terms))
+
+    def ritz(self, model, b, basis):
+        """Exact: a turned ply's stiffness holds the harmonics 0, 2 and 4 of the angle."""
+
+        def features(theta):
+            d = np.radians(np.atleast_1d(theta)[0])
+            return np.array([1.0, np.cos(2 * d), np.sin(2 * d), np.cos(4 * d), np.sin(4 * d)])
+
+        nodes = np.array([[-40.0], [-20.0], [0.0], [20.0], [40.0]])
+        return interpolated_ritz(lambda t: self.apply(model, t), basis, nodes, features)
 
     def mirror_images(self, model, theta):
         """``-delta`` when the layup is mirror-symmetric."""

@@ -6,6 +6,7 @@ import numpy as np
 
 from .base import Parameter, Physics, mirror_positions
 from .locate import effect_map
+from .pencil import project
 from .scan import Scan, misfit
 
 __all__ = ["PointMass", "point_mass_map", "point_mass_scan"]
@@ -56,6 +57,19 @@ class PointMass(Physics):
         n_w = model.element.fields(local)["w"][0]
         added = model.assembler.element_data(element, 1e-3 * mass_g * np.outer(n_w, n_w)[None])
         return model.modified(mass_data=model.mass_data + added)
+
+    def ritz(self, model, b, basis):
+        """Rank one: ``V^T M V + m u u^T`` with ``u`` the basis' ``w`` at ``(x, y)``."""
+        terms, constant, mass = project(model, basis)
+        a_mm, b_mm = 1e3 * model.mesh.a, 1e3 * model.mesh.b
+
+        def matrices(theta):
+            mass_g, x_mm, y_mm = theta
+            point = 1e-3 * np.array([[np.clip(x_mm, 0.0, a_mm), np.clip(y_mm, 0.0, b_mm)]])
+            u = np.asarray(model.interpolation(point) @ basis)  # (1, r)
+            return terms, constant, mass + 1e-3 * mass_g * (u.T @ u)
+
+        return matrices
 
     def mirror_images(self, model, theta):
         """The same mass at the mirror positions of ``(x, y)``."""

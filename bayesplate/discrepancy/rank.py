@@ -1,21 +1,43 @@
 """Step 3 of diagnose, name: every candidate fitted jointly with the constants, ranked.
 
 Each candidate's joint fit starts from the prior mean of its parameters, its own extra
-starting points and, for a located candidate, the best distinct places of its Ritz scan; it
-runs on the coarse mesh corrected to the working one and is refined only when promising.
-The candidates are ranked by their Laplace evidence gain over the nominal model.
+starting points and, for a located candidate, the best distinct places of its Ritz scan,
+each with the nominal optimum's constants and those of the other nominal basins found; it
+runs on a reduced model of the modified plate on the coarse mesh (:mod:`.pencil`; the
+coarse finite-element model for a candidate without a Ritz form), corrected to the working
+mesh; when promising, its best distinct reduced optima are finished on the working mesh and
+the best one there is its fit (a reduced model only chooses the starting points). Every
+variant of a candidate (a taper along x and along y) is fitted and refined on its own; the
+candidates are ranked by the Laplace evidence gain of these working-mesh fits over the
+nominal model.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from .fit import JointFit, JointProblem, fit
 from .parallel import fork_map
+from .pencil import candidate_pencil
 
 __all__ = ["CandidateResult", "improved_nominal", "rank"]
+
+#: Evaluation cap of a candidate's refinement on the working mesh, from its reduced optimum.
+REFINE_NFEV = 25
+#: Other nominal optima (``nominal.alternatives``, best first) whose constants start the
+#: candidates' reduced fits too.
+OTHER_BASINS = 2
+#: ... within this much of the nominal optimum's ``chi2 + chi2_prior`` (a fit far worse,
+#: or one that left the physical region, is no basin to start from).
+OTHER_BASIN_MARGIN = 20.0
+#: Distinct reduced optima of a candidate finished on the working mesh (the best one there
+#: is its fit: a reduced model of a strong taper can misjudge which basin is best).
+FINISHED = 3
+#: Extra starts (prior deviations from the mean) of a one-parameter candidate's reduced fit:
+#: a large effect that reorders modes has local optima on the way from the mean.
+SIZE_GRID = (-8.0, -6.0, -4.0, -3.0, -2.0, 2.0, 3.0, 4.0, 6.0, 8.0)
 
 
 @dataclass(frozen=True)
@@ -25,7 +47,8 @@ class CandidateResult:
     Attributes
     ----------
     name : str
-        The candidate's :attr:`~.base.Physics.name`.
+        The candidate's :attr:`~.base.Physics.name` (its variant, a taper's direction, is
+        in ``parameters``, first).
     fit : JointFit
     log_evidence_gain : float
         ``ln Z(candidate) - ln Z(nominal)``, nats.
@@ -48,17 +71,21 @@ class CandidateResult:
 def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list, say):
     """Fit every candidate jointly with the constants; best evidence gain first.
 
-    Every start is fitted on the coarse mesh corrected by the fine-to-coarse eigenvalue
-    ratio at the nominal fit; candidates that gain at least ``level["margin"]`` there are
-    refined on the working mesh. Only refined candidates can be chosen. Candidates of one
-    name (a taper per direction) keep the better.
+    Every start is fitted on a reduced model of the modified plate on the coarse mesh
+    (:func:`.pencil.candidate_pencil`), corrected by the fine-to-coarse eigenvalue ratio at
+    the nominal fit; candidates that gain at least ``level["margin"]`` there are refined on
+    the working mesh. Only refined candidates can be chosen. Every variant (a taper per
+    direction) is a candidate of its own.
 
     Parameters
     ----------
     model : PlateModel
     level : dict
         ``coarse`` (PlateModel), ``scale`` (fine / coarse eigenvalues, shape (m,)),
-        ``margin`` (nats), ``workers`` (int).
+        ``margin`` (nats), ``workers`` (int), ``coarse_modes`` (the coarse nominal modes
+        at ``nominal.b`` for the Ritz bases, shape (n_dofs, n); optional), ``rough`` (the
+        nominal problem on its reduced model; optional), ``modes`` (the nominal modes at
+        ``nominal.b`` on ``model``, shape (n_dofs, n), for the refinement; optional).
     Y, sigma : numpy.ndarray, shape (m,)
         Measured eigenvalues and their deviations, rad^2/s^2.
     mu_b : numpy.ndarray, shape (6,)
@@ -84,10 +111,26 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
         thetas = [problem.theta_mean, *physics.starting_points(model, nominal.b),
                   *_located_starts(physics, model, scans)]  # fmt: skip
         lo, hi = problem.theta_lower, problem.theta_upper
-        starts = [problem.pack(nominal.b, np.clip(t, lo, hi)) for t in thetas]
-        result = fit(problem, starts, max_nfev=25, coarse=level["coarse"],
-                     scale=level["scale"], refine=promising)  # fmt: skip
-        result = canonical_image(physics, model, result)
+        thetas = [np.clip(t, lo, hi) for t in thetas]
+        rough = _reduced(problem, physics, model, level, nominal, thetas)
+        if rough is not None and problem.k == 1:  # cheap there: a grid of sizes as well
+            thetas += [np.clip(problem.theta_mean + s * problem.theta_sd, lo, hi)
+                       for s in SIZE_GRID]  # fmt: skip
+        # from the nominal optimum and from the other nominal basins: the constants that
+        # fit best with an effect may lie in another basin than those that fit best without
+        top = nominal.chi2 + nominal.chi2_prior + OTHER_BASIN_MARGIN
+        others = [b for b, objective in nominal.alternatives if objective < top]
+        bases = [nominal.b, *others[:OTHER_BASINS]]
+        starts = [problem.pack(b, t) for b in bases for t in thetas]
+        # on a reduced model the local fits run to convergence; a reduced model of the
+        # working mesh around the rough optimum polishes it, checked by one full solve
+        polish = None
+        if rough is not None and level.get("modes") is not None:
+            polish = _polisher(problem, physics, model, level["modes"])
+        result = fit(problem, starts, max_nfev=REFINE_NFEV if rough else 25,
+                     coarse=level["coarse"], scale=level["scale"], refine=promising,
+                     rough=rough, rough_nfev=100, polish=polish, keep=FINISHED,
+                     distinct=True)  # fmt: skip
         gain = result.log_evidence - nominal.log_evidence
         params = {**physics.settings(), **physics.labelled(model, nominal.b, result.theta)}
         sds = physics.labelled(model, nominal.b, result.theta_sd)
@@ -100,57 +143,42 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
                    key=lambda i: -len(physics_list[i].parameters(model, nominal.b)))  # fmt: skip
     fitted = fork_map(candidate, [physics_list[i] for i in order], level["workers"])
     results = [fitted[order.index(i)] for i in range(len(physics_list))]
-    for r in results:
+    for r, physics in zip(results, physics_list, strict=True):
         where = "" if r.fit.refined else " (coarse mesh, not refined)"
-        say(f"{r.name}: chi2 = {r.fit.chi2:.1f}, evidence gain {r.log_evidence_gain:+.1f}{where}")
-    best_by_name = {}
-    for r in results:  # the taper is fitted once per direction; keep the better
-        if (
-            r.name not in best_by_name
-            or r.log_evidence_gain > best_by_name[r.name].log_evidence_gain
-        ):
-            best_by_name[r.name] = r
-    return sorted(best_by_name.values(), key=lambda r: -r.log_evidence_gain)
+        variant = "".join(f" ({v})" for v in physics.settings().values())
+        say(f"{r.name}{variant}: chi2 = {r.fit.chi2:.1f}, evidence gain "
+            f"{r.log_evidence_gain:+.1f}{where}")  # fmt: skip
+    return sorted(results, key=lambda r: -r.log_evidence_gain)
 
 
-def canonical_image(physics, model, result):
-    """The fit expressed at the first of its mirror images in ``(x, y)`` order.
+def _polisher(problem, physics, model, modes):
+    """``polish(z)``: the candidate's pencil on the working mesh with a snapshot at ``z``."""
+    n = int(problem.modes.max()) + 1
 
-    A located effect and its mirror images fit equally well (the plate's symmetry), so which
-    of them a fit reaches depends on its path, and on round-off where two paths part: a
-    point mass found at ``y = 28.6`` or ``71.4`` mm on a 100 mm plate is one answer. The
-    fit is reported at the image whose parameters come first (lexicographically, position
-    first); the reflection is affine with slopes +-1, read from
-    :meth:`~.base.Physics.mirror_images` itself, and carries the covariance along.
-    Fits without mirror images are returned as they are. The fit's ``modal`` stays the one
-    computed (its eigenvalues are the image's too).
+    def polish(z):
+        b, theta = problem.unpack(z)
+        pencil = candidate_pencil(model, physics, b, [theta], n + 4, nominal_modes=modes)
+        return problem.on_pencil(pencil)
+
+    return polish
+
+
+def _reduced(problem, physics, model, level, nominal, thetas):
+    """The candidate's problem on its reduced coarse model, or None (no Ritz form).
+
+    The Ritz basis holds the coarse nominal modes and the modified plate's at the starting
+    parameters and, for a single parameter, four prior deviations either side of the mean.
     """
-    theta = np.asarray(result.theta, dtype=float)
-    images = physics.mirror_images(model, theta)
-    if not images:
-        return result
-    key = _position_first(physics, model, result.b, theta)
-    best = min(range(-1, len(images)), key=lambda i: key(theta if i < 0 else images[i]))
-    if best < 0:
-        return result
-    image = np.asarray(images[best], dtype=float)
-    # slopes of the reflection, from the same method at a nudged theta (+-1 or 0 each)
-    slopes = np.empty(theta.size)
-    for i in range(theta.size):
-        step = np.zeros(theta.size)
-        step[i] = 1e-3 * max(abs(theta[i]), 1.0)
-        moved = np.asarray(physics.mirror_images(model, theta + step)[best], dtype=float)
-        slopes[i] = np.round((moved[i] - image[i]) / step[i])
-    T = np.diag(np.concatenate([np.ones(6), slopes]))
-    return replace(result, theta=image, covariance=T @ result.covariance @ T)
-
-
-def _position_first(physics, model, b, theta):
-    """Sort key of parameter values: the position columns first, then the rest in order."""
-    labels = list(physics.labelled(model, b, theta))
-    position = [i for i, name in enumerate(labels) if name.startswith(("x", "y"))]
-    order = position + [i for i in range(len(labels)) if i not in position]
-    return lambda t: tuple(np.round(np.asarray(t, dtype=float)[order], 9))
+    coarse = level["coarse"]
+    n = int(problem.modes.max()) + 1
+    snapshots = [t for t in thetas if not np.allclose(t, problem.theta_mean)]
+    if problem.k == 1:
+        for s in (-4.0, 4.0):
+            t = problem.theta_mean + s * problem.theta_sd
+            snapshots.append(np.clip(t, problem.theta_lower, problem.theta_upper))
+    pencil = candidate_pencil(coarse, physics, nominal.b, snapshots, n + 4,
+                              nominal_modes=level.get("coarse_modes"))  # fmt: skip
+    return None if pencil is None else problem.on_pencil(pencil, level["scale"])
 
 
 def _located_starts(physics, model, scans, n=3):
@@ -164,8 +192,9 @@ def improved_nominal(problem, nominal, ranked, level):
 
     A candidate's fit starts from the nominal constants and may walk into a better basin of
     the constants alone; its gain would then be credited to the physics. Re-fitting the
-    nominal model from there keeps the gains honest. Each re-fit runs on the corrected
-    coarse mesh first and is refined only when it beats the nominal evidence there.
+    nominal model from there keeps the gains honest. Each re-fit runs on the nominal
+    reduced model (``level["rough"]``; else the corrected coarse mesh) first and is refined
+    only when it beats the nominal evidence there.
 
     Returns
     -------
@@ -181,6 +210,7 @@ def improved_nominal(problem, nominal, ranked, level):
                 [problem.pack(c.fit.b)],
                 coarse=level["coarse"],
                 scale=level["scale"],
+                rough=level.get("rough"),
                 refine=lambda rough, bar=best.log_evidence: rough.log_evidence > bar,
             )
             if trial.refined and trial.log_evidence > best.log_evidence:

@@ -1,0 +1,81 @@
+"""Reduced candidate models (discrepancy.pencil) against the finite-element modified plate.
+
+The reference is the full solve of ``physics.apply(model, theta)``: an independent path
+(assembly and sparse eigen solver on every unknown) from the projected pencil.
+"""
+
+import numpy as np
+import pytest
+
+from bayesplate import PlateModel, bundled_case_path, load_case, stiffness_from_engineering
+from bayesplate.discrepancy import candidates
+from bayesplate.discrepancy.pencil import candidate_pencil
+
+N_MODES = 14
+
+
+@pytest.fixture(scope="module")
+def plate():
+    case = load_case(bundled_case_path("frederiksen_t300"))
+    model = PlateModel.from_case(case, mesh=(16, 10))
+    return model, stiffness_from_engineering(case.reference)
+
+
+def _snapshots_and_probe(physics, model, b):
+    """Snapshot parameters and a probe value that is not one of them."""
+    params = physics.parameters(model, b)
+    if physics.name == "point_mass":  # the scan's places, another mass at one of them
+        return [np.array([1.0, 23.0, 14.0]), np.array([0.5, 70.0, 40.0])], np.array(
+            [0.7, 23.0, 14.0]
+        )
+    if physics.name == "local_stiffness_loss":  # the scan's patches, another factor
+        return [
+            np.array([70.0, 35.0, 20.0, 15.0, 0.4]),
+            np.array([30.0, 20.0, 20.0, 15.0, 0.6]),
+        ], np.array([70.0, 35.0, 20.0, 15.0, 0.7])
+    mean = np.array([p.mean for p in params])
+    sd = np.array([p.sd for p in params])
+    lo, hi = np.array([p.lower for p in params]), np.array([p.upper for p in params])
+    snaps = [np.clip(mean + s * sd, lo, hi) for s in (-4.0, -1.0, 1.0, 4.0)]
+    return snaps, np.clip(mean + 1.7 * sd, lo, hi)
+
+
+@pytest.mark.parametrize("physics", candidates(), ids=lambda p: p.name + "".join(
+    p.settings().values()))  # fmt: skip
+def test_reduced_candidate_matches_full_solve(plate, physics):
+    model, b = plate
+    snapshots, probe = _snapshots_and_probe(physics, model, b)
+    nominal = model.solve(b, N_MODES + 20).vectors
+    pencil = candidate_pencil(model, physics, b, snapshots, N_MODES + 4, nominal_modes=nominal)
+    full = physics.apply(model, probe).solve(b, N_MODES)
+    modal, d_theta = pencil.solve(b, probe, N_MODES)
+    assert np.max(np.abs(modal.eigenvalues / full.eigenvalues - 1.0)) < 1e-4
+    # Rayleigh-Ritz: upper bounds of the finite-element eigenvalues
+    assert np.all(modal.eigenvalues >= full.eigenvalues * (1 - 1e-9))
+    # sensitivities in b: the full model's eq. 28 at the same point
+    rel = np.abs(modal.sensitivities - full.sensitivities) / np.abs(full.sensitivities).max()
+    assert rel.max() < 1e-3
+    # the parameter derivative: central difference of full solves (of the size only for a
+    # located effect: its basis resolves the place only near its snapshots), and of the
+    # pencil's own eigenvalues (the Jacobian the fit uses is that of its model)
+    h = 0.05 * np.array([p.sd for p in physics.parameters(model, b)])
+    for i in range(probe.size):
+        up, down = probe.copy(), probe.copy()
+        up[i] += 1e-3 * h[i]
+        down[i] -= 1e-3 * h[i]
+        own = (pencil.eigenvalues(b, up, N_MODES) - pencil.eigenvalues(b, down, N_MODES)) / (
+            2e-3 * h[i]
+        )
+        assert np.max(np.abs(d_theta[:, i] - own)) <= 1e-4 * np.abs(own).max() + 1e-9
+        if (i > 0 and physics.name == "point_mass") or (
+            i < 4 and physics.name == "local_stiffness_loss"
+        ):
+            continue
+        up, down = probe.copy(), probe.copy()
+        up[i] += h[i]
+        down[i] -= h[i]
+        fd = (physics.apply(model, up).solve(b, N_MODES).eigenvalues
+              - physics.apply(model, down).solve(b, N_MODES).eigenvalues) / (2 * h[i])  # fmt: skip
+        scale = np.abs(fd).max()
+        if scale > 0:
+            assert np.max(np.abs(d_theta[:, i] - fd)) < 1e-2 * scale
