@@ -12,6 +12,7 @@ from .options import (
     mesh_of,
     positive_int,
     resolve_case,
+    seed_int,
 )
 
 __all__ = ["register"]
@@ -87,7 +88,7 @@ def register(sub):
     )
     add_case_argument(p)
     add_mesh_option(p)
-    p.add_argument("--seed", type=int, default=0, help="seed of the random fit starts")
+    p.add_argument("--seed", type=seed_int, default=0, help="seed of the random fit starts")
     p.add_argument(
         "--workers",
         type=positive_int,

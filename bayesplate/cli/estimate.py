@@ -14,6 +14,8 @@ from .options import (
     add_mesh_option,
     add_pairing_option,
     mesh_of,
+    positive_float,
+    positive_int,
     resolve_case,
 )
 
@@ -99,8 +101,10 @@ def register(sub):
     p.add_argument(
         "--method", choices=METHOD_CHOICES, default="MVE", help="estimator (default MVE)"
     )
-    p.add_argument("--tol", type=float, default=1e-3, help="TOL of section 2.4 (1e-3)")
-    p.add_argument("--max-iter", type=int, default=DEFAULT_MAX_ITER, help="iteration cap per stage")
+    p.add_argument("--tol", type=positive_float, default=1e-3, help="TOL of section 2.4 (1e-3)")
+    p.add_argument(
+        "--max-iter", type=positive_int, default=DEFAULT_MAX_ITER, help="iteration cap per stage"
+    )
     p.add_argument(
         "--convention",
         choices=CONVENTION_CHOICES,

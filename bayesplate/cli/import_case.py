@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import pathlib
 
+from .options import finite_float, positive_int
+
 __all__ = ["register"]
 
 _TAP_OPTIONS = ("poles", "chart", "use_poles", "band", "order", "window")
@@ -108,7 +110,7 @@ def register(sub):
     p.add_argument("-o", "--output", required=True, metavar="CASE", help="case file to write")
     p.add_argument(
         "--sigma-rel",
-        type=float,
+        type=finite_float,
         help="relative standard deviation of each frequency (default: the sheet's, else 0.01)",
     )
     tap = p.add_argument_group("tap tests (FRFs or impulse recordings)")
@@ -122,11 +124,11 @@ def register(sub):
     tap.add_argument(
         "--band",
         nargs=2,
-        type=float,
+        type=finite_float,
         metavar=("LOW_HZ", "HIGH_HZ"),
         help="frequency band of the fit, Hz (default: all the data above 0 Hz)",
     )
-    tap.add_argument("--order", type=int, help="highest LSCF model order (default 60)")
+    tap.add_argument("--order", type=positive_int, help="highest LSCF model order (default 60)")
     tap.add_argument(
         "--window",
         choices=("auto", "none", "exponential"),

@@ -23,9 +23,18 @@ __all__ = ["main", "build_parser"]
 _COMMANDS = (cases, modes, import_case, diagnose, estimate, report, sample)
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser with one-line usage errors: ``prog: error: message (see --help)``."""
+
+    def error(self, message):
+        """Print one line naming the command and the rule; exit with status 2."""
+        line = " ".join(f"{self.prog}: error: {message} (see {self.prog} --help)".split())
+        self.exit(2, line + "\n")
+
+
 def build_parser():
     """The argument parser of the ``bayesplate`` command."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="bayesplate",
         description="Elastic constants of laminated plates from natural frequencies. "
         "Start with `bayesplate cases` (bundled test cases), then "
@@ -45,8 +54,6 @@ def main(argv=None):
     logging.basicConfig(
         level=logging.INFO if args.verbose else logging.WARNING, format="%(message)s"
     )
-    if getattr(args, "count", None) is not None and args.count < 1:
-        parser.error(f"--count {args.count}: must be a positive integer")
     from ..io import CaseError  # after parsing: --help and usage errors need no numerics
 
     try:

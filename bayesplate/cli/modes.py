@@ -2,7 +2,14 @@
 
 from __future__ import annotations
 
-from .options import add_case_argument, add_json_option, add_mesh_option, mesh_of, resolve_case
+from .options import (
+    add_case_argument,
+    add_json_option,
+    add_mesh_option,
+    mesh_of,
+    positive_int,
+    resolve_case,
+)
 
 __all__ = ["register"]
 
@@ -70,7 +77,9 @@ def register(sub):
         default="prior",
         help="evaluate at the prior mean (default) or the [reference] constants",
     )
-    p.add_argument("--count", type=int, help="number of elastic modes (default: as measured)")
+    p.add_argument(
+        "--count", type=positive_int, help="number of elastic modes (default: as measured)"
+    )
     add_mesh_option(p)
     add_json_option(p)
     p.set_defaults(func=run)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import pathlib
 
 __all__ = [
@@ -17,6 +18,11 @@ __all__ = [
     "DEFAULT_MAX_ITER",
     "mesh_of",
     "positive_int",
+    "positive_float",
+    "finite_float",
+    "seed_int",
+    "MAX_MESH",
+    "walker_count",
     "resolve_case",
 ]
 
@@ -30,7 +36,7 @@ def add_mesh_option(p):
     """``--mesh NX NY``, shared by every command that builds the plate model."""
     p.add_argument(
         "--mesh",
-        type=int,
+        type=mesh_size,
         nargs=2,
         metavar=("NX", "NY"),
         help="elements along x and y (default: the case's [model] mesh)",
@@ -50,6 +56,63 @@ def positive_int(text):
         value = 0
     if value < 1:
         raise argparse.ArgumentTypeError(f"{text!r}: must be a whole number of at least 1")
+    return value
+
+
+#: :data:`bayesplate.io.checks.MAX_MESH_ELEMENTS`, spelled here so that the parser does not
+#: import numpy at start-up (tests/test_fuzz_cli.py holds the two equal).
+MAX_MESH = 400
+
+
+def mesh_size(text):
+    """Elements along one side: a whole number from 1 to :data:`MAX_MESH` (an argparse type)."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if not 1 <= value <= MAX_MESH:
+        raise argparse.ArgumentTypeError(f"{text!r}: must be a whole number from 1 to {MAX_MESH}")
+    return value
+
+
+def finite_float(text):
+    """A finite number (an argparse type): refuses nan and inf."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r}: must be a finite number")
+    return value
+
+
+def positive_float(text):
+    """A finite number above 0 (an argparse type)."""
+    value = finite_float(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: must be a positive number")
+    return value
+
+
+def seed_int(text):
+    """A seed: a whole number from 0 to 2^63 - 1 (an argparse type)."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if not 0 <= value < 2**63:
+        raise argparse.ArgumentTypeError(f"{text!r}: must be a whole number from 0 to 2^63 - 1")
+    return value
+
+
+def walker_count(text):
+    """Walkers of emcee: a whole number of at least 12, twice the six constants (argparse type)."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 12:
+        raise argparse.ArgumentTypeError(f"{text!r}: must be a whole number of at least 12")
     return value
 
 

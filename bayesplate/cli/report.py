@@ -2,7 +2,14 @@
 
 from __future__ import annotations
 
-from .options import add_case_argument, add_mesh_option, add_pairing_option, mesh_of, resolve_case
+from .options import (
+    add_case_argument,
+    add_mesh_option,
+    add_pairing_option,
+    mesh_of,
+    resolve_case,
+    seed_int,
+)
 
 __all__ = ["register"]
 
@@ -49,7 +56,7 @@ def register(sub):
     )
     add_mesh_option(p)
     add_pairing_option(p)
-    p.add_argument("--seed", type=int, default=0, help="seed of diagnose and the sampler")
+    p.add_argument("--seed", type=seed_int, default=0, help="seed of diagnose and the sampler")
     p.add_argument("--no-diagnose", action="store_true", help="leave out the diagnosis")
     p.add_argument("--no-sample", action="store_true", help="leave out posterior sampling")
     p.set_defaults(func=run)

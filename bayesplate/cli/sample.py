@@ -11,7 +11,11 @@ from .options import (
     add_mesh_option,
     add_pairing_option,
     mesh_of,
+    positive_float,
+    positive_int,
     resolve_case,
+    seed_int,
+    walker_count,
 )
 
 __all__ = ["register"]
@@ -100,10 +104,11 @@ def register(sub):
         "stopping rule was not met. Progress goes to standard error.",
     )
     add_case_argument(p)
-    p.add_argument("--seed", type=int, default=None, help="seed (default: fresh entropy)")
-    p.add_argument("--walkers", type=int, default=32, help="emcee walkers (default 32)")
-    p.add_argument("--max-steps", type=int, default=5000, help="cap on steps (default 5000)")
-    p.add_argument("--min-ess", type=float, default=2000.0,
+    p.add_argument("--seed", type=seed_int, default=None, help="seed (default: fresh entropy)")
+    p.add_argument("--walkers", type=walker_count, default=32, help="emcee walkers (default 32)")
+    p.add_argument("--max-steps", type=positive_int, default=5000,
+                   help="cap on steps (default 5000)")  # fmt: skip
+    p.add_argument("--min-ess", type=positive_float, default=2000.0,
                    help="effective samples per constant to reach (default 2000)")  # fmt: skip
     p.add_argument("--out", metavar="FILE.nc", help="write the ArviZ data (netCDF)")
     p.add_argument("--backend", metavar="FILE.h5",

@@ -33,6 +33,8 @@ from .checks import (
     _require_type,
     _string,
     check_engineering_constants,
+    check_engineering_plausible,
+    check_plausible,
 )
 from .errors import CaseError
 
@@ -82,6 +84,9 @@ class Plate(_EqualByValue):
     def __post_init__(self):
         for name in ("length", "width", "thickness", "density"):
             _set(self, name, _positive(getattr(self, name), f"plate.{name}"))
+        for name, unit in (("length", "_mm"), ("width", "_mm"), ("thickness", "_mm"),
+                           ("density", "_kg_m3")):  # fmt: skip
+            check_plausible(getattr(self, name), name + unit, f"plate.{name}{unit}", si=True)
         layup = _angles(self.layup_deg, "plate.layup_deg")
         _set(self, "layup_deg", tuple(layup))
         if self.ply_thickness is None:
@@ -90,6 +95,8 @@ class Plate(_EqualByValue):
             plies = _ply_thicknesses(
                 self.ply_thickness, len(layup), self.thickness, "plate.ply_thickness"
             )
+        check_plausible(plies, "ply_thickness_mm", "plate.ply_thickness_mm", si=True)
+        check_plausible(layup, "layup_deg", "plate.layup_deg")
         _set(self, "ply_thickness", tuple(plies))
 
 
@@ -127,6 +134,8 @@ class Measurement(_EqualByValue):
         sigma = _array(self.sigma_Hz, "measured.sigma_Hz", ndim=1)
         _check_length(sigma, frequency.size, "measured.sigma_Hz", "entry per frequency")
         _check_positive_each(sigma, "measured.sigma_Hz")
+        check_plausible(frequency, "frequency_Hz", "measured.frequency_Hz")
+        check_plausible(sigma, "sigma_Hz", "measured.sigma_Hz")
         _set(self, "sigma_Hz", sigma)
         if self.mode is not None:
             _set(self, "mode", _mode_array(self.mode, frequency.size))
@@ -185,6 +194,7 @@ class Prior(_EqualByValue):
         for name, value in zip(ENGINEERING_NAMES, sd, strict=True):
             _positive(value, f"prior.{name}.sd")
         check_engineering_constants(mean, "prior", key_suffix=".mean")
+        check_engineering_plausible(mean, sd, "prior", si=True)
         _set(self, "mean", mean)
         _set(self, "sd", sd)
 
@@ -235,6 +245,7 @@ class Case(_EqualByValue):
             reference = _array(self.reference, "reference", ndim=1, finite=False)
             _check_length(reference, 6, "reference", "value per engineering constant")
             check_engineering_constants(reference, "reference")
+            check_engineering_plausible(reference, None, "reference", si=True)
             _set(self, "reference", reference)
         if self.path is not None:
             _set(self, "path", os.fspath(self.path))

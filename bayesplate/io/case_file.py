@@ -34,6 +34,8 @@ from .checks import (
     _string,
     _table,
     check_engineering_constants,
+    check_engineering_plausible,
+    check_plausible,
     engineering_to_si,
 )
 from .errors import CaseError
@@ -191,14 +193,18 @@ def _parse_plate(raw) -> tuple[Plate, tuple[float, float]]:
     """Return the plate and its (length, width) in mm, for checking points."""
     table = _table(raw, "plate", _PLATE_KEYS, _PLATE_KEYS[:5])
     length, width, thickness, density = (
-        _positive(table[key], f"plate.{key}") for key in _PLATE_KEYS[:4]
+        _plausible(_positive(table[key], f"plate.{key}"), key, f"plate.{key}")
+        for key in _PLATE_KEYS[:4]
     )
+    _check_proportions(length, width, thickness)
     layup = _angles(table["layup_deg"], "plate.layup_deg")
+    check_plausible(layup, "layup_deg", "plate.layup_deg")
     plies = None
     if "ply_thickness_mm" in table:
         plies_mm = _ply_thicknesses(
             table["ply_thickness_mm"], len(layup), thickness, "plate.ply_thickness_mm"
         )
+        check_plausible(plies_mm, "ply_thickness_mm", "plate.ply_thickness_mm")
         plies = tuple(t * _MM for t in plies_mm)
     plate = Plate(length * _MM, width * _MM, thickness * _MM, density, tuple(layup), plies)
     return plate, (length, width)
@@ -208,6 +214,7 @@ def _parse_measured(raw, extent_mm: tuple[float, float]) -> Measurement:
     table = _table(raw, "measured", _MEASURED_KEYS, ("frequency_Hz",))
     frequency = _numbers(table["frequency_Hz"], "measured.frequency_Hz")
     _check_frequencies(frequency, "measured.frequency_Hz")
+    check_plausible(frequency, "frequency_Hz", "measured.frequency_Hz")
     sigma = _parse_sigma(table, frequency)
     mode = None
     if "mode" in table:
@@ -221,13 +228,17 @@ def _parse_sigma(table: Mapping, frequency: np.ndarray) -> np.ndarray:
         rule = "give sigma_rel or sigma_Hz, not both"
         raise CaseError("measured.sigma_rel", table["sigma_rel"], rule)
     if "sigma_Hz" in table:
-        return _numbers(table["sigma_Hz"], "measured.sigma_Hz")
+        sigma = _numbers(table["sigma_Hz"], "measured.sigma_Hz")
+        if sigma.size == frequency.size:  # else Measurement names the length rule
+            _check_sigma_hz(sigma)
+        return sigma
     if "sigma_rel" not in table:
         rule = "required: give sigma_rel (fraction of each frequency) or sigma_Hz (list)"
         raise CaseError("measured.sigma_rel", rule=rule)
     sigma_rel = _number(table["sigma_rel"], "measured.sigma_rel")
     if not 0 < sigma_rel < 1:
         raise CaseError("measured.sigma_rel", table["sigma_rel"], "must be > 0 and < 1")
+    check_plausible(sigma_rel, "sigma_rel", "measured.sigma_rel")
     return sigma_rel * frequency
 
 
@@ -276,6 +287,7 @@ def _matrix(raw, key: str, ncols: int) -> np.ndarray:
             rule = f"must have one value per point of points_mm ({ncols}), got {values.size}"
             raise CaseError(f"{key}[{i}]", row, rule)
         out[i] = values
+        check_plausible(np.max(np.abs(values), initial=0.0), "shape_amplitude", f"{key}[{i}]")
     return out
 
 
@@ -289,6 +301,7 @@ def _parse_prior(raw) -> Prior:
         mean[i] = _number(entry["mean"], f"prior.{key}.mean")
         sd[i] = _positive(entry["sd"], f"prior.{key}.sd")
     check_engineering_constants(mean, "prior", keys=ENGINEERING_KEYS, key_suffix=".mean")
+    check_engineering_plausible(mean, sd, "prior")
     return Prior(engineering_to_si(mean), engineering_to_si(sd))
 
 
@@ -301,4 +314,27 @@ def _parse_reference(raw) -> np.ndarray:
     table = _table(raw, "reference", ENGINEERING_KEYS, ENGINEERING_KEYS)
     values = np.array([_number(table[key], f"reference.{key}") for key in ENGINEERING_KEYS])
     check_engineering_constants(values, "reference", keys=ENGINEERING_KEYS)
+    check_engineering_plausible(values, None, "reference")
     return engineering_to_si(values)
+
+
+def _plausible(value: float, quantity: str, key: str) -> float:
+    check_plausible(value, quantity, key)
+    return value
+
+
+def _check_proportions(length: float, width: float, thickness: float) -> None:
+    """A plate is thin: its thickness may not exceed its length or its width (all mm)."""
+    side = min(length, width)
+    if thickness > side:
+        rule = f"must not exceed the plate's length and width (smaller: {side:g} mm)"
+        raise CaseError("plate.thickness_mm", thickness, rule)
+
+
+def _check_sigma_hz(sigma: np.ndarray) -> None:
+    """Each sd positive and plausible (the positivity rule first, as Measurement has it)."""
+    for i, s in enumerate(sigma):
+        key = f"measured.sigma_Hz[{i}]"
+        if not s > 0:
+            raise CaseError(key, s, "must be a positive number")
+        check_plausible(s, "sigma_Hz", key)

@@ -15,11 +15,14 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..quantities import ENGINEERING_NAMES, from_case_units, to_case_units
+from ..quantities import ENGINEERING_KEYS, ENGINEERING_NAMES, from_case_units, to_case_units
 from .errors import CaseError
 
 __all__ = [
     "MAX_MESH_ELEMENTS",
+    "PLAUSIBLE_RANGES",
+    "check_plausible",
+    "check_engineering_plausible",
     "check_engineering_constants",
     "engineering_to_si",
     "engineering_from_si",
@@ -29,6 +32,30 @@ MAX_MESH_ELEMENTS = 400
 """Largest number of elements allowed along one side in ``model.mesh``."""
 
 _PLY_SUM_RTOL = 1e-6  # relative tolerance on sum(ply thicknesses) == thickness
+
+#: The one table of plausible ranges of a case's physical inputs, in case-file units:
+#: quantity -> (lowest, highest, unit, SI per unit). Generous on purpose (balsa to tungsten,
+#: micro-plates to metre panels, 0.1 Hz to 1 MHz): a value outside is a typo or a unit mix-up
+#: (m for mm, Pa for GPa, kg/mm^3), never a plate. Moduli: 0.1 MPa (soft foams) to 2,000 GPa
+#: (above diamond, 1,220 GPa); nu12: -1 to 5 (auxetic to steep angle-ply laminae; the
+#: lamina's own bound nu12^2 < E1/E2 is checked besides); shapes: the largest amplitude of a
+#: row, any scale that squares without overflow or underflow in the MAC.
+PLAUSIBLE_RANGES: dict[str, tuple[float, float, str, float]] = {
+    "length_mm": (0.01, 10_000.0, "mm", 1e-3),
+    "width_mm": (0.01, 10_000.0, "mm", 1e-3),
+    "thickness_mm": (1e-4, 1_000.0, "mm", 1e-3),
+    "ply_thickness_mm": (1e-5, 1_000.0, "mm", 1e-3),
+    "density_kg_m3": (10.0, 25_000.0, "kg/m^3", 1.0),
+    "layup_deg": (-360.0, 360.0, "deg", 1.0),
+    "frequency_Hz": (0.1, 1e6, "Hz", 1.0),
+    "sigma_Hz": (1e-6, 1e5, "Hz", 1.0),
+    "sigma_rel": (1e-6, 0.5, "(fraction of the frequency)", 1.0),
+    "modulus_GPa": (1e-4, 2_000.0, "GPa", 1e9),
+    "modulus_sd_GPa": (1e-7, 2_000.0, "GPa", 1e9),
+    "nu12": (-1.0, 5.0, "", 1.0),
+    "nu12_sd": (1e-6, 5.0, "", 1.0),
+    "shape_amplitude": (1e-100, 1e100, "(largest of a row, any unit)", 1.0),
+}
 
 
 # ----------------------------------------------------------------------------- public checks
@@ -122,6 +149,65 @@ def _mesh(raw, key: str) -> tuple[int, int]:
         raise CaseError(key, raw, "must be two integers [nx, ny]")
     nx, ny = (_integer(v, f"{key}[{i}]", 1, MAX_MESH_ELEMENTS) for i, v in enumerate(items))
     return nx, ny
+
+
+def check_plausible(value, quantity: str, key: str, si: bool = False) -> None:
+    """Refuse a value outside the plausible range of its quantity (:data:`PLAUSIBLE_RANGES`).
+
+    Parameters
+    ----------
+    value : float or array_like
+        The value (each entry of an array is checked), in the quantity's case-file unit, or
+        in SI with `si`.
+    quantity : str
+        A key of :data:`PLAUSIBLE_RANGES`, e.g. ``"density_kg_m3"``.
+    key : str
+        Dotted key named in the error; array entries get ``[i]``.
+    si : bool
+        Whether `value` is in SI (converted to the case-file unit before the check).
+
+    Raises
+    ------
+    CaseError
+        E.g. ``plate.density_kg_m3 = 1e+30: outside the plausible range 10 to 25,000 kg/m^3``.
+    """
+    low, high, unit, per_unit = PLAUSIBLE_RANGES[quantity]
+    values = np.atleast_1d(np.asarray(value, dtype=float)) / (per_unit if si else 1.0)
+    for i, v in enumerate(values.ravel()):
+        if not low <= v <= high:
+            name = key if np.ndim(value) == 0 else f"{key}[{i}]"
+            rule = f"outside the plausible range {_figure(low)} to {_figure(high)} {unit}"
+            raise CaseError(name, float(v), rule.rstrip())
+
+
+def check_engineering_plausible(mean, sd, key_prefix: str, si: bool = False) -> None:
+    """Refuse prior means (or reference values) and sds outside their plausible ranges.
+
+    Parameters
+    ----------
+    mean : array_like, shape (6,)
+        Constants in the order of :data:`ENGINEERING_NAMES` (GPa for the moduli, or Pa with
+        `si`).
+    sd : array_like, shape (6,) or None
+        Their standard deviations, same units; None for reference values.
+    key_prefix : str
+        ``"prior"`` (keys ``prior.E1_GPa.mean``) or ``"reference"`` (``reference.E1_GPa``).
+    si : bool
+        Whether the values are in SI.
+    """
+    for i, key in enumerate(ENGINEERING_KEYS):
+        is_nu = key == "nu12"
+        name = _join(key_prefix, key)
+        if sd is None:
+            check_plausible(mean[i], "nu12" if is_nu else "modulus_GPa", name, si)
+            continue
+        check_plausible(mean[i], "nu12" if is_nu else "modulus_GPa", name + ".mean", si)
+        check_plausible(sd[i], "nu12_sd" if is_nu else "modulus_sd_GPa", name + ".sd", si)
+
+
+def _figure(x: float) -> str:
+    """A range limit for people: ``25,000``, ``0.1``, ``1e-100``."""
+    return f"{x:,.10g}" if 1e-4 <= abs(x) < 1e7 else f"{x:.10g}"
 
 
 # ----------------------------------------------------------------------------- value rules
