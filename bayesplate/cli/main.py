@@ -31,6 +31,13 @@ class _Parser(argparse.ArgumentParser):
         line = " ".join(f"{self.prog}: error: {message} (see {self.prog} --help)".split())
         self.exit(2, line + "\n")
 
+    def _get_values(self, action, arg_strings):
+        # Python 3.11's argparse drops a "--" given as an option's value (``--tol=--``) and
+        # hands the option an empty list, bypassing its type: refuse it instead.
+        if action.option_strings and "--" in arg_strings:
+            self.error(f"argument {'/'.join(action.option_strings)}: '--' is not a value")
+        return super()._get_values(action, arg_strings)
+
 
 def build_parser():
     """The argument parser of the ``bayesplate`` command."""
