@@ -44,7 +44,9 @@ def _value(v):
     if isinstance(v, int):
         return str(v)
     if isinstance(v, float):
-        return "nan" if math.isnan(v) else ("inf" if v > 0 else "-inf") if math.isinf(v) else repr(v)
+        return (
+            "nan" if math.isnan(v) else ("inf" if v > 0 else "-inf") if math.isinf(v) else repr(v)
+        )
     if isinstance(v, str):
         return json.dumps(v)
     if isinstance(v, (datetime.date, datetime.datetime)):
@@ -79,15 +81,20 @@ def _rich_plate1():
     measured["frequency_Hz"] = f
     measured["sigma_Hz"] = [round(0.01 * x, 3) for x in f]
     measured["mode"] = [1, 2, 3, 5, 4]
-    measured["points_mm"] = [[0.0, 0.0], [plate["length_mm"] / 2, plate["width_mm"] / 3],
-                             [plate["length_mm"], plate["width_mm"]]]  # fmt: skip
+    measured["points_mm"] = [
+        [0.0, 0.0],
+        [plate["length_mm"] / 2, plate["width_mm"] / 3],
+        [plate["length_mm"], plate["width_mm"]],
+    ]
     measured["shapes"] = [[1.0, -0.5, 0.25 * (i + 1)] for i in range(len(f))]
     case["model"] = {"mesh": [8, 4]}
     return case
 
 
-BASES = {"plate1-full": _rich_plate1(),
-         "frederiksen": tomllib.loads(bundled_case_path("frederiksen_t300").read_text())}  # fmt: skip
+BASES = {
+    "plate1-full": _rich_plate1(),
+    "frederiksen": tomllib.loads(bundled_case_path("frederiksen_t300").read_text()),
+}
 
 
 def test_the_base_cases_are_valid():
@@ -125,8 +132,14 @@ def _is(path, *names):
     return bool(keys) and keys[-1] in names
 
 
-OPTIONAL = {("source",), ("model",), ("model", "mesh"), ("plate", "ply_thickness_mm"),
-            ("measured", "mode"), ("reference",)}  # fmt: skip
+OPTIONAL = {
+    ("source",),
+    ("model",),
+    ("model", "mesh"),
+    ("plate", "ply_thickness_mm"),
+    ("measured", "mode"),
+    ("reference",),
+}
 ANGLE_OR_SHAPE = ("layup_deg", "shapes")
 MAY_BE_TINY = ("layup_deg", "shapes", "points_mm", "nu12")  # 1e-200 is a legal value there
 INTEGERS = ("mode", "mesh")
@@ -204,8 +217,11 @@ def structure_corruption(draw):
     """Missing keys, empty arrays and tables, unknown keys, unit spellings, bad frequencies."""
     base = draw(st.sampled_from(sorted(BASES)))
     case = _copy(BASES[base])
-    kind = draw(st.sampled_from(["missing", "empty", "unknown key", "unit", "unsorted",
-                                 "duplicated", "absurd"]))  # fmt: skip
+    kind = draw(
+        st.sampled_from(
+            ["missing", "empty", "unknown key", "unit", "unsorted", "duplicated", "absurd"]
+        )
+    )
     keyed = [p for p, _ in _leaves(case) if isinstance(p[-1], str)]
     if kind == "missing":
         path = draw(st.sampled_from([p for p in keyed if p not in OPTIONAL]))
@@ -245,8 +261,11 @@ def structure_corruption(draw):
     if kind == "duplicated":
         if "mode" in case["measured"]:  # a mode index given twice
             mode = case["measured"]["mode"]
-            i, j = draw(st.sampled_from([(i, j) for i in range(len(mode)) for j in range(len(mode))
-                                         if i != j]))  # fmt: skip
+            i, j = draw(
+                st.sampled_from(
+                    [(i, j) for i in range(len(mode)) for j in range(len(mode)) if i != j]
+                )
+            )
             mode[j] = mode[i]
             return base, case, ("measured", "mode"), ["measured.mode", "distinct"]
         i = draw(st.integers(0, len(f) - 1))  # a frequency given twice, out of order
@@ -258,19 +277,27 @@ def structure_corruption(draw):
 #: quantity of the plausible-range table -> where it sits in a case; absurd values scale
 #: whole lists (one spoilt frequency would break the order first).
 PLACES = {
-    "length_mm": [("plate", "length_mm")], "width_mm": [("plate", "width_mm")],
-    "thickness_mm": [("plate", "thickness_mm")], "density_kg_m3": [("plate", "density_kg_m3")],
-    "frequency_Hz": [("measured", "frequency_Hz")], "sigma_Hz": [("measured", "sigma_Hz")],
-    "sigma_rel": [("measured", "sigma_rel")], "layup_deg": [("plate", "layup_deg")],
-    "modulus_GPa": [(t, k, "mean") for t in ["prior"] for k in
-                    ("E1_GPa", "E2_GPa", "G12_GPa", "G13_GPa", "G23_GPa")]
+    "length_mm": [("plate", "length_mm")],
+    "width_mm": [("plate", "width_mm")],
+    "thickness_mm": [("plate", "thickness_mm")],
+    "density_kg_m3": [("plate", "density_kg_m3")],
+    "frequency_Hz": [("measured", "frequency_Hz")],
+    "sigma_Hz": [("measured", "sigma_Hz")],
+    "sigma_rel": [("measured", "sigma_rel")],
+    "layup_deg": [("plate", "layup_deg")],
+    "modulus_GPa": [
+        (t, k, "mean")
+        for t in ["prior"]
+        for k in ("E1_GPa", "E2_GPa", "G12_GPa", "G13_GPa", "G23_GPa")
+    ]
     + [("reference", k) for k in ("E1_GPa", "E2_GPa", "G12_GPa", "G13_GPa", "G23_GPa")],
-    "modulus_sd_GPa": [("prior", k, "sd") for k in ("E1_GPa", "E2_GPa", "G12_GPa", "G13_GPa",
-                                                    "G23_GPa")],
+    "modulus_sd_GPa": [
+        ("prior", k, "sd") for k in ("E1_GPa", "E2_GPa", "G12_GPa", "G13_GPa", "G23_GPa")
+    ],
     "nu12": [("prior", "nu12", "mean"), ("reference", "nu12")],
     "nu12_sd": [("prior", "nu12", "sd")],
     "shape_amplitude": [("measured", "shapes")],
-}  # fmt: skip
+}
 
 
 def absurd_value(draw, base, case):
@@ -342,17 +369,27 @@ def test_a_broken_structure_is_refused_naming_the_key(fuzz_ledger, corruption, c
 
 @pytest.mark.parametrize(
     ("key", "value", "range_"),
-    [("density_kg_m3", "1e30", "10 to 25,000 kg/m^3"), ("length_mm", "1e9", "0.01 to 10,000 mm"),
-     ("thickness_mm", "3.36e-9", "0.0001 to 1,000 mm"), ("density_kg_m3", "1.537", "10 to")],
-)  # fmt: skip
-def test_the_issue_s_absurd_density_is_refused_with_its_range(fuzz_ledger, tmp_path, key, value,
-                                                               range_):  # fmt: skip
+    [
+        ("density_kg_m3", "1e30", "10 to 25,000 kg/m^3"),
+        ("length_mm", "1e9", "0.01 to 10,000 mm"),
+        ("thickness_mm", "3.36e-9", "0.0001 to 1,000 mm"),
+        ("density_kg_m3", "1.537", "10 to"),
+    ],
+)
+def test_the_issue_s_absurd_density_is_refused_with_its_range(
+    fuzz_ledger, tmp_path, key, value, range_
+):
     text = bundled_case_path("frederiksen_t300").read_text()
     text = re.sub(rf"^{key} = .*$", f"{key} = {value}", text, flags=re.M)
     case = tmp_path / "case.toml"
     case.write_text(text)
-    line = assert_refused_cleanly(fuzz_ledger, ["estimate", case, "--method", "B"], [case], [],
-                                  [f"plate.{key} = ", "outside the plausible range " + range_])  # fmt: skip
+    line = assert_refused_cleanly(
+        fuzz_ledger,
+        ["estimate", case, "--method", "B"],
+        [case],
+        [],
+        [f"plate.{key} = ", "outside the plausible range " + range_],
+    )
     assert str(case) in line
 
 
@@ -364,8 +401,11 @@ def test_the_issue_s_absurd_density_is_refused_with_its_range(fuzz_ledger, tmp_p
 def test_a_damaged_file_is_refused_naming_the_file(fuzz_ledger, data):
     base = data.draw(st.sampled_from(sorted(BASES)))
     text = dumps(BASES[base]).encode()
-    kind = data.draw(st.sampled_from(["truncated", "not utf-8", "binary", "syntax", "empty",
-                                      "bom", "bytes flipped"]))  # fmt: skip
+    kind = data.draw(
+        st.sampled_from(
+            ["truncated", "not utf-8", "binary", "syntax", "empty", "bom", "bytes flipped"]
+        )
+    )
     if kind == "truncated":
         cut = data.draw(st.integers(0, len(text) - 1))
         text = text[:cut]
@@ -397,15 +437,16 @@ def test_a_damaged_file_is_refused_naming_the_file(fuzz_ledger, data):
             assert kind in ("truncated", "bytes flipped"), kind
             return
         out = Path(tmp, "out.json")
-        assert_refused_cleanly(fuzz_ledger, ["modes", file, "--json", out], [file], [out],
-                               ["case.toml"])  # fmt: skip
+        assert_refused_cleanly(
+            fuzz_ledger, ["modes", file, "--json", out], [file], [out], ["case.toml"]
+        )
 
 
 def test_a_numpy_free_check_of_the_writer():
     """The fuzzer's TOML writer round-trips what it writes (else corruptions are not real)."""
     for case in BASES.values():
         assert tomllib.loads(dumps(case)) == case
-    odd = {"a": [math.inf, -math.inf], "b": {"c": "q\"\\\n\u03bd"}, "d": datetime.date(2026, 1, 2)}
+    odd = {"a": [math.inf, -math.inf], "b": {"c": 'q"\\\n\u03bd'}, "d": datetime.date(2026, 1, 2)}
     back = tomllib.loads(dumps(odd))
     assert back["a"] == [math.inf, -math.inf] and back["b"] == odd["b"] and back["d"] == odd["d"]
     assert np.isnan(tomllib.loads(dumps({"n": math.nan}))["n"])

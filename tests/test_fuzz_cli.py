@@ -109,8 +109,8 @@ OPTIONS = {
     "diagnose": {"--seed": BAD_SEED, "--workers": BAD_INT, "--mesh": BAD_MESH,
                  "--pairing": BAD_CHOICE},
     "report": {"--seed": BAD_SEED, "--mesh": BAD_MESH, "--pairing": BAD_CHOICE},
-    "import": {"--sigma-rel": BAD_FLOAT + ["0", "1", "1.5", "-0.1"], "--order": BAD_INT,
-               "--band": BAD_FLOAT, "--window": BAD_CHOICE},
+    "import": {"--sigma-rel": BAD_FLOAT + ["0", "1", "1.5", "-0.1", "0.7", "1e-9"],
+               "--order": BAD_INT, "--band": BAD_FLOAT, "--window": BAD_CHOICE},
 }  # fmt: skip
 
 

@@ -53,8 +53,7 @@ def _import_refused(ledger, path, names=(), extra=(), reader=_modes_reader, inpu
     argv = ["import", path, "--plate", SHEET, "-o", out, *extra]
     if is_tap_test(path):
         argv += ["--poles", poles, "--chart", chart]
-    assert_refused_cleanly(ledger, argv, [path, *inputs], [out, poles, chart],
-                           [path.name, *names])  # fmt: skip
+    assert_refused_cleanly(ledger, argv, [path, *inputs], [out, poles, chart], [path.name, *names])
     return True
 
 
@@ -70,7 +69,11 @@ def _damage_bytes(data, text: bytes) -> bytes:
     if kind == "latin-1":
         return text[:at] + "µ°é".encode("latin-1") + text[at:]
     if kind == "non-ascii":
-        return text[:at] + data.draw(st.sampled_from(["µm", "é", "１", "\u2212", "😀"])).encode() + text[at:]
+        return (
+            text[:at]
+            + data.draw(st.sampled_from(["µm", "é", "１", "\u2212", "😀"])).encode()
+            + text[at:]
+        )
     if kind == "flip":
         return text[:at] + bytes([text[at] ^ data.draw(st.integers(1, 255))]) + text[at + 1 :]
     if kind == "nul":
@@ -102,8 +105,25 @@ def _damage_lines(data, text: str) -> str:
 CSV_TEXT = "frequency_Hz,sigma_Hz,mode\n" + "".join(
     f"{f},{f / 100},{m}\n" for f, m in [(120.5, 1), (310.0, 2), (455.25, 4), (470.0, 3)]
 )
-BAD_CELLS = ["nan", "inf", "-inf", "-1", "0", "abc", "", "1e400", "1e30", "1e-30", "0x10",
-             "2.5.1", "--3", "µ", "1 2", "true", "1_000"]  # fmt: skip
+BAD_CELLS = [
+    "nan",
+    "inf",
+    "-inf",
+    "-1",
+    "0",
+    "abc",
+    "",
+    "1e400",
+    "1e30",
+    "1e-30",
+    "0x10",
+    "2.5.1",
+    "--3",
+    "µ",
+    "1 2",
+    "true",
+    "1_000",
+]
 
 
 @fuzz_settings(150)
@@ -120,8 +140,20 @@ def test_a_damaged_frequency_table_is_refused(fuzz_ledger, data):
         text = ("\n".join(",".join(r) for r in rows) + "\n").encode()
     elif kind == "header":
         j = data.draw(st.integers(0, 2))
-        rows[0][j] = data.draw(st.sampled_from(["frequency_kHz", "freq", "sigma_%", "", "mode",
-                                                "frequency_Hz", "Frequency_Hz", "sigma_rel"]))  # fmt: skip
+        rows[0][j] = data.draw(
+            st.sampled_from(
+                [
+                    "frequency_kHz",
+                    "freq",
+                    "sigma_%",
+                    "",
+                    "mode",
+                    "frequency_Hz",
+                    "Frequency_Hz",
+                    "sigma_rel",
+                ]
+            )
+        )
         text = ("\n".join(",".join(r) for r in rows) + "\n").encode()
         names = ["line 1"] if rows[0][j] != "sigma_rel" else []
     elif kind == "order":
@@ -146,18 +178,52 @@ def _uff_modes_text():
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp, "m.uff")
         p = 3
-        sets = [pyuff.prepare_164(units_code=1, units_description="SI", temp_mode=1,
-                                  length=1.0, force=1.0, temp=1.0, temp_offset=273.15),
-                pyuff.prepare_15(node_nums=[1, 2, 3], def_cs=[0] * p, disp_cs=[0] * p,
-                                 color=[0] * p, x=[0.0, 0.05, 0.1], y=[0.0, 0.02, 0.05],
-                                 z=[0.0] * p)]  # fmt: skip
+        sets = [
+            pyuff.prepare_164(
+                units_code=1,
+                units_description="SI",
+                temp_mode=1,
+                length=1.0,
+                force=1.0,
+                temp=1.0,
+                temp_offset=273.15,
+            ),
+            pyuff.prepare_15(
+                node_nums=[1, 2, 3],
+                def_cs=[0] * p,
+                disp_cs=[0] * p,
+                color=[0] * p,
+                x=[0.0, 0.05, 0.1],
+                y=[0.0, 0.02, 0.05],
+                z=[0.0] * p,
+            ),
+        ]
         for n, (f, shape) in enumerate([(300.0, [1.0, 0.5, -1.0]), (500.0, [-1.0, 2.0, 1.0])]):
-            sets.append(pyuff.prepare_55(
-                model_type=1, id1="NONE", id2="NONE", id3="NONE", id4="NONE", id5="NONE",
-                data_ch=2, spec_data_type=8, n_data_per_node=3, node_nums=np.arange(1, 4),
-                load_case=1, mode_n=n + 1, analysis_type=2, data_type=2, r1=np.zeros(p),
-                r2=np.zeros(p), r3=np.array(shape), freq=f, modal_m=1.0, modal_damp_vis=0.01,
-                modal_damp_his=0.0))  # fmt: skip
+            sets.append(
+                pyuff.prepare_55(
+                    model_type=1,
+                    id1="NONE",
+                    id2="NONE",
+                    id3="NONE",
+                    id4="NONE",
+                    id5="NONE",
+                    data_ch=2,
+                    spec_data_type=8,
+                    n_data_per_node=3,
+                    node_nums=np.arange(1, 4),
+                    load_case=1,
+                    mode_n=n + 1,
+                    analysis_type=2,
+                    data_type=2,
+                    r1=np.zeros(p),
+                    r2=np.zeros(p),
+                    r3=np.array(shape),
+                    freq=f,
+                    modal_m=1.0,
+                    modal_damp_vis=0.01,
+                    modal_damp_his=0.0,
+                )
+            )
         pyuff.UFF(str(path)).write_sets(sets, mode="overwrite")
         return path.read_text()
 
@@ -170,15 +236,27 @@ def _uff_field_damage(data, text):
     kind = data.draw(st.sampled_from(["dataset", "units", "frequency", "number"]))
     if kind == "dataset":
         old = data.draw(st.sampled_from(["    55", "    15", "   164"]))
-        new = data.draw(st.sampled_from(["    58", "    56", "    16", "  2412", "    -1", "  abcd"]))
+        new = data.draw(
+            st.sampled_from(["    58", "    56", "    16", "  2412", "    -1", "  abcd"])
+        )
         return text.replace(f"\n{old}\n", f"\n{new}\n", 1)
     if kind == "units":  # dataset 164 record 2: the length factor (m per unit)
         line = next(ln for ln in text.splitlines() if ln.strip().startswith("1.00000000000000"))
         bad = data.draw(st.sampled_from(["0.0", "-1.0", "nan", "inf", "1e300", "abc", "1e-300"]))
         return text.replace(line, line.replace("1.00000000000000", f"{bad:>16}", 1), 1)
     if kind == "frequency":
-        bad = data.draw(st.sampled_from(["          nan", "         -300", "        1e+30",
-                                         "        1e-30", "            0", "  3.0000xe+02"]))  # fmt: skip
+        bad = data.draw(
+            st.sampled_from(
+                [
+                    "          nan",
+                    "         -300",
+                    "        1e+30",
+                    "        1e-30",
+                    "            0",
+                    "  3.0000xe+02",
+                ]
+            )
+        )
         return text.replace("  3.00000e+02", bad, 1)
     numbers = [tok for tok in set(text.split()) if tok.replace(".", "").replace("-", "").isdigit()]
     tok = data.draw(st.sampled_from(sorted(numbers)))
@@ -212,7 +290,9 @@ def _impulse(n=2048):
 def _frf_csv_text():
     f = np.arange(0.0, 4000.0, 8.0)
     s = 2j * np.pi * f
-    h = sum(1 / ((2 * np.pi * fk) ** 2 + 2 * 0.01 * 2 * np.pi * fk * s + s**2) for fk in (700, 1900))
+    h = sum(
+        1 / ((2 * np.pi * fk) ** 2 + 2 * 0.01 * 2 * np.pi * fk * s + s**2) for fk in (700, 1900)
+    )
     rows = "".join(f"{a:.10g},{z.real:.10g},{z.imag:.10g}\n" for a, z in zip(f, h, strict=True))
     return "frequency_Hz,H1_re,H1_im\n" + rows
 
@@ -235,7 +315,8 @@ def _wav_bytes(data):
         signal = signal[: data.draw(st.integers(1, 63))]
     elif kind == "nan":
         signal[data.draw(st.integers(0, signal.size - 1))] = data.draw(
-            st.sampled_from([np.nan, np.inf]))  # fmt: skip
+            st.sampled_from([np.nan, np.inf])
+        )
     elif kind == "zeros":
         signal[:] = 0
     elif kind == "rate":
@@ -288,13 +369,15 @@ def test_a_damaged_poles_file_is_refused(fuzz_ledger, data):
         lines = POLES_TEXT.splitlines()
         i = data.draw(st.integers(1, len(lines) - 1))
         cells = lines[i].split(",")
-        cells[data.draw(st.integers(0, 2))] = data.draw(st.sampled_from(BAD_CELLS + ["2", "0.9999"]))
+        cells[data.draw(st.integers(0, 2))] = data.draw(
+            st.sampled_from(BAD_CELLS + ["2", "0.9999"])
+        )
         raw = ("\n".join(lines) + "\n").encode()
         raw = ("\n".join(lines[:i] + [",".join(cells)] + lines[i + 1 :]) + "\n").encode()
     elif kind == "none kept":
         raw = POLES_TEXT.replace("\n1,", "\n0,").encode()
     elif kind == "order":
-        raw = "keep,frequency_Hz,damping\n1,1900.0,0.01\n1,700.0,0.01\n".encode()
+        raw = b"keep,frequency_Hz,damping\n1,1900.0,0.01\n1,700.0,0.01\n"
     elif kind == "bytes":
         raw = _damage_bytes(data, POLES_TEXT.encode())
     else:

@@ -21,10 +21,13 @@ def run(args):
         read_modal_data,
         write_case,
     )
+    from ..io.checks import check_plausible
     from ..io.modal_file import is_tap_test
 
     if args.sigma_rel is not None and not 0 < args.sigma_rel < 1:
         raise CaseError("--sigma-rel", args.sigma_rel, "must be > 0 and < 1")
+    if args.sigma_rel is not None:  # here, else the sheet would be blamed for it
+        check_plausible(args.sigma_rel, "sigma_rel", "--sigma-rel")
     plate = args.plate
     if not pathlib.Path(plate).exists() and plate in bundled_plate_names():
         plate = bundled_plate_path(plate)
