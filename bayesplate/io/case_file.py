@@ -300,8 +300,9 @@ def _parse_prior(raw) -> Prior:
         )
         mean[i] = _number(entry["mean"], f"prior.{key}.mean")
         sd[i] = _positive(entry["sd"], f"prior.{key}.sd")
-    check_engineering_plausible(mean, sd, "prior")  # first: name the absurd value itself
+    check_engineering_plausible(mean, sd, "prior", nu12=False)  # name an absurd E2 itself
     check_engineering_constants(mean, "prior", keys=ENGINEERING_KEYS, key_suffix=".mean")
+    check_engineering_plausible(mean, sd, "prior", moduli=False)
     return Prior(engineering_to_si(mean), engineering_to_si(sd))
 
 
@@ -313,8 +314,9 @@ def _parse_model(raw) -> tuple[int, int] | None:
 def _parse_reference(raw) -> np.ndarray:
     table = _table(raw, "reference", ENGINEERING_KEYS, ENGINEERING_KEYS)
     values = np.array([_number(table[key], f"reference.{key}") for key in ENGINEERING_KEYS])
-    check_engineering_plausible(values, None, "reference")
+    check_engineering_plausible(values, None, "reference", nu12=False)
     check_engineering_constants(values, "reference", keys=ENGINEERING_KEYS)
+    check_engineering_plausible(values, None, "reference", moduli=False)
     return engineering_to_si(values)
 
 

@@ -180,7 +180,9 @@ def check_plausible(value, quantity: str, key: str, si: bool = False) -> None:
             raise CaseError(name, float(v), rule.rstrip())
 
 
-def check_engineering_plausible(mean, sd, key_prefix: str, si: bool = False) -> None:
+def check_engineering_plausible(
+    mean, sd, key_prefix: str, si: bool = False, *, moduli: bool = True, nu12: bool = True
+) -> None:
     """Refuse prior means (or reference values) and sds outside their plausible ranges.
 
     Parameters
@@ -194,15 +196,19 @@ def check_engineering_plausible(mean, sd, key_prefix: str, si: bool = False) -> 
         ``"prior"`` (keys ``prior.E1_GPa.mean``) or ``"reference"`` (``reference.E1_GPa``).
     si : bool
         Whether the values are in SI.
+    moduli, nu12 : bool
+        Check the moduli and every sd; check the mean (value) of nu12. A case file checks the
+        moduli first (an absurd E2 is named, not the nu12 it makes impossible), then the
+        lamina's rule nu12^2 < E1/E2 (:func:`check_engineering_constants`), then nu12.
     """
     for i, key in enumerate(ENGINEERING_KEYS):
         is_nu = key == "nu12"
-        name = _join(key_prefix, key)
-        if sd is None:
+        name = _join(key_prefix, key) + ("" if sd is None else ".mean")
+        if nu12 if is_nu else moduli:
             check_plausible(mean[i], "nu12" if is_nu else "modulus_GPa", name, si)
-            continue
-        check_plausible(mean[i], "nu12" if is_nu else "modulus_GPa", name + ".mean", si)
-        check_plausible(sd[i], "nu12_sd" if is_nu else "modulus_sd_GPa", name + ".sd", si)
+        if sd is not None and moduli:
+            quantity = "nu12_sd" if is_nu else "modulus_sd_GPa"
+            check_plausible(sd[i], quantity, _join(key_prefix, key) + ".sd", si)
 
 
 def _figure(x: float) -> str:
