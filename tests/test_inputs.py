@@ -226,5 +226,32 @@ def test_variance_budget_closure_flags_a_foreign_covariance():
     Vb = V_b * np.outer(scale, scale)
     ok = variance_budget(Pb, Sb, V_Y, Vb, np.zeros((8, 4)), np.zeros(4), b)
     assert ok.status == "ok"
+    near = variance_budget(1.001 * Pb, Sb, V_Y, Vb, np.zeros((8, 4)), np.zeros(4), b)
+    assert near.status == "approximate"  # closure about 2e-3: another model's covariance
     off = variance_budget(0.5 * Pb, Sb, V_Y, Vb, np.zeros((8, 4)), np.zeros(4), b)
     assert off.status == "not_closed"
+
+
+# ----------------------------------------------------------------------------- command line
+
+
+def test_cli_estimate_shows_the_budget(tmp_path, capsys):
+    import json
+
+    from bayesplate.cli.main import main as cli_main
+    from bayesplate.io import bundled_case_path
+
+    text = bundled_case_path("plate1").read_text()
+    assert "\n[plate]\n" in text
+    path = tmp_path / "plate1_sd.toml"
+    path.write_text(text.replace("\n[plate]\n", "\n[plate]\nthickness_sd_mm = 0.03\n"))
+    args = ["estimate", str(path), "--method", "B", "--mesh", "12", "12", "--forward", "full"]
+    status = cli_main([*args, "-q", "--json", str(tmp_path / "e.json"), "--plots", str(tmp_path)])
+    out = capsys.readouterr().out
+    assert status == 0
+    assert "variance budget (B" in out and "thickness" in out and "density" not in out
+    doc = json.loads((tmp_path / "e.json").read_text())["variance_budget"]
+    assert doc["status"] == "ok"
+    for key, share in doc["share"].items():
+        assert sum(share.values()) == pytest.approx(1.0, rel=1e-9), key
+    assert (tmp_path / "variance_budget.png").stat().st_size > 1000
