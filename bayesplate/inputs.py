@@ -24,6 +24,11 @@ Variance budget
     to the engineering constants at the estimate (first order). The total is the estimator's own
     covariance plus the inputs' shares, so with zero input deviations it is today's covariance,
     bit for bit.
+
+Marginalising the inputs
+    ``GaussianProblem.from_case(..., inputs="marginal")`` adds ``J_p Sigma_p J_p^T``
+    (:func:`input_covariance`) to the eigenvalue covariance: the inputs integrated out to first
+    order, so the estimators' and the sampler's deviations include them.
 """
 
 from __future__ import annotations
@@ -46,6 +51,7 @@ __all__ = [
     "VarianceBudget",
     "input_sd",
     "input_jacobian",
+    "input_covariance",
     "variance_budget",
     "estimate_budget",
 ]
@@ -132,6 +138,33 @@ def input_jacobian(case, b, modes, mesh=None, step=DEFAULT_STEP) -> InputJacobia
         )
         J[:, k] = (up - down) / (2.0 * dp)
     return InputJacobian(J, lam, nominal, step)
+
+
+def input_covariance(case, b, modes, mesh=None) -> np.ndarray:
+    """``J_p Sigma_p J_p^T``: the eigenvalue covariance the inputs' deviations add.
+
+    Parameters
+    ----------
+    case : bayesplate.io.Case
+        Its plate's ``*_sd`` (independent inputs).
+    b : array_like, shape (6,)
+        Stiffness coefficients where ``J_p`` is evaluated, Pa.
+    modes : array_like of int, shape (m,)
+        0-based computed modes paired with the measured eigenvalues.
+    mesh : tuple of int, optional
+        As for :func:`input_jacobian`.
+
+    Returns
+    -------
+    numpy.ndarray, shape (m, m)
+        rad^4/s^4; zeros (and no solve) when every deviation is 0.
+    """
+    sd = input_sd(case.plate)
+    modes = np.asarray(modes, dtype=int)
+    if not np.any(sd):
+        return np.zeros((modes.size, modes.size))
+    J = input_jacobian(case, b, modes, mesh=mesh).J * sd[None, :]
+    return J @ J.T
 
 
 def _scaled(case, name, value):

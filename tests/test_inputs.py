@@ -255,3 +255,61 @@ def test_cli_estimate_shows_the_budget(tmp_path, capsys):
     for key, share in doc["share"].items():
         assert sum(share.values()) == pytest.approx(1.0, rel=1e-9), key
     assert (tmp_path / "variance_budget.png").stat().st_size > 1000
+
+
+# ----------------------------------------------------------------------------- marginal
+
+
+def test_marginal_inputs_widen_the_posterior_as_h_squared(rng):
+    # lambda ~ h^2 b / rho for a thin plate and sum_j S_ij b_j = lambda_i exactly (K linear
+    # in b): a thickness error is mostly a common scaling the constants absorb, so the
+    # relative sd of a bending-determined modulus grows to about sqrt(s0^2 + (2 sd_h / h)^2)
+    # (the issue's "2 % in h moves E by 4 %"). Not exactly: the prior on the weakly
+    # determined nu12, G13, G23 holds part of that common scale, and the modes' departures
+    # from h^2 (1 to 5 % at a/h = 75 on this mesh) let the data inform h; on this plate
+    # with 1 % data both stay within 12 % of the scaling law (measured 5, 9 and 10 %).
+    from bayesplate.estimators import run
+    from bayesplate.pairing import Pairing
+    from bayesplate.posterior import GaussianProblem
+
+    sd_h = 0.02 * 0.004
+    case, model = _synthetic(rng, sigma_rel=0.01, prior_rel=1.0, thickness_sd=sd_h)
+    pairing = Pairing.from_measurement(case.measured)
+    exact = GaussianProblem.from_case(case, model, pairing)
+    marginal = GaussianProblem.from_case(case, model, pairing, inputs="marginal")
+    r0, r1 = run(exact, "B"), run(marginal, "B")
+    assert r0.converged and r1.converged
+    rel0, rel1 = (r.sd / np.abs(r.constants) for r in (r0, r1))
+    expected = np.sqrt(rel0**2 + (2 * sd_h / 0.004) ** 2)
+    moduli = [0, 1, 3]
+    np.testing.assert_allclose(rel1[moduli], expected[moduli], rtol=0.12)
+    assert np.all(rel1[moduli] > 1.7 * rel0[moduli])
+    # an independent route to the same covariance: the inputs as nuisance parameters of a
+    # joint linear Gaussian in (b, p); its b-block is the marginal's (Woodbury vs Schur)
+    S = marginal.predict(r1.b).S
+    mu_p = np.array([case.plate.thickness, case.plate.density, case.plate.length,
+                     case.plate.width])  # fmt: skip
+    J = input_jacobian(case, marginal.mu_b, pairing.modes, mesh=MESH).J
+    sd_p = input_sd(case.plate)
+    keep = sd_p > 0
+    W = np.linalg.inv(exact.V_Y)
+    A = np.block([[S.T @ W @ S + np.linalg.inv(exact.V_b), S.T @ W @ J[:, keep]],
+                  [J[:, keep].T @ W @ S,
+                   J[:, keep].T @ W @ J[:, keep] + np.diag(1 / sd_p[keep] ** 2)]])  # fmt: skip
+    scale = np.concatenate([np.abs(r1.b), mu_p[keep]])
+    joint = np.linalg.inv(A * np.outer(scale, scale)) * np.outer(scale, scale)
+    np.testing.assert_allclose(joint[:6, :6], r1.covariance_b, rtol=1e-7)
+
+
+def test_marginal_without_input_sds_changes_nothing():
+    from bayesplate.pairing import Pairing
+    from bayesplate.posterior import GaussianProblem
+
+    case = _case()
+    model = PlateModel.from_case(case, mesh=MESH)
+    pairing = Pairing.from_measurement(case.measured)
+    a = GaussianProblem.from_case(case, model, pairing)
+    b = GaussianProblem.from_case(case, model, pairing, inputs="marginal")
+    assert np.array_equal(a.V_Y, b.V_Y)
+    with pytest.raises(ValueError, match="inputs"):
+        GaussianProblem.from_case(case, model, pairing, inputs="sampled")

@@ -5,8 +5,6 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-import numpy as np
-
 from .options import (
     CONVENTION_CHOICES,
     DEFAULT_MAX_ITER,
@@ -52,6 +50,8 @@ def estimate_text(case, model, result):
 
 def budget_text(budget):
     """The variance budget table: each constant's sd from each source, and its share."""
+    import numpy as np
+
     from ..quantities import ENGINEERING_KEYS, to_case_units
 
     keep = [i for i, row in enumerate(budget.variance) if np.any(row > 0)]
@@ -77,6 +77,8 @@ def budget_text(budget):
 
 def _budget(case, model, result):
     """The variance budget of a converged estimate, or None (no covariance to split)."""
+    import numpy as np
+
     from ..inputs import estimate_budget
 
     if not result.converged or not np.all(np.isfinite(result.covariance_b)):
