@@ -100,6 +100,17 @@ def _table(result, budget):
     return lines
 
 
+def _cpu():
+    """The processor's model name (``/proc/cpuinfo``), or the platform's machine type."""
+    try:
+        for line in pathlib.Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.machine()
+
+
 def report(case, rows, seconds):
     """The Markdown report."""
     load = os.getloadavg()[0]
@@ -107,7 +118,7 @@ def report(case, rows, seconds):
         "# The spruce plate's uncertain inputs: variance budget of B and MVE",
         "",
         f"Made by `python studies/spruce_input_budget.py` on {datetime.date.today()}, "
-        f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, load "
+        f"{_cpu()}, {os.cpu_count()} cores, load "
         f"{load:.1f}, {seconds:.0f} s. Case `{CASE}` with the sheet's deviations: h "
         f"{SD_H_MM} mm, a {SD_A_MM} mm, b {SD_B_MM} mm, mass {SD_MASS_G} g. Linearised at "
         "each estimate; `share` is the fraction of the total variance; the sd without inputs "
