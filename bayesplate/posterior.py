@@ -48,6 +48,7 @@ from .pairing import Pairing
 from .quantities import eigenvalue_from_hz, eigenvalue_sd, stiffness_covariance
 
 __all__ = [
+    "INPUT_TREATMENTS",
     "OBSERVATION_CONVENTIONS",
     "PRIOR_CONVENTIONS",
     "Prediction",
@@ -60,6 +61,8 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 OBSERVATION_CONVENTIONS = ("variance", "deviation")
+#: How the plate's measured inputs enter: as exact numbers, or marginalised (linearised).
+INPUT_TREATMENTS = ("exact", "marginal")
 PRIOR_CONVENTIONS = ("variance", "full", "deviation")
 
 
@@ -194,6 +197,8 @@ class GaussianProblem:
         prior="variance",
         prior_mean=None,
         prior_sd=None,
+        inputs="exact",
+        inputs_at=None,
     ):
         """The problem of a case file on a forward model.
 
@@ -210,11 +215,20 @@ class GaussianProblem:
             Conventions for ``V_Y`` and ``V_b`` (see the module docstring).
         prior_mean, prior_sd : array_like, shape (6,), optional
             Engineering prior (SI) replacing the case's.
+        inputs : {"exact", "marginal"}
+            The plate's thickness, density, length and width as exact numbers, or with the
+            case's deviations (``plate.*_sd``) marginalised to first order: ``V_Y`` gains
+            ``J_p Sigma_p J_p^T`` (:mod:`bayesplate.inputs`), so every constant's posterior
+            widens by the inputs' share. Needs ``model.mesh`` (a finite-element model's).
+        inputs_at : array_like, shape (6,), optional
+            Stiffness coefficients (Pa) where ``J_p`` is evaluated; default the prior mean.
+            Six full solves; none when every input deviation is 0.
 
         Returns
         -------
         GaussianProblem
         """
+        _check(inputs, INPUT_TREATMENTS, "inputs")
         measured = case.measured
         pairing = pairing or Pairing.from_measurement(measured)
         measured = pairing.select(measured)
@@ -223,6 +237,12 @@ class GaussianProblem:
         mu_b, V_b = prior_in_stiffness(mean_e, sd_e, prior)
         Y = observed_eigenvalues(measured.frequency_Hz)
         V_Y = observation_covariance(measured.frequency_Hz, measured.sigma_Hz, observation)
+        if inputs == "marginal":
+            from .inputs import input_covariance
+
+            at = mu_b if inputs_at is None else inputs_at
+            mesh = (model.mesh.nx, model.mesh.ny)
+            V_Y = V_Y + input_covariance(case, at, pairing.modes, mesh=mesh)
         return cls(Y, V_Y, mu_b, V_b, model.solve, pairing)
 
     @property

@@ -28,6 +28,7 @@ STUDIES = [
     "diagnose_frederiksen",
     "prior_bias",
     "spruce_badiane",
+    "spruce_input_budget",
 ]
 
 

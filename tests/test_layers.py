@@ -22,6 +22,7 @@ NUMERICS = (
     "pairing",
     "assignment",
     "posterior",
+    "inputs",
     "estimators",
     "reduced",
     "sampling",

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+from pathlib import Path
 
 from .options import (
     CONVENTION_CHOICES,
@@ -49,6 +50,44 @@ def estimate_text(case, model, result):
     return "\n".join(lines)
 
 
+def budget_text(budget):
+    """The variance budget table: each constant's sd from each source, and its share."""
+    import numpy as np
+
+    from ..quantities import ENGINEERING_KEYS, to_case_units
+
+    keep = [i for i, row in enumerate(budget.variance) if np.any(row > 0)]
+    sd = np.array([to_case_units(row) for row in budget.source_sd])
+    total = to_case_units(budget.sd)
+    lines = [
+        f"variance budget ({budget.method}, linearised at the estimate): sd from each source "
+        "(case units) and its share of the variance",
+        f"{'constant':>9}" + "".join(f"{budget.sources[i]:>15}" for i in keep) + f"{'total':>10}",
+    ]
+    for j, key in enumerate(ENGINEERING_KEYS):
+        cells = "".join(f"{sd[i, j]:#9.3g} ({100 * budget.share[i, j]:3.0f}%)" for i in keep)
+        lines.append(f"{key:>9}{cells}{total[j]:#10.3g}")
+    if budget.status == "approximate":
+        lines.append(f"  frequencies + prior split with the full model's sensitivities at the "
+                     f"fast model's answer: they add up to its covariance within "
+                     f"{budget.closure:.1e}")  # fmt: skip
+    elif budget.status != "ok":
+        lines.append(f"  budget status {budget.status}: the split of the estimator's own "
+                     f"covariance does not close (closure {budget.closure:.1e})")  # fmt: skip
+    return "\n".join(lines)
+
+
+def _budget(case, model, result):
+    """The variance budget of a converged estimate, or None (no covariance to split)."""
+    import numpy as np
+
+    from ..inputs import estimate_budget
+
+    if not result.converged or not np.all(np.isfinite(result.covariance_b)):
+        return None
+    return estimate_budget(case, result, model)
+
+
 def _check_lines(result):
     """The full model's check of a fast-model answer, if there is one."""
     check = result.check
@@ -63,7 +102,7 @@ def _check_lines(result):
 def run(args):
     """Estimate the constants; print the table, write JSON on request."""
     from ..estimators import estimate
-    from ..io import estimate_to_dict, write_json
+    from ..io import budget_to_dict, estimate_to_dict, save_figure, write_json
     from ..model import PlateModel
 
     case = resolve_case(args.case)
@@ -80,10 +119,21 @@ def run(args):
         pairing=args.pairing,
         forward=args.forward,
     )
+    budget = _budget(case, model, result)
     if args.json:
-        write_json(estimate_to_dict(result, case, model), args.json)
+        document = estimate_to_dict(result, case, model)
+        if budget is not None:
+            document["variance_budget"] = budget_to_dict(budget)
+        write_json(document, args.json)
     if args.json != "-":
         print(estimate_text(case, model, result))
+        if budget is not None:
+            print(budget_text(budget))
+    if args.plots and budget is not None:
+        from ..plots import variance_budget_bars
+
+        path = Path(args.plots) / "variance_budget.png"
+        save_figure(variance_budget_bars(budget, title=case.name), path)
     return 0 if result.converged else 1
 
 
@@ -125,5 +175,11 @@ def register(sub):
     )
     add_mesh_option(p)
     add_json_option(p)
+    p.add_argument(
+        "--plots",
+        metavar="DIR",
+        help="write the variance budget figure (variance_budget.png: each constant's "
+        "variance split by source) to DIR",
+    )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
     p.set_defaults(func=run)

@@ -41,6 +41,7 @@ from .errors import CaseError
 from .export import (
     atomic_write,
     atomic_write_text,
+    budget_to_dict,
     constants_json,
     diagnosis_to_dict,
     estimate_to_dict,
@@ -95,6 +96,7 @@ __all__ = [
     "write_json",
     "constants_json",
     "estimate_to_dict",
+    "budget_to_dict",
     "sampling_to_dict",
     "diagnosis_to_dict",
 ]

@@ -28,6 +28,7 @@ from .checks import (
     _check_positive_each,
     _mesh,
     _mode_array,
+    _number,
     _ply_thicknesses,
     _positive,
     _require_type,
@@ -72,6 +73,11 @@ class Plate(_EqualByValue):
         Ply angles from the bottom face (z = -h/2) upward, degrees.
     ply_thickness : tuple of float, optional
         One thickness per ply, m, summing to `thickness`; default h / number of plies.
+    length_sd, width_sd, thickness_sd : float, optional
+        One standard deviation of the measured length, width and thickness, m; default 0
+        (taken as exact). Plies keep their fractions of the thickness when it varies.
+    density_sd : float, optional
+        One standard deviation of the density, kg/m^3; default 0.
     """
 
     length: float
@@ -80,10 +86,16 @@ class Plate(_EqualByValue):
     density: float
     layup_deg: tuple[float, ...]
     ply_thickness: tuple[float, ...] | None = None
+    length_sd: float = 0.0
+    width_sd: float = 0.0
+    thickness_sd: float = 0.0
+    density_sd: float = 0.0
 
     def __post_init__(self):
         for name in ("length", "width", "thickness", "density"):
             _set(self, name, _positive(getattr(self, name), f"plate.{name}"))
+            sd = f"{name}_sd"
+            _set(self, sd, _nonnegative(getattr(self, sd), f"plate.{sd}"))
         for name, unit in (("length", "_mm"), ("width", "_mm"), ("thickness", "_mm"),
                            ("density", "_kg_m3")):  # fmt: skip
             check_plausible(getattr(self, name), name + unit, f"plate.{name}{unit}", si=True)
@@ -283,6 +295,14 @@ class Case(_EqualByValue):
         """
         base = self.measured if measured is None else measured
         return dataclasses.replace(self, measured=dataclasses.replace(base, **changes))
+
+
+def _nonnegative(raw, key: str) -> float:
+    """Return `raw` as a finite float >= 0 (a standard deviation; 0 means exact)."""
+    value = _number(raw, key)
+    if value < 0:
+        raise CaseError(key, raw, "must be a number >= 0 (a standard deviation)")
+    return value
 
 
 def _set(obj, name: str, value) -> None:

@@ -7,6 +7,20 @@ plate. This is the only module of the package that reads case files (the plate s
 :func:`parse_case` checks the file's own keys and values (millimetres, GPa), so a message
 quotes what the user wrote, e.g. ``plate.thickness_mm = -3.0: must be a positive number``;
 the :class:`Case` it builds checks its invariants again in SI.
+
+Uncertain inputs (optional keys of ``[plate]``): ``thickness_sd_mm``, ``density_sd_kg_m3``,
+``length_sd_mm`` and ``width_sd_mm`` give one standard deviation of the measured thickness,
+density, length and width, in the units of the value they qualify; absent means 0 (taken as
+exact). Each must be a finite number >= 0, e.g. ``plate.thickness_sd_mm = -0.1: must be a
+number >= 0 (a standard deviation)``. They are not fitted: :mod:`bayesplate.inputs` carries them
+into each constant's variance (the estimate's variance budget) and, on request, into the
+eigenvalue covariance of the Gaussian problem (``inputs="marginal"``). Example::
+
+    [plate]
+    thickness_mm = 4.89
+    thickness_sd_mm = 0.11     # spread of ten readings
+    density_kg_m3 = 435.7
+    density_sd_kg_m3 = 4.4
 """
 
 from __future__ import annotations
@@ -59,6 +73,17 @@ _PLATE_KEYS = (
     "density_kg_m3",
     "layup_deg",
     "ply_thickness_mm",
+    "length_sd_mm",
+    "width_sd_mm",
+    "thickness_sd_mm",
+    "density_sd_kg_m3",
+)
+#: Optional standard deviations of the measured plate inputs: (key, Plate field, to SI).
+_PLATE_SD_KEYS = (
+    ("length_sd_mm", "length_sd", 1e-3),
+    ("width_sd_mm", "width_sd", 1e-3),
+    ("thickness_sd_mm", "thickness_sd", 1e-3),
+    ("density_sd_kg_m3", "density_sd", 1.0),
 )
 _MEASURED_KEYS = ("frequency_Hz", "sigma_rel", "sigma_Hz", "mode", "points_mm", "shapes")
 _PRIOR_ENTRY_KEYS = ("mean", "sd")
@@ -206,8 +231,18 @@ def _parse_plate(raw) -> tuple[Plate, tuple[float, float]]:
         )
         check_plausible(plies_mm, "ply_thickness_mm", "plate.ply_thickness_mm")
         plies = tuple(t * _MM for t in plies_mm)
-    plate = Plate(length * _MM, width * _MM, thickness * _MM, density, tuple(layup), plies)
+    sds = {field: _sd(table[key], f"plate.{key}") * to_si
+           for key, field, to_si in _PLATE_SD_KEYS if key in table}  # fmt: skip
+    plate = Plate(length * _MM, width * _MM, thickness * _MM, density, tuple(layup), plies, **sds)
     return plate, (length, width)
+
+
+def _sd(raw, key: str) -> float:
+    """A standard deviation as written: a finite number >= 0."""
+    value = _number(raw, key)
+    if value < 0:
+        raise CaseError(key, raw, "must be a number >= 0 (a standard deviation)")
+    return value
 
 
 def _parse_measured(raw, extent_mm: tuple[float, float]) -> Measurement:

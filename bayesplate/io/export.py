@@ -23,6 +23,7 @@ from ..quantities import CASE_SCALE, ENGINEERING_KEYS, STIFFNESS_NAMES, to_case_
 __all__ = [
     "atomic_write",
     "atomic_write_text",
+    "budget_to_dict",
     "constants_json",
     "diagnosis_to_dict",
     "estimate_to_dict",
@@ -128,6 +129,35 @@ def write_json(obj, target):
 
 
 # ----------------------------------------------------------------------------- documents
+
+
+def budget_to_dict(budget):
+    """The JSON document of a variance budget (:class:`bayesplate.inputs.VarianceBudget`).
+
+    Returns
+    -------
+    dict
+        ``{"status", "closure", "sources", "sd": {key: {source: sd, ..., "total": sd}},
+        "share": {key: {source: fraction}}}`` with sds in case units (GPa, -).
+    """
+    sd = np.array([to_case_units(row) for row in budget.source_sd])
+    total = to_case_units(budget.sd)
+    return {
+        "status": budget.status,
+        "closure": float(budget.closure),
+        "sources": list(budget.sources),
+        "sd": {
+            key: {
+                **dict(zip(budget.sources, sd[:, i].tolist(), strict=True)),
+                "total": float(total[i]),
+            }
+            for i, key in enumerate(ENGINEERING_KEYS)
+        },  # fmt: skip
+        "share": {
+            key: dict(zip(budget.sources, budget.share[:, i].tolist(), strict=True))
+            for i, key in enumerate(ENGINEERING_KEYS)
+        },
+    }
 
 
 def estimate_to_dict(result, case, model):

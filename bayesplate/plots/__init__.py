@@ -8,13 +8,15 @@ registry, no GUI backend needed), and returns the figure; saving it is the calle
 
 By topic: :mod:`~bayesplate.plots.estimates` (sensitivities, frequency differences,
 residuals), :mod:`~bayesplate.plots.modes` (mode shapes, MAC matrix),
-:mod:`~bayesplate.plots.posterior` (corner plots, traces, autocorrelation) and
+:mod:`~bayesplate.plots.posterior` (corner plots, traces, autocorrelation),
+:mod:`~bayesplate.plots.budget` (each constant's variance by source) and
 :mod:`~bayesplate.plots.diagnosis` (location maps, residuals before and after a refit).
 """
 
 from __future__ import annotations
 
 from ._style import CONSTANT_LABELS
+from .budget import variance_budget_bars
 from .diagnosis import diagnosis_figures, location_map, residual_comparison
 from .estimates import estimate_residuals, frequency_comparison, sensitivity_bars
 from .modes import mac_matrix_plot, mode_shapes
@@ -41,4 +43,5 @@ __all__ = [
     "sampling_figures",
     "sensitivity_bars",
     "trace_plot",
+    "variance_budget_bars",
 ]

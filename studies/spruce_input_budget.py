@@ -1,0 +1,157 @@
+"""The spruce plate's uncertain inputs: each constant's variance by source (issue 17, stage 1).
+
+The bundled case `badiane_spruce_5R` takes its thickness, density and size as exact. Its sheet
+says otherwise: ten thickness readings 4.7 to 5.1 mm (sd 0.11 mm, 2.3 %), five lengths
+(sd 0.84 mm) and five widths (sd 0.55 mm); the density is the mass (269.2 g, read to 0.1 g)
+over a b h. B and MVE are run on the case as it is; their variance budget
+(:func:`bayesplate.inputs.estimate_budget`) then adds each input's linearised share.
+
+Two readings of the density's uncertainty:
+- *independent*: what the case keys express (``density_sd_kg_m3``, inputs independent), with
+  the density's sd propagated from those of h, a, b and the mass (2.3 %);
+- *from the mass*: rho = m / (a b h) moves with h, a and b, so the inputs are h, a, b and m:
+  the eigenvalues depend on h through ``J_h - (rho / h) J_rho`` (and likewise a, b) and on
+  the mass alone through ``J_rho`` with sd ``rho sd_m / m``. Bending eigenvalues go as
+  ``E h^2 / rho``, i.e. as ``E h^3 a b / m``: thickness weighs 3 sd_h / h, not 2.
+
+Writes ``spruce_input_budget.md`` to ``out_dir``. Run:
+``python studies/spruce_input_budget.py [--quick] [--out DIR]`` (quick: B only).
+"""
+
+# no `from __future__ import annotations`: loaded by tests with spec_from_file_location
+import argparse
+import dataclasses
+import datetime
+import os
+import pathlib
+import platform
+
+import numpy as np
+
+from bayesplate.estimators import estimate
+from bayesplate.inputs import estimate_budget, input_jacobian, variance_budget
+from bayesplate.io import atomic_write_text, bundled_case_path, load_case
+from bayesplate.model import PlateModel
+from bayesplate.posterior import GaussianProblem
+from bayesplate.quantities import ENGINEERING_KEYS, to_case_units
+
+REPORT = "spruce_input_budget.md"
+CASE = "badiane_spruce_5R"
+SD_H_MM, SD_A_MM, SD_B_MM = 0.11, 0.84, 0.55  # the sheet's readings (case file comments)
+MASS_G, SD_MASS_G = 269.2, 0.1
+SHOWN = (0, 1, 3)  # E1, E2, G12: what the bending frequencies determine
+
+
+def uncertain_case():
+    """The bundled case with the sheet's deviations (density independent, 2.3 %)."""
+    case = load_case(bundled_case_path(CASE))
+    p = case.plate
+    rel = np.hypot.reduce([SD_H_MM * 1e-3 / p.thickness, SD_A_MM * 1e-3 / p.length,
+                           SD_B_MM * 1e-3 / p.width, SD_MASS_G / MASS_G])  # fmt: skip
+    plate = dataclasses.replace(p, thickness_sd=SD_H_MM * 1e-3, length_sd=SD_A_MM * 1e-3,
+                                width_sd=SD_B_MM * 1e-3, density_sd=rel * p.density)  # fmt: skip
+    return dataclasses.replace(case, plate=plate)
+
+
+def from_mass(case, result, model, J):
+    """The budget with rho = m / (a b h): h, a, b carry rho with them; m alone is left."""
+    p = case.plate
+    J_rho = J[:, 1]
+    J_eff = np.column_stack([J[:, 0] - p.density / p.thickness * J_rho, J_rho,
+                             J[:, 2] - p.density / p.length * J_rho,
+                             J[:, 3] - p.density / p.width * J_rho])  # fmt: skip
+    sd = np.array([p.thickness_sd, p.density * SD_MASS_G / MASS_G, p.length_sd, p.width_sd])
+    conventions = result.settings["conventions"]
+    problem = GaussianProblem.from_case(case, model, result.pairing, conventions.observation,
+                                        conventions.prior, result.settings.get("prior_mean"),
+                                        result.settings.get("prior_sd"))  # fmt: skip
+    S = problem.predict(result.b, np.asarray(result.modes) - 1).S
+    return variance_budget(result.covariance_b, S, problem.V_Y, problem.V_b, J_eff, sd,
+                           result.b, result.method)  # fmt: skip
+
+
+def run(quick=False):
+    """B and MVE on the spruce case; their budgets in both readings of the density."""
+    case = uncertain_case()
+    model = PlateModel.from_case(case)
+    rows = []
+    for method in ("B",) if quick else ("B", "MVE"):
+        result = estimate(case, method, model=model)
+        J = input_jacobian(case, result.b, np.asarray(result.modes) - 1,
+                           mesh=(model.mesh.nx, model.mesh.ny))  # fmt: skip
+        independent = estimate_budget(case, result, model, jacobian=J)
+        rows.append((result, independent, from_mass(case, result, model, J.J)))
+    return case, rows
+
+
+def _table(result, budget):
+    head = ["constant", "estimate", "sd, frequencies + prior", "sd with inputs"]
+    head += [f"share {s}" for s in budget.sources]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    estimate_ = to_case_units(result.constants)
+    own = to_case_units(np.sqrt(np.diag(budget.estimator_covariance)))
+    total = to_case_units(budget.sd)
+    for j in range(6):
+        cells = [ENGINEERING_KEYS[j], f"{estimate_[j]:.4g}", f"{own[j]:.3g} "
+                 f"({100 * own[j] / abs(estimate_[j]):.1f} %)",
+                 f"{total[j]:.3g} ({100 * total[j] / abs(estimate_[j]):.1f} %)"]  # fmt: skip
+        cells += [f"{100 * s:.0f} %" for s in budget.share[:, j]]
+        lines.append("| " + " | ".join(cells) + " |")
+    return lines
+
+
+def _cpu():
+    """The processor's model name (``/proc/cpuinfo``), or the platform's machine type."""
+    try:
+        for line in pathlib.Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.machine()
+
+
+def report(case, rows, seconds):
+    """The Markdown report."""
+    load = os.getloadavg()[0]
+    out = [
+        "# The spruce plate's uncertain inputs: variance budget of B and MVE",
+        "",
+        f"Made by `python studies/spruce_input_budget.py` on {datetime.date.today()}, "
+        f"{_cpu()}, {os.cpu_count()} cores, load "
+        f"{load:.1f}, {seconds:.0f} s. Case `{CASE}` with the sheet's deviations: h "
+        f"{SD_H_MM} mm, a {SD_A_MM} mm, b {SD_B_MM} mm, mass {SD_MASS_G} g. Linearised at "
+        "each estimate; `share` is the fraction of the total variance; the sd without inputs "
+        "is the estimator's own (what `bayesplate estimate` reported before).",
+    ]
+    for result, independent, mass in rows:
+        out += ["", f"## {result.method} ({result.status}, {result.iterations} iterations)", ""]
+        rho_rel = 100 * case.plate.density_sd / case.plate.density
+        out += [
+            f"Inputs independent (density sd {rho_rel:.1f} %, budget status "
+            f"{independent.status}, closure {independent.closure:.1e}):",
+            "",
+        ]
+        out += _table(result, independent)
+        out += ["", "Density from the mass, rho = m / (a b h) (the `density` row is the mass's "
+                f"share; status {mass.status}):", ""]  # fmt: skip
+        out += _table(result, mass)
+    return "\n".join(out) + "\n"
+
+
+def main(out_dir, quick=False):
+    """Run and write the report; return its path."""
+    import time
+
+    start = time.perf_counter()
+    case, rows = run(quick)
+    path = pathlib.Path(out_dir) / REPORT
+    atomic_write_text(path, report(case, rows, time.perf_counter() - start))
+    return path
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="B only")
+    parser.add_argument("--out", default=pathlib.Path(__file__).resolve().parents[1] / "reports")
+    print(main(parser.parse_args().out, parser.parse_args().quick))
