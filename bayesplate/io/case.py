@@ -96,6 +96,12 @@ class Plate(_EqualByValue):
             _set(self, name, _positive(getattr(self, name), f"plate.{name}"))
             sd = f"{name}_sd"
             _set(self, sd, _nonnegative(getattr(self, sd), f"plate.{sd}"))
+            if getattr(self, sd) >= 0.5 * getattr(self, name):  # the input is not known at all
+                raise CaseError(
+                    f"plate.{sd}",
+                    getattr(self, sd),
+                    f"must be below half of plate.{name} (a standard deviation)",
+                )
         for name, unit in (("length", "_mm"), ("width", "_mm"), ("thickness", "_mm"),
                            ("density", "_kg_m3")):  # fmt: skip
             check_plausible(getattr(self, name), name + unit, f"plate.{name}{unit}", si=True)
