@@ -213,7 +213,13 @@ class _client:
         if self.scheduler is not None and not isinstance(self.scheduler, str):
             return self.scheduler  # a client given by the caller: theirs to close
         if self.scheduler is not None:
-            client = Client(self.scheduler)
+            try:
+                client = Client(self.scheduler)
+            except (OSError, ValueError) as err:  # bad input: one line, not a traceback
+                rule = f"no Dask scheduler answers there ({type(err).__name__}: {err})"
+                raise CaseError(
+                    "--scheduler", self.scheduler, rule=" ".join(rule.split())
+                ) from None
         else:
             n = self.workers or _cores()
             cluster = LocalCluster(
