@@ -28,6 +28,8 @@ HEAVY = (
     "netCDF4",
     "pyuff",
     "sdypy",
+    "dask",
+    "distributed",
 )
 
 #: Each package's ``__all__`` before the exports became lazy (commit 9f5ebd1): every name
@@ -142,7 +144,7 @@ def _heavy(modules):
 def test_subcommands_are_the_known_ones():
     # a new subcommand is covered by the help test below through _subcommands()
     assert _subcommands() == [
-        "cases", "modes", "import", "diagnose", "estimate", "report", "sample"
+        "cases", "modes", "import", "diagnose", "estimate", "report", "sample", "batch"
     ]  # fmt: skip
 
 

@@ -15,12 +15,12 @@ import argparse
 import logging
 import sys
 
-from . import cases, diagnose, estimate, import_case, modes, report, sample
+from . import batch, cases, diagnose, estimate, import_case, modes, report, sample
 
 __all__ = ["main", "build_parser"]
 
 #: The subcommands' modules, in the order of ``bayesplate --help``.
-_COMMANDS = (cases, modes, import_case, diagnose, estimate, report, sample)
+_COMMANDS = (cases, modes, import_case, diagnose, estimate, report, sample, batch)
 
 
 class _Parser(argparse.ArgumentParser):
