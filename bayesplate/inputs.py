@@ -45,6 +45,7 @@ from .pairing import track
 from .quantities import engineering_covariance
 
 __all__ = [
+    "converged_budget",
     "INPUT_NAMES",
     "INPUT_UNITS",
     "InputJacobian",
@@ -349,3 +350,13 @@ def estimate_budget(case, result, model=None, jacobian=None) -> VarianceBudget:
         result.b,
         result.method,
     )
+
+
+def converged_budget(case, result, model=None):
+    """:func:`estimate_budget` of a converged estimate; None when there is no covariance.
+
+    What ``bayesplate estimate`` and ``bayesplate batch`` both report (one rule for both).
+    """
+    if not result.converged or not np.all(np.isfinite(result.covariance_b)):
+        return None
+    return estimate_budget(case, result, model)

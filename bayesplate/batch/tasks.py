@@ -113,7 +113,9 @@ def _estimate(case, options):
         pairing=options["pairing"],
         forward=options["forward"],
     )
-    doc = estimate_to_dict(r, case, model)
+    from ..inputs import converged_budget
+
+    doc = estimate_to_dict(r, case, model, converged_budget(case, r, model))
     chi2, dof = _estimate_chi2(case, r)
     row = {
         "status": r.status,

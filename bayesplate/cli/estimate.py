@@ -77,17 +77,6 @@ def budget_text(budget):
     return "\n".join(lines)
 
 
-def _budget(case, model, result):
-    """The variance budget of a converged estimate, or None (no covariance to split)."""
-    import numpy as np
-
-    from ..inputs import estimate_budget
-
-    if not result.converged or not np.all(np.isfinite(result.covariance_b)):
-        return None
-    return estimate_budget(case, result, model)
-
-
 def _check_lines(result):
     """The full model's check of a fast-model answer, if there is one."""
     check = result.check
@@ -102,7 +91,7 @@ def _check_lines(result):
 def run(args):
     """Estimate the constants; print the table, write JSON on request."""
     from ..estimators import estimate
-    from ..io import budget_to_dict, estimate_to_dict, save_figure, write_json
+    from ..io import estimate_to_dict, save_figure, write_json
     from ..model import PlateModel
 
     case = resolve_case(args.case)
@@ -119,12 +108,11 @@ def run(args):
         pairing=args.pairing,
         forward=args.forward,
     )
-    budget = _budget(case, model, result)
+    from ..inputs import converged_budget
+
+    budget = converged_budget(case, result, model)
     if args.json:
-        document = estimate_to_dict(result, case, model)
-        if budget is not None:
-            document["variance_budget"] = budget_to_dict(budget)
-        write_json(document, args.json)
+        write_json(estimate_to_dict(result, case, model, budget), args.json)
     if args.json != "-":
         print(estimate_text(case, model, result))
         if budget is not None:

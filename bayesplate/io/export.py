@@ -160,7 +160,7 @@ def budget_to_dict(budget):
     }
 
 
-def estimate_to_dict(result, case, model):
+def estimate_to_dict(result, case, model, budget=None):
     """The JSON document of an estimate (``bayesplate estimate --json``).
 
     Parameters
@@ -171,6 +171,9 @@ def estimate_to_dict(result, case, model):
         The case it was computed for (its name).
     model : bayesplate.forward.ForwardModel
         The model it was computed with (its mesh).
+    budget : bayesplate.inputs.VarianceBudget, optional
+        Its variance budget (:func:`bayesplate.inputs.converged_budget`), under
+        ``"variance_budget"``.
 
     Returns
     -------
@@ -215,6 +218,8 @@ def estimate_to_dict(result, case, model):
             }
             for s in result.stages
         ]
+    if budget is not None:
+        out["variance_budget"] = budget_to_dict(budget)
     return out
 
 
