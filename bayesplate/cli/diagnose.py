@@ -49,8 +49,10 @@ def run(args):
 
 def diagnosis_text(d):
     """Human-readable summary of a diagnosis."""
+    rival = getattr(d, "rival", None)
     lines = [
-        f"verdict: {d.verdict}" + (f" ({d.chosen.name})" if d.chosen else ""),
+        f"verdict: {d.verdict}"
+        + (f" ({d.chosen.name}" + (f" or {rival.name})" if rival else ")") if d.chosen else ""),
         f"nominal fit: chi2 = {d.nominal.chi2:.1f} on {d.dof:.1f} dof, p = {d.p_value:.3g}",
     ]
     if d.located_modes:
@@ -65,6 +67,10 @@ def diagnosis_text(d):
             for k, v in c.parameters.items()
         )
         lines.append(f"  {c.name:22s} {c.log_evidence_gain:+8.1f}   {params}")
+    probabilities = getattr(d, "probabilities", {})
+    if probabilities:
+        lines.append("posterior probabilities: " + ", ".join(
+            f"{k} {v:.3g}" for k, v in probabilities.items() if v >= 1e-3))  # fmt: skip
     if d.chosen is not None:
         lines.append(
             f"refit: chi2 = {d.chosen.fit.chi2:.1f} on {d.refit_dof:.1f} dof, "
@@ -84,7 +90,8 @@ def register(sub):
         description="Fit the nominal model, test it (chi-square), locate the misfit, rank "
         "candidate physics (point_mass, thickness_taper, ply_misalignment, "
         "elastic_foundation, local_stiffness_loss) by Laplace evidence, refit, and give a "
-        "verdict: consistent, explained or unexplained.",
+        "verdict: consistent, explained, ambiguous (two candidates fit about equally: both named, "
+        "with the measurement that would tell them apart) or unexplained.",
     )
     add_case_argument(p)
     add_mesh_option(p)

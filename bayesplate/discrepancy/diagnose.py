@@ -12,8 +12,14 @@
    with the constants, on a reduced model of the modified plate (:mod:`.pencil`) refined on
    the working mesh, and rank the candidates by their Laplace evidence gain over the nominal
    model (what the constants cannot absorb; :mod:`.rank`).
-4. Model: the chosen candidate's joint fit is the refit, with its Laplace posterior.
-5. Verdict: ``consistent``, ``explained`` or ``unexplained`` (:mod:`.verdict`).
+4. Model: the chosen candidate's joint fit is the refit, with its Laplace posterior. When
+   the best single candidate's refit is still rejected, two effects at once: the best one
+   paired with every other candidate (:mod:`.pair`), ranked on the same evidence scale.
+5. Verdict: ``consistent``, ``explained``, ``ambiguous`` (the refit is consistent but a
+   different candidate's posterior odds are within ``ambiguity_margin``: both are named,
+   and the measurement that would tell them apart, :mod:`.separate`) or ``unexplained``
+   (:mod:`.verdict`), with the posterior probability of every model
+   (:mod:`.probabilities`).
 
 Before any of it, the mesh's own error on every frequency is estimated by Richardson
 extrapolation (the element converges as h^2) and reported beside the measurement deviation;
@@ -41,9 +47,12 @@ from .base import mirror_positions
 from .fit import JointFit, JointProblem
 from .locate import absorbable_projector, mode_kinds
 from .nominal import N_STARTS, check_fast, fit_nominal, nominal_reduced
+from .pair import pairs_with
+from .probabilities import model_probabilities
 from .rank import CandidateResult, improved_nominal, rank
 from .scan import RitzBasis
-from .verdict import basins_note, predictive_p_values, unidentified, verdict
+from .separate import Separation, separate
+from .verdict import basins_note, predictive_p_values, runner_up, unidentified, verdict
 
 __all__ = [
     "CandidateResult",
@@ -68,6 +77,8 @@ DEFAULTS = {
     "refine_margin": 1.0,  # nats: candidates below this on the coarse mesh are not refined
     "basin_margin": 2.0,  # chi2 + chi2_prior: another nominal optimum this close fits as well
     "workers": 1,  # processes for independent fits (fork); the CLI uses 2
+    "ambiguity_margin": 2.0,  # nats (odds about 7:1): a different candidate this close ties
+    "pairs": True,  # fit two effects at once when the best single one is rejected
 }
 """Default values of :func:`diagnose`'s keyword-only options (their single source)."""
 
@@ -81,7 +92,7 @@ class Diagnosis:
 
     Attributes
     ----------
-    verdict : {"consistent", "explained", "unexplained"}
+    verdict : {"consistent", "explained", "ambiguous", "unexplained"}
     nominal : JointFit
     dof : float
         Degrees of freedom of the nominal chi-square.
@@ -98,8 +109,10 @@ class Diagnosis:
         Best location of a local change, mm; ``region_mirrors_mm`` fit equally.
     candidates : list of CandidateResult
         Best first; every variant of a candidate is one (a taper along x and one along y,
-        told apart by ``parameters["direction"]``).
+        told apart by ``parameters["direction"]``), and so is every pair of effects fitted
+        (named ``first+second``, :mod:`.pair`).
     chosen : CandidateResult or None
+        The best candidate when ``explained`` or ``ambiguous``.
     refit_dof, refit_p_value : float
     unidentified : list of str
         Constants the data do not inform (nominal fit, and refit when there is one).
@@ -107,6 +120,13 @@ class Diagnosis:
     notes : list of str
     scans : dict of Scan
         The Ritz scan of each located candidate, keyed as ``maps``.
+    probabilities : dict
+        Posterior probability of ``"nominal"`` (nothing left out) and of each candidate by
+        name, variants summed (:func:`.probabilities.model_probabilities`).
+    rival : CandidateResult or None
+        When ``ambiguous``: the runner-up, a different candidate.
+    separation : Separation or None
+        When ``ambiguous``: the measurement that would tell ``chosen`` from ``rival``.
     """
 
     verdict: str
@@ -129,6 +149,9 @@ class Diagnosis:
     measured_Hz: np.ndarray
     notes: list
     scans: dict = field(default_factory=dict, repr=False)
+    probabilities: dict = field(default_factory=dict)
+    rival: CandidateResult | None = None
+    separation: Separation | None = None
 
 
 def coarse_model(model):
@@ -172,6 +195,9 @@ def diagnose(
     refine_margin=DEFAULTS["refine_margin"],
     basin_margin=DEFAULTS["basin_margin"],
     workers=DEFAULTS["workers"],
+    ambiguity_margin=DEFAULTS["ambiguity_margin"],
+    pairs=DEFAULTS["pairs"],
+    prior_odds=None,
     fast=None,
 ):
     """Diagnose a case: nominal fit, location, candidate ranking, refit, verdict.
@@ -211,6 +237,14 @@ def diagnose(
         Another nominal optimum whose ``chi2 + chi2_prior`` is this close fits as well.
     workers : int
         Processes for the independent fits (fork); the results do not depend on it.
+    ambiguity_margin : float
+        Posterior log-odds of the best candidate against a different one under which the
+        verdict is ``ambiguous``, nats (2: about 7 to 1).
+    pairs : bool
+        Fit two effects at once when the best single candidate's refit is rejected.
+    prior_odds : dict, optional
+        ``{candidate name: prior odds against the nominal model}`` (default 1 for every
+        candidate; a case-file key for them is not defined yet).
     fast : bayesplate.reduced.CertifiedModel, optional
         A reduced model of ``model`` for the nominal fit's global stage (its reduced part is
         used uncertified, also outside its box); default: one built on the half mesh over
@@ -301,8 +335,33 @@ def diagnose(
     if warranted:
         refit_dof = max(m - best.fit.effective_parameters, 1.0)
         refit_p = float(chi2_dist.sf(best.fit.chi2, refit_dof))
+    if warranted and refit_p < alpha and pairs:  # two effects at once
+        two = pairs_with(best, physics, ranked, model, scans)
+        two = rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, two, say)
+        top = next((c for c in two if c.fit.refined), None)
+        if top is not None and top.log_evidence_gain > best.log_evidence_gain + evidence_threshold:
+            best = top
+            refit_dof = max(m - best.fit.effective_parameters, 1.0)
+            refit_p = float(chi2_dist.sf(best.fit.chi2, refit_dof))
+        ranked = sorted(ranked + two, key=lambda r: -r.log_evidence_gain)
+    if warranted:
         loose = unidentified(best.fit, V_b, unidentified_ratio)
-    outcome, chosen = verdict(p_value, warranted, refit_p, alpha, best)
+    probabilities = model_probabilities([(c.name, c.log_evidence_gain) for c in ranked],
+                                        prior_odds)  # fmt: skip
+    rival, gap = runner_up(best, ranked, probabilities) if warranted else (None, np.inf)
+    outcome, chosen = verdict(p_value, warranted, refit_p, alpha, best, gap, ambiguity_margin)
+    separation = None
+    if outcome == "ambiguous":
+        separation = separate(
+            model, best, rival, modes, float(np.median(sigma_Hz / measured.frequency_Hz))
+        )
+        notes.append(
+            f"{best.name} and {rival.name} fit about equally well (posterior probabilities "
+            f"{probabilities[best.name]:.2f} and {probabilities[rival.name]:.2f}): "
+            + separation.text()
+        )
+    else:
+        rival = None
     if outcome == "consistent":
         region, mirrors = None, []
     if outcome == "unexplained":
@@ -316,10 +375,12 @@ def diagnose(
     if outcome != "consistent" and region is not None and mirrors:
         notes.append("the plate's symmetry makes the mirror images of the located region fit "
                      "equally well from frequencies alone")  # fmt: skip
-    say(f"verdict: {outcome}" + (f" ({chosen.name})" if chosen else ""))
+    say(f"verdict: {outcome}" + (f" ({chosen.name})" if chosen else "")
+        + (f" or {rival.name}" if rival else ""))  # fmt: skip
     return Diagnosis(
         outcome, nominal, dof, p_value, mode_p, located, kinds, maps, region, mirrors, ranked,
         chosen, refit_dof, refit_p, loose, sigma_Hz, err, measured.frequency_Hz, notes, scans,
+        probabilities, rival, separation,
     )  # fmt: skip
 
 

@@ -1,7 +1,7 @@
 """The checks of a fit and the verdict: predictive p-values, unidentified constants, basins.
 
 Step 1 and step 5 of :func:`.diagnose.diagnose`: what a fit's Laplace posterior says about
-each measured mode and each constant, which other optima fit about as well, and the three
+each measured mode and each constant, which other optima fit about as well, and the
 verdicts. Pure computation on :class:`.fit.JointFit` results.
 """
 
@@ -13,11 +13,18 @@ from scipy.stats import norm
 from .. import laminate
 from ..quantities import ENGINEERING_NAMES, engineering_covariance
 
-__all__ = ["basins_note", "predictive_p_values", "rival_optima", "unidentified", "verdict"]
+__all__ = [
+    "basins_note",
+    "predictive_p_values",
+    "rival_optima",
+    "runner_up",
+    "unidentified",
+    "verdict",
+]
 
 
-def verdict(p_value, warranted, refit_p, alpha, best):
-    """The three verdicts of the issue.
+def verdict(p_value, warranted, refit_p, alpha, best, gap=np.inf, margin=2.0):
+    """The verdicts of the issue.
 
     Parameters
     ----------
@@ -30,17 +37,49 @@ def verdict(p_value, warranted, refit_p, alpha, best):
     alpha : float
         Significance of the tests.
     best : CandidateResult or None
+    gap : float
+        Posterior log-odds of ``best`` against the runner-up, a *different* candidate
+        (another name, not another variant), nats; ``inf`` when there is none.
+    margin : float
+        A ``gap`` under this many nats makes an explained mismatch ``ambiguous`` (2 nats:
+        odds under about 7 to 1).
 
     Returns
     -------
-    verdict : {"consistent", "explained", "unexplained"}
+    verdict : {"consistent", "explained", "ambiguous", "unexplained"}
     chosen : CandidateResult or None
+        ``best`` when explained or ambiguous (its fit is the refit).
     """
     if warranted and refit_p >= alpha:
-        return "explained", best
+        return ("ambiguous" if gap < margin else "explained"), best
     if p_value >= alpha and not warranted:
         return "consistent", None
     return "unexplained", None
+
+
+def runner_up(best, ranked, probabilities):
+    """The best refined candidate of another name than ``best``, and the log-odds between.
+
+    Parameters
+    ----------
+    best : CandidateResult
+    ranked : list of CandidateResult
+        Best first.
+    probabilities : dict
+        ``{name: posterior probability}`` (:func:`.probabilities.model_probabilities`).
+
+    Returns
+    -------
+    rival : CandidateResult or None
+        Another variant of ``best``'s candidate (a taper along the other side) is no rival.
+    gap : float
+        ``ln P(best's name) - ln P(rival's name)``, nats; ``inf`` without a rival.
+    """
+    rival = next((c for c in ranked if c.fit.refined and c.name != best.name), None)
+    if rival is None:
+        return None, np.inf
+    with np.errstate(divide="ignore"):
+        return rival, float(np.log(probabilities[best.name]) - np.log(probabilities[rival.name]))
 
 
 def predictive_p_values(fit_, problem):

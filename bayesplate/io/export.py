@@ -292,6 +292,27 @@ def _fit_summary(fit_, dof, p_value):
     }
 
 
+def _rival(d):
+    """The runner-up of an ``ambiguous`` diagnosis and what would separate it, or None."""
+    rival, separation = getattr(d, "rival", None), getattr(d, "separation", None)
+    if rival is None:
+        return None
+    out = {"physics": rival.name, "log_evidence_gain": rival.log_evidence_gain,
+           "chi2": rival.fit.chi2, "parameters": rival.parameters,
+           "parameters_sd": rival.parameters_sd, "separation": None}  # fmt: skip
+    if separation is not None:
+        out["separation"] = {
+            "mode": separation.mode,
+            "frequency_Hz": list(separation.frequency_Hz),
+            "difference_sd": separation.difference_sd,
+            "shape_mode": separation.shape_mode,
+            "point_mm": list(separation.point_mm),
+            "shape_difference": separation.shape_difference,
+            "text": separation.text(),
+        }
+    return out
+
+
 def diagnosis_to_dict(d):
     """The diagnosis as plain data, in the units of the case files (see the issue's keys)."""
     nominal = _fit_summary(d.nominal, d.dof, d.p_value)
@@ -326,6 +347,8 @@ def diagnosis_to_dict(d):
         ],  # fmt: skip
         "chosen": None if d.chosen is None else d.chosen.name,
         "refit": refit,
+        "probabilities": dict(getattr(d, "probabilities", {})),
+        "rival": _rival(d),
         "unidentified": d.unidentified,
         "notes": d.notes,
     }

@@ -276,7 +276,10 @@ def _diagnose_section(data, figures):
     d = data.results["diagnose"]["diagnosis"]
     nominal = d["nominal"]
     lines += [
-        f"**Verdict: {d['verdict']}**" + (f" ({d['chosen']})" if d["chosen"] else ""),
+        f"**Verdict: {d['verdict']}**"
+        + (f" ({d['chosen']}" if d["chosen"] else "")
+        + (f" or {d['rival']['physics']}" if d.get("rival") else "")
+        + (")" if d["chosen"] else ""),
         "",
         f"- Nominal fit: chi-square {nominal['chi2']:.1f} on {nominal['dof']:.1f} degrees of "
         f"freedom, p = {nominal['p_value']:.3g}",
@@ -297,6 +300,9 @@ def _diagnose_section(data, figures):
             f"- Refit with {d['chosen']}: chi-square {refit['chi2']:.1f} on "
             f"{refit['dof']:.1f} degrees of freedom, p = {refit['p_value']:.3g}"
         )
+    if d.get("probabilities"):
+        shown = [f"{k} {v:.3g}" for k, v in d["probabilities"].items() if v >= 1e-3]
+        lines.append("- Posterior probabilities (equal prior odds): " + ", ".join(shown))
     if d["unidentified"]:
         lines.append(
             "- Not identified by the data (the prior dominates): " + ", ".join(d["unidentified"])

@@ -1,0 +1,258 @@
+"""Model probabilities, the ``ambiguous`` verdict and two effects at once (issue 13).
+
+References: the closed form of Bayes' rule for two models (a logistic function of the
+log-evidence difference); exact equivalences of composed plates (an effect at zero size is
+no effect, two masses at one point are one mass of their sum, a mass and a foundation
+touch different matrices); the plate's mirror symmetry (mirror images of a fitted effect
+have equal frequencies). Recordings for the diagnoses are made on a mesh twice as fine
+with 0.2 % noise, as in tests/test_diagnose.py.
+"""
+
+import numpy as np
+import pytest
+from scipy.special import expit
+
+from bayesplate import PlateModel, bundled_case_path, load_case, stiffness_from_engineering
+from bayesplate.discrepancy import ElasticFoundation, PointMass, ThicknessTaper
+from bayesplate.discrepancy.diagnose import diagnose
+from bayesplate.discrepancy.pair import Pair, pairs_with
+from bayesplate.discrepancy.pencil import candidate_pencil
+from bayesplate.discrepancy.probabilities import NOMINAL, model_probabilities
+from bayesplate.discrepancy.separate import separate
+from bayesplate.discrepancy.verdict import runner_up, verdict
+from bayesplate.io import diagnosis_to_dict
+
+MESH = (12, 6)
+NOISE = 0.002
+N_MODES = 12
+
+
+def _plate1_case():
+    case = load_case(bundled_case_path("plate1"))
+    mean = case.reference * np.array([1.1, 0.9, 1.1, 1.1, 0.9, 1.1])
+    return case.with_prior(mean, case.reference * np.array([0.15, 0.15, 0.2, 0.15, 0.3, 0.3]))
+
+
+def _recordings(case, physics=None, theta=None, seed=0):
+    fine = PlateModel.from_case(case, mesh=(2 * MESH[0], 2 * MESH[1]))
+    plate = fine if physics is None else physics.apply(fine, np.asarray(theta, dtype=float))
+    f = plate.solve(stiffness_from_engineering(case.reference), 14).frequency_Hz
+    f = f * (1 + NOISE * np.random.default_rng(seed).standard_normal(f.size))
+    return case.with_measured(frequency_Hz=f, sigma_Hz=NOISE * f)
+
+
+@pytest.fixture(scope="module")
+def model():
+    return PlateModel.from_case(_plate1_case(), mesh=MESH)
+
+
+@pytest.fixture(scope="module")
+def b():
+    return stiffness_from_engineering(_plate1_case().reference)
+
+
+# --- probabilities ---------------------------------------------------------------------
+
+
+def test_probabilities_sum_to_one_and_ignore_a_common_constant(rng):
+    names = ["point_mass", "thickness_taper", "thickness_taper", "ply_misalignment"]
+    log_z = rng.normal(0.0, 5.0, len(names))
+    p = model_probabilities(list(zip(names, log_z, strict=True)), nominal=1.5)
+    assert set(p) == {NOMINAL, "point_mass", "thickness_taper", "ply_misalignment"}
+    assert sum(p.values()) == pytest.approx(1.0, abs=1e-14)
+    # log-evidences of thousands of nats (exp would overflow): only differences count
+    shift = 5e3
+    q = model_probabilities(list(zip(names, log_z + shift, strict=True)), nominal=1.5 + shift)
+    for k in p:  # rounding of log_z + 5e3 is ~1e-12 nats: probabilities agree to 1e-10
+        assert q[k] == pytest.approx(p[k], rel=1e-10, abs=1e-300)
+    huge = model_probabilities([("point_mass", 800.0)])  # exp(800) overflows a float
+    assert huge["point_mass"] == 1.0 and 0.0 <= huge[NOMINAL] < 1e-300
+
+
+def test_two_models_follow_bayes_rule_in_closed_form():
+    for gain in (-3.0, 0.0, 2.0, 7.5):
+        p = model_probabilities([("point_mass", gain)])
+        # P(candidate) = e^g / (1 + e^g): the logistic function of the evidence gain
+        assert p["point_mass"] == pytest.approx(expit(gain), rel=1e-13)
+        assert p[NOMINAL] == pytest.approx(expit(-gain), rel=1e-13)
+        odds = 0.25
+        q = model_probabilities([("point_mass", gain)], prior_odds={"point_mass": odds})
+        assert q["point_mass"] == pytest.approx(expit(gain + np.log(odds)), rel=1e-13)
+
+
+def test_variants_share_their_candidate_prior_and_are_summed():
+    # a taper along x and along y is one candidate whose direction has a uniform prior:
+    # P(taper) = (e^g1 + e^g2) / 2 / (1 + (e^g1 + e^g2) / 2 + e^g3)
+    g1, g2, g3 = 2.0, -1.0, 1.0
+    p = model_probabilities([("thickness_taper", g1), ("thickness_taper", g2), ("pm", g3)])
+    taper = 0.5 * (np.exp(g1) + np.exp(g2))
+    total = 1.0 + taper + np.exp(g3)
+    assert p["thickness_taper"] == pytest.approx(taper / total, rel=1e-13)
+    assert p["pm"] == pytest.approx(np.exp(g3) / total, rel=1e-13)
+    assert list(p) == [NOMINAL, "thickness_taper", "pm"]  # candidates most probable first
+    # a failed fit (-inf, NaN) has probability zero and changes nothing else
+    r = model_probabilities([("thickness_taper", g1), ("thickness_taper", g2), ("pm", g3),
+                             ("foundation", -np.inf), ("loss", np.nan)])  # fmt: skip
+    assert r["foundation"] == r["loss"] == 0.0 and r["pm"] == pytest.approx(p["pm"], rel=1e-14)
+    with pytest.raises(ValueError, match="prior_odds"):
+        model_probabilities([("pm", 1.0)], prior_odds={"pm": -1.0})
+
+
+# --- verdict ---------------------------------------------------------------------------
+
+
+class _Result:
+    """What the verdict reads of a CandidateResult."""
+
+    def __init__(self, name, gain, refined=True):
+        self.name, self.log_evidence_gain = name, gain
+        self.fit = type("Fit", (), {"refined": refined})()
+
+
+def test_a_runner_up_within_two_nats_makes_an_explained_mismatch_ambiguous():
+    ranked = [_Result("thickness_taper", 3.2), _Result("thickness_taper", 3.1),
+              _Result("local_stiffness_loss", 2.6), _Result("point_mass", 0.5)]  # fmt: skip
+    p = model_probabilities([(c.name, c.log_evidence_gain) for c in ranked])
+    rival, gap = runner_up(ranked[0], ranked, p)
+    assert rival is ranked[2]  # the other taper direction is a variant, not a rival
+    # odds of the taper (its two directions, each half its prior) against the loss
+    assert gap == pytest.approx(np.log(0.5 * (np.exp(3.2) + np.exp(3.1)) / np.exp(2.6)))
+    assert verdict(1e-6, True, 0.5, 0.01, ranked[0], gap) == ("ambiguous", ranked[0])
+    assert verdict(1e-6, True, 0.5, 0.01, ranked[0], 2.5) == ("explained", ranked[0])
+    assert verdict(1e-6, True, 1e-4, 0.01, ranked[0], gap) == ("unexplained", None)
+    alone = [ranked[0], _Result("point_mass", 3.0, refined=False)]  # not refined: no rival
+    assert runner_up(ranked[0], alone, p) == (None, np.inf)
+
+
+class _Twin(PointMass):
+    """The point mass under another name: a constructed exact tie."""
+
+    name = "point_mass_twin"
+
+
+def test_a_constructed_tie_is_ambiguous_and_names_both(model):
+    truth = np.array([15.0, 50.0, 30.0])  # as tests/test_diagnose.py: 15 g at (50, 30) mm
+    case = _recordings(_plate1_case(), PointMass(), truth, seed=2)
+    d = diagnose(case, model=model, rng=0, n_starts=1, physics=[PointMass(), _Twin()])
+    assert d.verdict == "ambiguous"
+    assert {d.chosen.name, d.rival.name} == {"point_mass", "point_mass_twin"}
+    # the same physics: equal evidence, equal probabilities, nothing would separate them
+    assert d.chosen.log_evidence_gain == pytest.approx(d.rival.log_evidence_gain, abs=1e-6)
+    assert d.probabilities["point_mass"] == pytest.approx(d.probabilities["point_mass_twin"])
+    assert d.probabilities[NOMINAL] < 1e-3
+    assert d.separation.difference_sd < 1e-3 and d.separation.shape_difference < 1e-3
+    out = diagnosis_to_dict(d)
+    assert out["verdict"] == "ambiguous"
+    assert out["rival"]["physics"] in {"point_mass", "point_mass_twin"}
+    assert any("point_mass_twin" in n for n in d.notes)
+    # a clear winner is still explained: the point mass against a foundation
+    d = diagnose(case, model=model, rng=0, n_starts=1, physics=[PointMass(), ElasticFoundation()])
+    assert d.verdict == "explained" and d.chosen.name == "point_mass" and d.rival is None
+    assert d.probabilities["point_mass"] > 0.99
+
+
+def test_separation_of_mirror_images_is_in_the_shapes_not_the_frequencies(model, b):
+    # a mass at (50, 30) mm and at its mirror image (150, 30) mm on the 0/90 plate: the
+    # frequencies agree exactly (symmetry), the shapes do not: no mode separates them
+    n = N_MODES
+    fits = []
+    for x in (50.0, 150.0):
+        theta = np.array([15.0, x, 30.0])
+        fit = type("Fit", (), {"physics": PointMass(), "b": b, "theta": theta})()
+        fits.append(type("C", (), {"name": f"mass at {x:.0f} mm", "fit": fit})())
+    s = separate(model, fits[0], fits[1], np.arange(n - 6), 0.002)
+    assert s.mode is not None and s.difference_sd < 1e-4  # round-off of a symmetric mesh
+    # a 15 g mass (11 % of the plate's mass) makes its side of the plate move differently:
+    # shapes differ by far more than the 1 % a shape measurement resolves
+    assert s.shape_difference > 0.05
+    assert "measure the shape of mode" in s.text()
+    same = separate(model, fits[0], fits[0], np.arange(n - 6), 0.002)
+    assert same.difference_sd == 0.0 and same.shape_difference == 0.0
+
+
+# --- two effects at once ---------------------------------------------------------------
+
+
+def _eigenvalues(plate, b):
+    return plate.solve(b, N_MODES).eigenvalues
+
+
+def test_a_pair_with_the_second_effect_at_zero_size_is_the_first_alone(model, b):
+    mass = np.array([12.0, 60.0, 25.0])
+    pair = Pair(PointMass(), ThicknessTaper("x"), b)
+    got = _eigenvalues(pair.apply(model, np.concatenate([mass, [0.0]])), b)
+    want = _eigenvalues(PointMass().apply(model, mass), b)
+    np.testing.assert_allclose(got, want, rtol=1e-10)  # same matrices up to round-off
+    reverse = Pair(ThicknessTaper("x"), PointMass(), b)  # composition is symmetric
+    np.testing.assert_allclose(
+        _eigenvalues(reverse.apply(model, np.concatenate([[0.1], mass])), b),
+        _eigenvalues(pair.apply(model, np.concatenate([mass, [0.1]])), b),
+        rtol=1e-10,
+    )
+
+
+def test_two_point_masses_at_one_point_are_one_mass_of_their_sum(model, b):
+    pair = Pair(PointMass(), PointMass(), b)
+    got = _eigenvalues(pair.apply(model, [5.0, 70.0, 40.0, 9.0, 70.0, 40.0]), b)
+    want = _eigenvalues(PointMass().apply(model, [14.0, 70.0, 40.0]), b)
+    np.testing.assert_allclose(got, want, rtol=1e-10)
+    names = [p.name for p in pair.parameters(model, b)]
+    assert names[:3] == ["point_mass.mass_g", "point_mass.x_mm", "point_mass.y_mm"]
+
+
+def test_a_mass_and_a_foundation_compose_as_applied_in_turn(model, b):
+    (k,) = [p.sd for p in ElasticFoundation().parameters(model, b)]
+    mass = np.array([10.0, 40.0, 70.0])
+    pair = Pair(PointMass(), ElasticFoundation(), b)
+    got = _eigenvalues(pair.apply(model, np.concatenate([mass, [2 * k]])), b)
+    in_turn = ElasticFoundation().apply(PointMass().apply(model, mass), [2 * k])
+    np.testing.assert_allclose(got, _eigenvalues(in_turn, b), rtol=1e-10)
+
+
+def test_a_pairs_ritz_form_reproduces_its_plate_at_a_snapshot(model, b):
+    pair = Pair(PointMass(), ThicknessTaper("y"), b)
+    theta = np.array([10.0, 50.0, 30.0, 0.12])
+    pencil = candidate_pencil(model, pair, b, [theta], N_MODES)
+    # the exact modes at theta are in the basis: Rayleigh-Ritz returns their eigenvalues
+    want = _eigenvalues(pair.apply(model, theta), b)
+    np.testing.assert_allclose(pencil.eigenvalues(b, theta, N_MODES), want, rtol=1e-8)
+    # its mirror images: a symmetry moves the mass and reverses the taper together. Under
+    # y -> b - y: (50, 70) mm with -0.12; under x -> a - x: (150, 30) mm with +0.12; under
+    # the half-turn: (150, 70) mm with -0.12 (a y-taper is unchanged by x -> a - x)
+    images = sorted(tuple(np.round(t, 9)) for t in pair.mirror_images(model, theta))
+    assert images == [(10.0, 50.0, 70.0, -0.12), (10.0, 150.0, 30.0, 0.12),
+                      (10.0, 150.0, 70.0, -0.12)]  # fmt: skip
+
+
+def test_pairs_are_the_best_with_every_other_candidate(model, b):
+    physics = [PointMass(), ThicknessTaper("x"), ThicknessTaper("y"), ElasticFoundation()]
+    fit = type("Fit", (), {"physics": physics[1], "b": b, "theta": np.array([0.1])})()
+    best = type("C", (), {"name": "thickness_taper", "fit": fit})()
+    pairs = pairs_with(best, physics, [best], model, {})
+    # the other taper direction is a variant of the same candidate, not a second effect
+    assert [p.name for p in pairs] == ["thickness_taper+point_mass",
+                                       "thickness_taper+elastic_foundation"]  # fmt: skip
+    starts = pairs[0].starting_points(model, b)
+    np.testing.assert_allclose(starts[0][0], 0.1)  # from the best single fit
+
+
+@pytest.mark.slow
+def test_two_concealed_effects_are_named_as_a_pair(model, b):
+    # a 15 g mass at (50, 30) mm on a plate tapered 15 % along x, recorded on the working
+    # mesh itself (its own error switched off): no single candidate can fit, the pair can
+    truth = np.array([15.0, 50.0, 30.0, 0.15])
+    f = Pair(PointMass(), ThicknessTaper("x"), b).apply(model, truth).solve(b, 14).frequency_Hz
+    f = f * (1 + NOISE * np.random.default_rng(3).standard_normal(f.size))
+    case = _plate1_case().with_measured(frequency_Hz=f, sigma_Hz=NOISE * f)
+    physics = [PointMass(), ThicknessTaper("x"), ElasticFoundation()]
+    d = diagnose(case, model=model, rng=0, n_starts=1, physics=physics, mesh_error_ratio=1e9)
+    assert d.verdict == "explained" and d.chosen.name == "point_mass+thickness_taper"
+    single = next(c for c in d.candidates if c.name == "point_mass")
+    assert d.chosen.log_evidence_gain > single.log_evidence_gain + 3.0
+    assert d.refit_p_value > 0.01 and d.probabilities["point_mass+thickness_taper"] > 0.99
+    got, sd = d.chosen.fit.theta, d.chosen.fit.theta_sd
+    # the truth or one of its mirror images (a symmetry moves the mass and turns the taper)
+    images = [truth, [15.0, 150.0, 30.0, -0.15], [15.0, 50.0, 70.0, 0.15],
+              [15.0, 150.0, 70.0, -0.15]]  # fmt: skip
+    near = min(images, key=lambda t: np.hypot(*(got[1:3] - np.asarray(t)[1:3])))
+    assert np.all(np.abs(got - near) < 3 * sd + np.array([0.5, 3.0, 3.0, 0.01]))
