@@ -154,6 +154,7 @@ def _row(label, physics, size, theta, d, case, model, seconds):
     return {
         "effect": label, "size": size, "p_value": d.p_value, "verdict": d.verdict,
         "chosen": d.chosen.name if d.chosen else None, "recovered": recovered,
+        "rival": d.rival.name if getattr(d, "rival", None) is not None else None,
         "truth": truth_params, "before": before, "after": after, "seconds": seconds,
         "mirrors": d.chosen.mirror_images if d.chosen else [],
         "gains": {c.name: c.log_evidence_gain for c in d.candidates},
@@ -246,6 +247,9 @@ def _findings(rows):
     controls = [r for r in rows if r["effect"] == "control"]
     rejected = [r for r in rows if r["effect"] != "control" and r["p_value"] < 0.01]
     named = [r for r in rejected if r["chosen"] == r["effect"]]
+    # `ambiguous` names two: right when the truth is one of them
+    among = [r for r in rejected if r["verdict"] == "ambiguous"
+             and r["effect"] in (r["chosen"], r.get("rival"))]  # fmt: skip
     better = [r for r in named if r["after"] is not None
               and np.abs(r["after"]).max() < np.abs(r["before"]).max()]  # fmt: skip
     within = [r for r in named if recovery_z(r) is not None and recovery_z(r) <= 2.0]
@@ -256,7 +260,8 @@ def _findings(rows):
         f"- controls saying `consistent`: {sum(r['verdict'] == 'consistent' for r in controls)}"
         f" of {len(controls)}",
         f"- effects rejected by the nominal fit (p < 0.01): {len(rejected)}; named correctly: "
-        f"{len(named)}; refit consistent: {sum(r['verdict'] == 'explained' for r in named)}",
+        f"{len(named)}; refit consistent: {sum(r['verdict'] == 'explained' for r in named)}; "
+        f"declared `ambiguous` with the truth among the two named: {len(among)}",
         f"- of those named, parameters within 2 reported sd of the truth (or of a mirror "
         f"image of it): {len(within)} of {len(named)} (largest |error| / sd per row: "
         + ", ".join(f"{r['effect']} {r['size']} {recovery_z(r):.1f}" for r in named)
