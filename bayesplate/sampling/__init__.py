@@ -69,7 +69,7 @@ from .density import EigenvalueForward, WhitenedLogPosterior
 from .moves import LaplaceMove, ScreenedDEMove, default_moves
 from .pipeline import sample
 from .result import CASE_UNITS, HDI_PROB, SamplingResult
-from .setup import SamplingSetup, posterior_box, prepare
+from .setup import SamplingSetup, posterior_box, prepare, resolve_inputs
 
 __all__ = [
     "CASE_UNITS",
@@ -86,6 +86,7 @@ __all__ = [
     "linearisation_band",
     "posterior_box",
     "prepare",
+    "resolve_inputs",
     "sample",
     "sample_problem",
 ]
