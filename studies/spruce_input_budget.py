@@ -9,9 +9,10 @@ over a b h. B and MVE are run on the case as it is; their variance budget
 Two readings of the density's uncertainty:
 - *independent*: what the case keys express (``density_sd_kg_m3``, inputs independent), with
   the density's sd propagated from those of h, a, b and the mass (2.3 %);
-- *from the mass*: rho = m / (a b h) moves with h, a and b, so the inputs are h, a, b and m:
-  the eigenvalues depend on h through ``J_h - (rho / h) J_rho`` (and likewise a, b) and on
-  the mass alone through ``J_rho`` with sd ``rho sd_m / m``. Bending eigenvalues go as
+- *from the mass*: the case keys ``mass_g`` and ``mass_sd_g``: rho = m / (a b h) moves with
+  h, a and b, so the inputs are h, a, b and m (:func:`bayesplate.inputs.input_sources`): the
+  eigenvalues depend on h through ``J_h - (rho / h) J_rho`` (and likewise a, b) and on the
+  mass alone through ``J_rho`` with sd ``rho sd_m / m``. Bending eigenvalues go as
   ``E h^2 / rho``, i.e. as ``E h^3 a b / m``: thickness weighs 3 sd_h / h, not 2.
 
 Writes ``spruce_input_budget.md`` to ``out_dir``. Run:
@@ -29,10 +30,9 @@ import platform
 import numpy as np
 
 from bayesplate.estimators import estimate
-from bayesplate.inputs import estimate_budget, input_jacobian, variance_budget
+from bayesplate.inputs import estimate_budget, input_jacobian
 from bayesplate.io import atomic_write_text, bundled_case_path, load_case
 from bayesplate.model import PlateModel
-from bayesplate.posterior import GaussianProblem
 from bayesplate.quantities import ENGINEERING_KEYS, to_case_units
 
 REPORT = "spruce_input_budget.md"
@@ -53,21 +53,18 @@ def uncertain_case():
     return dataclasses.replace(case, plate=plate)
 
 
-def from_mass(case, result, model, J):
-    """The budget with rho = m / (a b h): h, a, b carry rho with them; m alone is left."""
+def mass_case(case):
+    """The case as a lab that weighed the plate writes it (``mass_g``, ``mass_sd_g``).
+
+    The sheet's mass and the case's geometry give a density 0.1 % from the case's (rounding
+    of the printed values); the density is the case's own here, so that both readings share
+    one estimate, and the mass is set to match it.
+    """
     p = case.plate
-    J_rho = J[:, 1]
-    J_eff = np.column_stack([J[:, 0] - p.density / p.thickness * J_rho, J_rho,
-                             J[:, 2] - p.density / p.length * J_rho,
-                             J[:, 3] - p.density / p.width * J_rho])  # fmt: skip
-    sd = np.array([p.thickness_sd, p.density * SD_MASS_G / MASS_G, p.length_sd, p.width_sd])
-    conventions = result.settings["conventions"]
-    problem = GaussianProblem.from_case(case, model, result.pairing, conventions.observation,
-                                        conventions.prior, result.settings.get("prior_mean"),
-                                        result.settings.get("prior_sd"))  # fmt: skip
-    S = problem.predict(result.b, np.asarray(result.modes) - 1).S
-    return variance_budget(result.covariance_b, S, problem.V_Y, problem.V_b, J_eff, sd,
-                           result.b, result.method)  # fmt: skip
+    mass = p.density * p.length * p.width * p.thickness
+    assert abs(mass / (MASS_G * 1e-3) - 1) < 2e-3, mass
+    return dataclasses.replace(case, plate=dataclasses.replace(p, mass=mass,
+                                                               mass_sd=SD_MASS_G * 1e-3))
 
 
 def run(quick=False):
@@ -80,7 +77,8 @@ def run(quick=False):
         J = input_jacobian(case, result.b, np.asarray(result.modes) - 1,
                            mesh=(model.mesh.nx, model.mesh.ny))  # fmt: skip
         independent = estimate_budget(case, result, model, jacobian=J)
-        rows.append((result, independent, from_mass(case, result, model, J.J)))
+        rows.append((result, independent, estimate_budget(mass_case(case), result, model,
+                                                          jacobian=J)))  # fmt: skip
     return case, rows
 
 
@@ -133,8 +131,8 @@ def report(case, rows, seconds):
             "",
         ]
         out += _table(result, independent)
-        out += ["", "Density from the mass, rho = m / (a b h) (the `density` row is the mass's "
-                f"share; status {mass.status}):", ""]  # fmt: skip
+        out += ["", "Density from the mass (case keys `mass_g`, `mass_sd_g`), rho = m / (a b h)"
+                f" (budget status {mass.status}):", ""]  # fmt: skip
         out += _table(result, mass)
     return "\n".join(out) + "\n"
 
