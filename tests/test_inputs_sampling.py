@@ -155,3 +155,24 @@ def test_marginal_box_spans_the_marginal_posterior(plate1_thickness):
     assert marginal.certificate.passed
     width = (marginal.box.upper - marginal.box.lower) / (exact.box.upper - exact.box.lower)
     assert width[0] > 1.2
+
+
+def test_cli_and_report_say_which_inputs_were_used():
+    from bayesplate.cli.main import build_parser
+    from bayesplate.cli.sample import _inputs_line
+    from bayesplate.report.markdown import _inputs_lines
+
+    case = load_case(bundled_case_path("plate1"))
+    assert _inputs_line(case, "exact") == "inputs: exact (the case gives no sd)"
+    plate = dataclasses.replace(case.plate, thickness_sd=0.11e-3, mass=0.1, mass_sd=1e-4)
+    weighed = dataclasses.replace(case, plate=plate)
+    assert _inputs_line(weighed, "marginal") == (
+        "inputs: marginal (linearised), sd thickness 0.11 mm, mass 0.1 g"
+    )
+    assert "left out" in _inputs_line(weighed, "exact")
+    args = build_parser().parse_args(["sample", "plate1", "--inputs", "exact"])
+    assert args.inputs == "exact"
+    assert build_parser().parse_args(["sample", "plate1"]).inputs is None  # auto
+    assert _inputs_lines({"inputs": "exact"}) == []
+    text = _inputs_lines({"inputs": "marginal", "inputs_given": "thickness 0.11 mm"})[0]
+    assert "thickness 0.11 mm" in text and "V_Y + J Σ J^T" in text
