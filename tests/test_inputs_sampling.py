@@ -104,6 +104,8 @@ def test_resolve_inputs_default_follows_the_case():
     plate = dataclasses.replace(case.plate, thickness_sd=1e-5)
     assert resolve_inputs(dataclasses.replace(case, plate=plate)) == "marginal"
     assert resolve_inputs(dataclasses.replace(case, plate=plate), "exact") == "exact"
+    weighed = dataclasses.replace(case.plate, mass=0.1, mass_sd=1e-4)  # the mass's sd alone
+    assert resolve_inputs(dataclasses.replace(case, plate=weighed)) == "marginal"
     with pytest.raises(ValueError, match="inputs"):
         resolve_inputs(case, "nominal")
 

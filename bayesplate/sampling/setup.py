@@ -24,7 +24,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..estimators import resolve_conventions, run, settle_pairing
-from ..inputs import input_covariance, input_sd
+from ..inputs import input_covariance, input_sources
 from ..model import PlateModel
 from ..pairing import Pairing
 from ..posterior import INPUT_TREATMENTS, GaussianProblem
@@ -160,7 +160,7 @@ def resolve_inputs(case, inputs="auto"):
     str
     """
     if inputs == "auto":
-        return "marginal" if np.any(input_sd(case.plate)) else "exact"
+        return "marginal" if np.any(input_sources(case.plate)[1]) else "exact"
     if inputs not in INPUT_TREATMENTS:
         raise ValueError(f"inputs = {inputs!r}: must be 'auto' or one of {INPUT_TREATMENTS}")
     return inputs
@@ -287,7 +287,9 @@ def prepare(
         marginalised (:meth:`GaussianProblem.from_case`); ``"auto"``: marginal when the case
         gives any ``plate.*_sd``. ``J_p`` is evaluated at the pilot (or settling) B estimate,
         else at the prior mean; with a fast model built here, its box is placed with the
-        marginal problem's ``P`` there (one more full solve).
+        marginal problem's ``P`` there (one more full solve). A `fast` model or a `box`
+        given is kept as it is: if it was placed for the exact posterior, walkers beyond it
+        use the full model (counted in the result).
 
     Returns
     -------
