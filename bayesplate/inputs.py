@@ -14,6 +14,19 @@ Input Jacobian
     of the discrete model by ``1/s^2``, so ``sum_k d ln lambda / d ln p_k = -2`` over (h, a, b);
     for a thin isotropic plate (Kirchhoff limit) ``d ln lambda / d ln h = 2`` for bending modes.
 
+Mass-derived density
+    A lab that weighs the plate computes ``rho = m / (a b h)`` (case key ``mass_g``); the
+    measured inputs are then (h, m, a, b), independent, and the density's error is not
+    independent of the thickness's. :func:`input_sources` gives the effect of one deviation of
+    each independent reading on ``p = (h, rho, a, b)``, the columns of ``A`` (4, 4):
+    ``d p / d (h, m, a, b)`` times their deviations, with ``d rho / d h = -rho / h`` (likewise
+    a, b) and ``d rho / d m = rho / m``. The eigenvalues then move with ``J_p A``: at fixed
+    geometry ``lambda ~ 1 / rho ~ 1 / m`` (exact: ``M`` is proportional to rho, hence to m),
+    and a thickness change carries the density with it, ``d lambda / d h |_m = J_h - (rho /
+    h) J_rho`` (chain rule): bending eigenvalues go as ``E h^2 / rho``, i.e. ``E h^3 a b /
+    m``, so a thickness error weighs 3 sd_h / h in a modulus, not 2. Without a mass ``A`` is
+    ``diag(sd)`` and the inputs are (h, rho, a, b), independent.
+
 Variance budget
     The estimators' covariance (B's ``P`` of eq. 9; MVE's reported ``V - V S^T (S V S^T +
     V_Y)^-1 S V``, the same ``P`` at its own estimate) is that of the linear map
@@ -51,6 +64,8 @@ __all__ = [
     "InputJacobian",
     "VarianceBudget",
     "input_sd",
+    "input_sources",
+    "describe_inputs",
     "input_jacobian",
     "input_covariance",
     "variance_budget",
@@ -72,6 +87,52 @@ _EXTRA_MODES = 4  # computed beyond the highest paired mode, so MAC can follow a
 def input_sd(plate) -> np.ndarray:
     """Standard deviations of the inputs of a plate, shape (4,), SI (order of INPUT_NAMES)."""
     return np.array([float(getattr(plate, f"{name}_sd", 0.0)) for name in INPUT_NAMES])
+
+
+def input_sources(plate):
+    """The independent readings behind a plate's inputs and one deviation's effect of each.
+
+    Parameters
+    ----------
+    plate : bayesplate.io.Plate
+
+    Returns
+    -------
+    names : tuple of str
+        ``INPUT_NAMES``, or ``("thickness", "mass", "length", "width")`` when the density was
+        derived from the mass (``plate.mass`` given).
+    A : numpy.ndarray, shape (4, 4)
+        Column k: the change of ``(h, rho, a, b)`` (SI) from one standard deviation of
+        reading k; the inputs' covariance is ``A A^T``.
+    """
+    sd = input_sd(plate)
+    if plate.mass is None:
+        return INPUT_NAMES, np.diag(sd)
+    rho = plate.density
+    h, a, b = plate.thickness, plate.length, plate.width
+    sd[1] = plate.mass_sd
+    D = np.array([  # d (h, rho, a, b) / d (h, m, a, b)
+        [1.0, 0.0, 0.0, 0.0],
+        [-rho / h, rho / plate.mass, -rho / a, -rho / b],
+        [0.0, 0.0, 1.0, 0.0],
+        [0.0, 0.0, 0.0, 1.0],
+    ])  # fmt: skip
+    return ("thickness", "mass", "length", "width"), D * sd[None, :]
+
+
+_CASE_UNITS = {"thickness": (1e3, "mm"), "length": (1e3, "mm"), "width": (1e3, "mm"),
+               "density": (1.0, "kg/m^3"), "mass": (1e3, "g")}  # fmt: skip
+
+
+def describe_inputs(plate) -> str:
+    """The deviations a plate gives, in case units: ``"thickness 0.11 mm, mass 0.1 g"``."""
+    names, _ = input_sources(plate)
+    sd = input_sd(plate)
+    if plate.mass is not None:
+        sd[1] = plate.mass_sd
+    parts = [f"{name} {value * _CASE_UNITS[name][0]:.3g} {_CASE_UNITS[name][1]}"
+             for name, value in zip(names, sd, strict=True) if value > 0]  # fmt: skip
+    return ", ".join(parts) or "none"
 
 
 @dataclass(frozen=True)
@@ -147,7 +208,8 @@ def input_covariance(case, b, modes, mesh=None) -> np.ndarray:
     Parameters
     ----------
     case : bayesplate.io.Case
-        Its plate's ``*_sd`` (independent inputs).
+        Its plate's ``*_sd`` (independent inputs; with a mass, the readings of
+        :func:`input_sources`: ``J_p A A^T J_p^T``).
     b : array_like, shape (6,)
         Stiffness coefficients where ``J_p`` is evaluated, Pa.
     modes : array_like of int, shape (m,)
@@ -160,11 +222,11 @@ def input_covariance(case, b, modes, mesh=None) -> np.ndarray:
     numpy.ndarray, shape (m, m)
         rad^4/s^4; zeros (and no solve) when every deviation is 0.
     """
-    sd = input_sd(case.plate)
+    _, A = input_sources(case.plate)
     modes = np.asarray(modes, dtype=int)
-    if not np.any(sd):
+    if not np.any(A):
         return np.zeros((modes.size, modes.size))
-    J = input_jacobian(case, b, modes, mesh=mesh).J * sd[None, :]
+    J = input_jacobian(case, b, modes, mesh=mesh).J @ A
     return J @ J.T
 
 
@@ -245,7 +307,7 @@ CLOSURE_TOL = 1e-6  # relative: far above round-off (1e-12), far below any real 
 APPROXIMATE_TOL = 1e-2
 
 
-def variance_budget(P, S, V_Y, V_b, J_p, sd_p, b, method="B") -> VarianceBudget:
+def variance_budget(P, S, V_Y, V_b, J_p, sd_p, b, method="B", names=INPUT_NAMES) -> VarianceBudget:
     """Split an estimator's covariance by source and add the inputs' shares.
 
     Parameters
@@ -266,6 +328,9 @@ def variance_budget(P, S, V_Y, V_b, J_p, sd_p, b, method="B") -> VarianceBudget:
         The estimate, Pa (where ``b -> e`` is linearised).
     method : str
         Named in the result.
+    names : tuple of str
+        The inputs' names in the sources (``("thickness", "mass", ...)`` when `J_p` is
+        ``J_p A`` of :func:`input_sources`, with `sd_p` ones).
 
     Returns
     -------
@@ -273,7 +338,7 @@ def variance_budget(P, S, V_Y, V_b, J_p, sd_p, b, method="B") -> VarianceBudget:
     """
     P, S, V_Y, V_b, J_p = (np.asarray(x, dtype=float) for x in (P, S, V_Y, V_b, J_p))
     sd_p = np.asarray(sd_p, dtype=float)
-    sources = ("frequencies", *INPUT_NAMES, "prior")
+    sources = ("frequencies", *names, "prior")
     e = laminate.engineering_from_stiffness(np.asarray(b, dtype=float))
     T = np.linalg.inv(laminate.stiffness_jacobian(e))  # d e / d b
     cov_e = engineering_covariance(e, P)  # the estimator's, as its result reports it
@@ -332,23 +397,28 @@ def estimate_budget(case, result, model=None, jacobian=None) -> VarianceBudget:
     )
     modes = np.asarray(result.modes) - 1
     prediction = problem.predict(result.b, modes)
-    sd = input_sd(case.plate)
-    if not np.any(sd):  # every input taken as exact: no share, no solves
+    names, A = input_sources(case.plate)
+    if not np.any(A):  # every input taken as exact: no share, no solves
         J = np.zeros((modes.size, len(INPUT_NAMES)))
     elif jacobian is None:
         mesh = (model.mesh.nx, model.mesh.ny)
         J = input_jacobian(case, result.b, modes, mesh=mesh).J
     else:
         J = jacobian.J
+    if case.plate.mass is None:  # (h, rho, a, b) independent: as before, bit for bit
+        J_sources, sd = J, np.diag(A)
+    else:  # one deviation of each reading (h, m, a, b) through rho = m / (a b h)
+        J_sources, sd = J @ A, np.ones(len(names))
     return variance_budget(
         result.covariance_b,
         prediction.S,
         problem.V_Y,
         problem.V_b,
-        J,
+        J_sources,
         sd,
         result.b,
         result.method,
+        names,
     )
 
 

@@ -29,6 +29,7 @@ STUDIES = [
     "prior_bias",
     "spruce_badiane",
     "spruce_input_budget",
+    "input_coverage",
 ]
 
 

@@ -35,6 +35,7 @@ def sample_text(case, result):
         f"{result.n_evaluations} evaluations, {result.n_full} full solves while sampling; "
         f"{result.timings.get('total', result.wall_time):.1f} s in all",
         f"fast model: {result.certificate or 'none (the full model)'}",
+        _inputs_line(case, result.settings.get("inputs", "exact")),
         f"{'constant':>9} {'B (MAP)':>10} {'B sd':>9} {'post mean':>10} {'post sd':>9} "
         f"{'hdi 3%':>9} {'hdi 97%':>9} {'ESS':>6} {'R-hat':>6}",
     ]
@@ -49,6 +50,18 @@ def sample_text(case, result):
     return "\n".join(lines)
 
 
+def _inputs_line(case, inputs):
+    """Which treatment of the plate's inputs the posterior used, with their deviations."""
+    from ..inputs import describe_inputs
+
+    given = describe_inputs(case.plate)
+    if inputs == "marginal":
+        return f"inputs: marginal (linearised), sd {given}"
+    if given != "none":
+        return f"inputs: exact (the case's sd {given} left out)"
+    return "inputs: exact (the case gives no sd)"
+
+
 def run(args):
     """Sample the posterior; print the table, write JSON, netCDF and figures on request."""
     from ..io import sampling_to_dict, save_figure, write_json, write_netcdf
@@ -61,7 +74,7 @@ def run(args):
     if not quiet:
         logging.getLogger("bayesplate.sampling").setLevel(logging.INFO)  # progress
     setup = prepare(case, model=model, forward="full" if args.full else "reduced", rng=args.seed,
-                    pairing=args.pairing)  # fmt: skip
+                    pairing=args.pairing, inputs=args.inputs or "auto")  # fmt: skip
     result = sample(
         case,
         rng=args.seed,
@@ -114,6 +127,10 @@ def register(sub):
     p.add_argument("--backend", metavar="FILE.h5",
                    help="keep the chain in this HDF5 file; re-running continues it")  # fmt: skip
     p.add_argument("--full", action="store_true", help="sample the full model (slow)")
+    p.add_argument("--inputs", choices=("exact", "marginal"), default=None,
+                   help="the plate's thickness, density, length and width as exact numbers, "
+                   "or their case deviations (plate.*_sd) marginalised to first order "
+                   "(default: marginal when the case gives any deviation)")  # fmt: skip
     add_pairing_option(p)
     add_mesh_option(p)
     add_json_option(p)

@@ -77,7 +77,16 @@ class Plate(_EqualByValue):
         One standard deviation of the measured length, width and thickness, m; default 0
         (taken as exact). Plies keep their fractions of the thickness when it varies.
     density_sd : float, optional
-        One standard deviation of the density, kg/m^3; default 0.
+        One standard deviation of the density, kg/m^3; default 0. Not used when `mass` is
+        given (the density's error then follows from the mass's and the geometry's).
+    mass : float, optional
+        The weighed mass, kg, when the density was derived from it, ``rho = m / (a b h)``:
+        the measured inputs are then (h, a, b, m), independent, and the density's error
+        is correlated with the thickness's (:func:`bayesplate.inputs.input_sources`).
+        Default None (the density measured on its own). Not checked against the density
+        here: the input Jacobian perturbs one input at a time.
+    mass_sd : float, optional
+        One standard deviation of the mass, kg; default 0.
     """
 
     length: float
@@ -90,6 +99,8 @@ class Plate(_EqualByValue):
     width_sd: float = 0.0
     thickness_sd: float = 0.0
     density_sd: float = 0.0
+    mass: float | None = None
+    mass_sd: float = 0.0
 
     def __post_init__(self):
         for name in ("length", "width", "thickness", "density"):
@@ -105,6 +116,14 @@ class Plate(_EqualByValue):
         for name, unit in (("length", "_mm"), ("width", "_mm"), ("thickness", "_mm"),
                            ("density", "_kg_m3")):  # fmt: skip
             check_plausible(getattr(self, name), name + unit, f"plate.{name}{unit}", si=True)
+        if self.mass is not None:
+            _set(self, "mass", _positive(self.mass, "plate.mass"))
+        _set(self, "mass_sd", _nonnegative(self.mass_sd, "plate.mass_sd"))
+        if self.mass is None and self.mass_sd:
+            raise CaseError("plate.mass_sd", self.mass_sd, "needs plate.mass")
+        if self.mass is not None and self.mass_sd >= 0.5 * self.mass:
+            raise CaseError("plate.mass_sd", self.mass_sd,
+                            "must be below half of plate.mass (a standard deviation)")  # fmt: skip
         layup = _angles(self.layup_deg, "plate.layup_deg")
         _set(self, "layup_deg", tuple(layup))
         if self.ply_thickness is None:

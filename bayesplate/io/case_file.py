@@ -21,6 +21,21 @@ eigenvalue covariance of the Gaussian problem (``inputs="marginal"``). Example::
     thickness_sd_mm = 0.11     # spread of ten readings
     density_kg_m3 = 435.7
     density_sd_kg_m3 = 4.4
+
+Mass-derived density (optional keys ``mass_g`` and ``mass_sd_g``): a lab that weighs the plate
+computes rho = m / (a b h), so the density's error moves with the thickness's. With ``mass_g``
+the density is derived from it and ``density_kg_m3`` may be left out; when it is given too, it
+must agree with m / (a b h) within its stated sd (``density_sd_kg_m3``; without one, within the
+derived density's own sd from those of m, a, b, h, and at least 0.1 % for a printed value's
+rounding), else one line names both, e.g. ``plate.density_kg_m3 = 480: must agree with
+plate.mass_g / (a b h) = 435.7 kg/m^3 within 4.4 kg/m^3``. The measured inputs are then
+h, a, b and m, independent (``density_sd_kg_m3`` is only the check's tolerance)::
+
+    [plate]
+    thickness_mm = 4.89
+    thickness_sd_mm = 0.11
+    mass_g = 269.2
+    mass_sd_g = 0.1            # the scale's resolution
 """
 
 from __future__ import annotations
@@ -77,7 +92,11 @@ _PLATE_KEYS = (
     "width_sd_mm",
     "thickness_sd_mm",
     "density_sd_kg_m3",
+    "mass_g",
+    "mass_sd_g",
 )
+#: Relative agreement always allowed between a given and a mass-derived density (rounding).
+_DENSITY_ROUNDING = 1e-3
 #: Optional standard deviations of the measured plate inputs: (key, Plate field, to SI).
 _PLATE_SD_KEYS = (
     ("length_sd_mm", "length_sd", 1e-3),
@@ -216,12 +235,18 @@ def _parse(data: Mapping, path) -> Case:
 
 def _parse_plate(raw) -> tuple[Plate, tuple[float, float]]:
     """Return the plate and its (length, width) in mm, for checking points."""
-    table = _table(raw, "plate", _PLATE_KEYS, _PLATE_KEYS[:5])
-    length, width, thickness, density = (
+    required = _PLATE_KEYS[:3] + _PLATE_KEYS[4:5]  # density: or the mass
+    table = _table(raw, "plate", _PLATE_KEYS, required)
+    if "density_kg_m3" not in table and "mass_g" not in table:
+        raise CaseError("plate.density_kg_m3", rule="required key is missing (or give mass_g)")
+    length, width, thickness = (
         _plausible(_positive(table[key], f"plate.{key}"), key, f"plate.{key}")
-        for key in _PLATE_KEYS[:4]
+        for key in required[:3]
     )
     _check_proportions(length, width, thickness)
+    if "density_kg_m3" in table:
+        _plausible(_positive(table["density_kg_m3"], "plate.density_kg_m3"), "density_kg_m3",
+                   "plate.density_kg_m3")  # fmt: skip
     layup = _angles(table["layup_deg"], "plate.layup_deg")
     check_plausible(layup, "layup_deg", "plate.layup_deg")
     plies = None
@@ -233,8 +258,36 @@ def _parse_plate(raw) -> tuple[Plate, tuple[float, float]]:
         plies = tuple(t * _MM for t in plies_mm)
     sds = {field: _sd(table[key], f"plate.{key}") * to_si
            for key, field, to_si in _PLATE_SD_KEYS if key in table}  # fmt: skip
-    plate = Plate(length * _MM, width * _MM, thickness * _MM, density, tuple(layup), plies, **sds)
+    density, mass = _density(table, length, width, thickness, sds)
+    plate = Plate(length * _MM, width * _MM, thickness * _MM, density, tuple(layup), plies,
+                  **sds, **mass)  # fmt: skip
     return plate, (length, width)
+
+
+def _density(table, length, width, thickness, sds):
+    """The density (kg/m^3) and the Plate's mass fields: from ``mass_g`` when it is given."""
+    if "mass_g" not in table:
+        if "mass_sd_g" in table:
+            raise CaseError("plate.mass_sd_g", table["mass_sd_g"], "needs plate.mass_g")
+        return _positive(table["density_kg_m3"], "plate.density_kg_m3"), {}
+    mass_g = _positive(table["mass_g"], "plate.mass_g")
+    mass_sd_g = _sd(table["mass_sd_g"], "plate.mass_sd_g") if "mass_sd_g" in table else 0.0
+    derived = mass_g * 1e-3 / (length * width * thickness * _MM**3)
+    if "density_kg_m3" in table:
+        given = _positive(table["density_kg_m3"], "plate.density_kg_m3")
+        stated = sds.get("density_sd", 0.0)
+        if stated > 0:
+            tol, why = stated, "its stated sd"
+        else:  # the derived density's own sd (first order), or the rounding of a printed one
+            rel = np.hypot.reduce([mass_sd_g / mass_g, sds.get("thickness_sd", 0.0) / (
+                thickness * _MM), sds.get("length_sd", 0.0) / (length * _MM),
+                sds.get("width_sd", 0.0) / (width * _MM)])  # fmt: skip
+            tol, why = max(rel, _DENSITY_ROUNDING) * derived, "the derived density's sd"
+        if abs(given - derived) > tol:
+            raise CaseError("plate.density_kg_m3", table["density_kg_m3"],
+                            f"must agree with plate.mass_g / (a b h) = {derived:.5g} kg/m^3 "
+                            f"within {tol:.3g} kg/m^3 ({why})")  # fmt: skip
+    return derived, {"mass": mass_g * 1e-3, "mass_sd": mass_sd_g * 1e-3}
 
 
 def _sd(raw, key: str) -> float:

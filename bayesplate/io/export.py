@@ -272,6 +272,7 @@ def sampling_to_dict(result, case, mve=None):
         "certificate": certificate,
         "timings_s": result.timings,
         "seed_entropy": result.settings.get("seed_entropy"),
+        "inputs": result.settings.get("inputs", "exact"),
         "estimates": {
             name: constants_json(r.constants, r.sd)
             for name, r in (("B", est), ("MVE", mve))

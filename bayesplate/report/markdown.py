@@ -262,9 +262,23 @@ def _sample_lines(result):
         f"{result['certificate'] or 'none (full model)'}; {result['n_full']} full solves while "
         f"sampling; {t.get('total', float('nan')):.0f} s in all.",
         "",
+        *_inputs_lines(result),
         *[f"- Sampler warning: {w}" for w in result.get("warnings", [])],
         "",
         *_table(["constant", "mean ± sd", "94 % HDI", "ESS (bulk)", "R-hat"], rows),
+        "",
+    ]
+
+
+def _inputs_lines(result):
+    """Whether the posterior has the plate's input deviations in it (none when exact)."""
+    if result.get("inputs", "exact") != "marginal":
+        return []
+    return [
+        "With the plate's measured inputs uncertain (the case's deviations: "
+        + str(result["inputs_given"])
+        + "), marginalised to first order: the eigenvalue covariance is V_Y + J Σ J^T, "
+        "J the eigenvalues' derivatives in the inputs. The intervals below include them.",
         "",
     ]
 

@@ -147,19 +147,24 @@ def sample_step(case, model, pairing, options, fast=None):
     """The posterior by :func:`bayesplate.sampling.sample` (only when the module exists).
 
     With `fast` (the report's shared :class:`bayesplate.reduced.CertifiedModel`) the sampler
-    builds no fast model of its own.
+    builds no fast model of its own, unless the case gives input deviations: the posterior
+    then has them marginalised (``inputs="auto"``) and is wider than the box the shared
+    model was certified over, so the sampler places and certifies its own.
 
     The draws kept for the corner plot (at most ``_CORNER_DRAWS``, shape (n, 6)) are in
     case units (GPa, -).
     """
+    from ..inputs import describe_inputs
     from ..laminate import engineering_from_stiffness
-    from ..sampling import sample
+    from ..sampling import resolve_inputs, sample
 
     chains = _QUICK_CHAINS if options.quick else _CHAINS
+    inputs = resolve_inputs(case)
     with warnings.catch_warnings(record=True) as caught:  # counted below, not repeated
         warnings.simplefilter("always")
         r = sample(case, rng=options.seed, model=model, pairing=pairing, progress=False,
-                   fast=fast, **chains)  # fmt: skip
+                   fast=fast if inputs == "exact" else None, inputs=inputs,
+                   **chains)  # fmt: skip
     e = to_case_units(engineering_from_stiffness(r.samples_b))
     keep = np.linspace(0, len(e) - 1, min(len(e), _CORNER_DRAWS)).astype(int)
     return {
@@ -180,4 +185,6 @@ def sample_step(case, model, pairing, options, fast=None):
         "map": None if r.estimate is None else r.estimate.constants,
         "draws": e[keep],
         "warnings": sorted({str(w.message) for w in caught}),
+        "inputs": inputs,
+        "inputs_given": describe_inputs(case.plate),
     }

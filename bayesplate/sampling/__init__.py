@@ -23,6 +23,15 @@ Fast model
     evaluations. The sampler needs eigenvalues only (the fastest reduced path); the MAP and
     its covariance ``P`` come from B iterated to TOL 1e-7 on the same fast model.
 
+Uncertain inputs
+    ``inputs="marginal"`` (the default when the case gives any ``plate.*_sd`` or a mass
+    with ``mass_sd``): the plate's thickness, density (or mass), length and width deviations
+    are integrated out to first order, ``V_Y + J_p Sigma_p J_p^T``
+    (:mod:`bayesplate.inputs`), a constant matrix: the fast model needs no new parameters,
+    only a box placed with the marginal ``P``. ``V_Y`` is then full: the pointwise terms are
+    leave-one-out conditionals and the Ritz screen bounds the misfit on the sub-block of the
+    eigenvalues it constrains.
+
 Parameterisation and moves
     Walkers move in whitened log coordinates (:class:`WhitenedLogPosterior`): the
     logarithms of the positive coefficients and C12 itself, whitened by ``P`` at the MAP;
@@ -69,7 +78,7 @@ from .density import EigenvalueForward, WhitenedLogPosterior
 from .moves import LaplaceMove, ScreenedDEMove, default_moves
 from .pipeline import sample
 from .result import CASE_UNITS, HDI_PROB, SamplingResult
-from .setup import SamplingSetup, posterior_box, prepare
+from .setup import SamplingSetup, posterior_box, prepare, resolve_inputs
 
 __all__ = [
     "CASE_UNITS",
@@ -86,6 +95,7 @@ __all__ = [
     "linearisation_band",
     "posterior_box",
     "prepare",
+    "resolve_inputs",
     "sample",
     "sample_problem",
 ]

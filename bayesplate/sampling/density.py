@@ -69,8 +69,12 @@ class WhitenedLogPosterior:
     is :meth:`GaussianProblem.log_posterior` of a problem built from the same ``Y``,
     ``V_Y``, ``mu_b``, ``V_b`` and pairing (only the forward model may differ) at
     ``b(z)``, plus :meth:`log_jacobian` (the density of ``z``); ``pointwise`` (shape (m,))
-    is the log-likelihood of each measured eigenvalue, summing to the log-likelihood
-    (``V_Y`` is diagonal); NaN outside the physical region.
+    is the log-likelihood of each measured eigenvalue, summing to the log-likelihood when
+    ``V_Y`` is diagonal; NaN outside the physical region. With a full ``V_Y`` (the inputs
+    marginalised) the eigenvalues are not independent and ``pointwise`` is each one's
+    leave-one-out predictive density ``ln f(Y_i | Y_-i, b)``: with ``Q = V_Y^-1``,
+    ``-((Q r)_i^2 / Q_ii + ln(2 pi / Q_ii)) / 2`` (Buerkner et al. 2021, non-factorised normal
+    models), which is what LOO needs; it equals the diagonal formula when ``V_Y`` is diagonal.
 
     Parameters
     ----------
@@ -93,8 +97,8 @@ class WhitenedLogPosterior:
 
     def __init__(self, problem, center, covariance, forward=None):
         var = np.diag(problem.V_Y)
-        if not np.array_equal(problem.V_Y, np.diag(var)):
-            raise ValueError("pointwise log-likelihoods need a diagonal V_Y")
+        # None: diagonal (independent eigenvalues); else the precision for conditional terms
+        self._Q = None if np.array_equal(problem.V_Y, np.diag(var)) else np.linalg.inv(problem.V_Y)
         self._source = problem.forward if forward is None else forward
         self.problem = problem.with_forward(self._forward)
         b0 = np.array(center, dtype=float)
@@ -141,7 +145,10 @@ class WhitenedLogPosterior:
     def pointwise(self, g):
         """Log-likelihood of each measured eigenvalue given paired model ones ``g``, (m,)."""
         r = self.problem.Y - g
-        return -0.5 * (r**2 / self._var + np.log(2 * np.pi * self._var))
+        if self._Q is None:
+            return -0.5 * (r**2 / self._var + np.log(2 * np.pi * self._var))
+        q = np.diag(self._Q)
+        return -0.5 * ((self._Q @ r) ** 2 / q + np.log(2 * np.pi / q))
 
     def __call__(self, z):
         """``(log_density, pointwise)`` at whitened ``z``, shape (6,)."""

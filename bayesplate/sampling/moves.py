@@ -185,7 +185,10 @@ class RitzScreen:
     misfit of a measured ``Y_i > R_i`` is at least ``Y_i - R_i``, so ``ln f <= ln prior -
     sum_{Y_i > R_i} (Y_i - R_i)^2 / (2 v_i) - sum ln(2 pi v_i) / 2``, plus the sampler's
     log-Jacobian. ``R`` is inflated by ``1e-8`` relative for rounding. Inside the box (no
-    full solve needed) the bound is ``+inf``: evaluate.
+    full solve needed) the bound is ``+inf``: evaluate. With a full ``V_Y`` (the inputs
+    marginalised) the misfit ``r^T V_Y^-1 r`` is at least that of the eigenvalues ``I`` with
+    ``Y_i > R_i`` alone, ``r_I^T (V_Y)_II^-1 r_I >= |gap_I|^2 / lambda_max((V_Y)_II)``, and
+    the normalising term is ``-(ln det V_Y + m ln 2 pi) / 2``.
 
     Parameters
     ----------
@@ -200,7 +203,12 @@ class RitzScreen:
     def __init__(self, density, reduced, box):
         self.density, self.reduced, self.box = density, reduced, box
         p = density.problem
-        self._norm = -0.5 * np.sum(np.log(2 * np.pi * np.diag(p.V_Y)))
+        var = np.diag(p.V_Y)
+        self._diagonal = np.array_equal(p.V_Y, np.diag(var))
+        if self._diagonal:
+            self._norm = -0.5 * np.sum(np.log(2 * np.pi * var))
+        else:
+            self._norm = -0.5 * (np.linalg.slogdet(p.V_Y)[1] + var.size * np.log(2 * np.pi))
 
     def __call__(self, z):
         """Upper bounds of the sampler's log-density at whitened `z` (n, 6), shape (n,)."""
@@ -217,8 +225,17 @@ class RitzScreen:
             except ValueError:  # the basis holds too few modes there: no bound
                 continue
             gap = np.maximum(p.Y - R * (1 + 1e-8), 0.0)
-            bounds[k] = prior + self._norm - 0.5 * np.sum(gap**2 / np.diag(p.V_Y))
+            bounds[k] = prior + self._norm - 0.5 * self._misfit(gap, p.V_Y)
         return bounds + self.density.log_jacobian(z)
+
+    def _misfit(self, gap, V_Y):
+        """A lower bound of ``r^T V_Y^-1 r`` over residuals with ``r_i >= gap_i`` (gap >= 0)."""
+        if self._diagonal:
+            return np.sum(gap**2 / np.diag(V_Y))
+        on = gap > 0
+        if not np.any(on):
+            return 0.0
+        return np.sum(gap[on] ** 2) / np.linalg.eigvalsh(V_Y[np.ix_(on, on)])[-1]
 
 
 def default_moves(inside=None, screen=None):

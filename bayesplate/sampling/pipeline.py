@@ -45,6 +45,7 @@ def sample(
     fast=None,
     fast_options=None,
     seed=None,
+    inputs="auto",
 ):
     """Sample the posterior of a case's elastic constants (the estimators' problem).
 
@@ -72,6 +73,10 @@ fast, fast_options
         :func:`bayesplate.reduced.fast_model`.
     seed : int, numpy.random.Generator or None
         Deprecated name of ``rng`` (a DeprecationWarning; removed in the next release).
+    inputs : {"auto", "exact", "marginal"}
+        Of :func:`prepare`: the plate's measured inputs exact, or their deviations
+        marginalised (``"auto"``: marginal when the case gives any). The result's
+        ``settings["inputs"]`` says which was used.
 
     Returns
     -------
@@ -96,6 +101,7 @@ fast, fast_options
             pilot_mesh=pilot_mesh,
             fast=fast,
             fast_options=fast_options,
+            inputs=inputs,
         )
     certified = setup.fast  # None when the full model is sampled
     fallbacks0 = dict(certified.fallbacks) if certified is not None else {}
@@ -128,7 +134,7 @@ fast, fast_options
     settings = {**result.settings, "seed_entropy": entropy, "case": case.name,
                 "box_lower": None if setup.box is None else setup.box.lower,
                 "box_upper": None if setup.box is None else setup.box.upper,
-                "full_solves_setup": setup.n_full_solves}  # fmt: skip
+                "full_solves_setup": setup.n_full_solves, "inputs": setup.inputs}  # fmt: skip
     return replace(
         result,
         n_full=n_full,

@@ -5,6 +5,13 @@ conventions, prior and pairing), a pilot B run (on a halved mesh above
 :data:`PILOT_MAX_ELEMENTS` elements) placing the posterior box (:func:`posterior_box`), the
 certified reduced-basis model over it (:func:`bayesplate.reduced.fast_model`), and B
 iterated to :data:`MAP_TOL` on that fast model: the MAP and its covariance ``P``.
+
+Uncertain inputs (``inputs="marginal"``): the plate's thickness, density, length and width
+deviations are marginalised to first order, ``V_Y + J_p Sigma_p J_p^T``
+(:meth:`GaussianProblem.from_case`), with ``J_p`` at the pilot (or settling) B estimate. That
+covariance is a constant matrix, so the fast model needs no new parameters; only its box is
+placed with the widened covariance (``P`` of the marginal problem at the pilot estimate), so
+that it spans the wider posterior.
 """
 
 from __future__ import annotations
@@ -17,9 +24,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..estimators import resolve_conventions, run, settle_pairing
+from ..inputs import input_covariance, input_sources
 from ..model import PlateModel
 from ..pairing import Pairing
-from ..posterior import GaussianProblem
+from ..posterior import INPUT_TREATMENTS, GaussianProblem
 from ..quantities import LOG_STIFFNESS
 from ..reduced import Box, fast_model
 from .density import EigenvalueForward
@@ -33,6 +41,7 @@ __all__ = [
     "SamplingSetup",
     "posterior_box",
     "prepare",
+    "resolve_inputs",
 ]
 
 log = logging.getLogger(__name__)
@@ -72,7 +81,10 @@ class SamplingSetup:
     timings : dict
         Seconds: ``pilot``, ``build``, ``map``.
     n_full_solves : int
-        Full finite-element solves spent (pilot on the case mesh, build, certification).
+        Full finite-element solves spent (pilot on the case mesh, build, certification,
+        the input Jacobian).
+    inputs : str
+        ``"exact"`` or ``"marginal"``: how the plate's measured inputs enter ``problem``.
     """
 
     problem: GaussianProblem = field(repr=False)
@@ -83,6 +95,7 @@ class SamplingSetup:
     box: object
     timings: dict
     n_full_solves: int
+    inputs: str = "exact"
 
     @property
     def certificate(self):
@@ -132,6 +145,50 @@ def _pilot_model(case, model, pilot_mesh):
             return model
         pilot_mesh = (math.ceil(mesh.nx / 2), math.ceil(mesh.ny / 2))
     return PlateModel.from_case(case, mesh=tuple(pilot_mesh))
+
+
+def resolve_inputs(case, inputs="auto"):
+    """``"exact"`` or ``"marginal"``: ``"auto"`` is marginal when the case gives any input sd.
+
+    Parameters
+    ----------
+    case : bayesplate.io.Case
+    inputs : {"auto", "exact", "marginal"}
+
+    Returns
+    -------
+    str
+    """
+    if inputs == "auto":
+        return "marginal" if np.any(input_sources(case.plate)[1]) else "exact"
+    if inputs not in INPUT_TREATMENTS:
+        raise ValueError(f"inputs = {inputs!r}: must be 'auto' or one of {INPUT_TREATMENTS}")
+    return inputs
+
+
+def _marginal(case, model, problem, at):
+    """The problem with the inputs marginalised (``J_p`` at `at`), and the full solves spent."""
+    V_in = input_covariance(case, at, problem.pairing.modes, mesh=(model.mesh.nx, model.mesh.ny))
+    solves = 7 if np.any(V_in) else 0  # the nominal solve and 3 central differences
+    marginal = GaussianProblem(problem.Y, problem.V_Y + V_in, problem.mu_b, problem.V_b,
+                               problem.forward, problem.pairing)  # fmt: skip
+    return marginal, solves
+
+
+def _place_box(case, model, problem, pilot, inputs, box_sigma):
+    """The (marginal) problem and the fast model's box from the pilot; full solves spent.
+
+    With the inputs marginalised, the box is placed with ``P`` of the marginal problem at the
+    pilot's ``b`` (one more full solve for the sensitivities): the pilot's own ``P`` ignores
+    the inputs and would leave a box a few marginal deviations wide.
+    """
+    if inputs != "marginal":
+        return problem, posterior_box(pilot, problem.mu_b, problem.V_b, box_sigma), 0
+    problem, spent = _marginal(case, model, problem, pilot.b)
+    S = problem.predict(pilot.b).S
+    info = S.T @ np.linalg.solve(problem.V_Y, S) + np.linalg.inv(problem.V_b)
+    placed = replace(pilot, covariance_b=np.linalg.inv(info))
+    return problem, posterior_box(placed, problem.mu_b, problem.V_b, box_sigma), spent + 1
 
 
 def posterior_box(estimate, mu_b, V_b, n_sigma=6.0, weak=0.25, prior_sigma=3.0, floor=0.1):
@@ -189,6 +246,7 @@ def prepare(
     fast=None,
     fast_options=None,
     seed=None,
+    inputs="auto",
 ):
     """The sampler's problem, fast model and MAP for a case.
 
@@ -224,12 +282,21 @@ def prepare(
         Keywords of :func:`bayesplate.reduced.fast_model` (default ``FAST_DEFAULTS``).
     seed : int, numpy.random.Generator or None
         Deprecated name of ``rng`` (a DeprecationWarning; removed in the next release).
+    inputs : {"auto", "exact", "marginal"}
+        The plate's measured inputs as exact numbers or with the case's deviations
+        marginalised (:meth:`GaussianProblem.from_case`); ``"auto"``: marginal when the case
+        gives any ``plate.*_sd``. ``J_p`` is evaluated at the pilot (or settling) B estimate,
+        else at the prior mean; with a fast model built here, its box is placed with the
+        marginal problem's ``P`` there (one more full solve). A `fast` model or a `box`
+        given is kept as it is: if it was placed for the exact posterior, walkers beyond it
+        use the full model (counted in the result).
 
     Returns
     -------
     SamplingSetup
     """
     rng = resolve_rng(rng, seed, "prepare")
+    inputs = resolve_inputs(case, inputs)
     if forward not in ("reduced", "full"):
         raise ValueError(f"forward = {forward!r}: must be 'reduced' or 'full'")
     conventions = resolve_conventions(convention)
@@ -249,12 +316,14 @@ def prepare(
     problem = GaussianProblem.from_case(
         case, model, pair, conventions.observation, conventions.prior, mean, sd
     )
+    exact = problem
     timings = {"pilot": 0.0, "build": 0.0, "map": 0.0}
     pilot, solves = None, 0
     if forward == "reduced" and fast is None:
         if box is None and settled is not None:
             pilot, solves = settled, settled.n_solves
-            box = posterior_box(pilot, problem.mu_b, problem.V_b, box_sigma)
+            problem, box, spent = _place_box(case, model, problem, pilot, inputs, box_sigma)
+            solves += spent
         if box is None:
             started = time.perf_counter()
             pilot_model = _pilot_model(case, model, pilot_mesh if own_model else None)
@@ -263,7 +332,8 @@ def prepare(
             )
             pilot = run(pilot_problem, "B", tol=PILOT_TOL, conventions=conventions)
             solves += pilot.n_solves if pilot_model is model else 0
-            box = posterior_box(pilot, problem.mu_b, problem.V_b, box_sigma)
+            problem, box, spent = _place_box(case, model, problem, pilot, inputs, box_sigma)
+            solves += spent
             timings["pilot"] = time.perf_counter() - started
             log.info("pilot B (%s): %s", _mesh_text(pilot_model), pilot.message)
         started = time.perf_counter()
@@ -273,8 +343,13 @@ def prepare(
         timings["build"] = time.perf_counter() - started
         solves += fast.build_solves
         log.info("fast model: %s", fast.certificate)
+    if inputs == "marginal" and problem is exact:  # no pilot here: J_p at the settling B
+        at = problem.mu_b if settled is None else settled.b
+        problem, spent = _marginal(case, model, problem, at)
+        solves += spent
     setup = SamplingSetup(problem, model, fast if forward == "reduced" else None, None,
-                          pilot, None if fast is None else fast.box, timings, solves)  # fmt: skip
+                          pilot, None if fast is None else fast.box, timings, solves,
+                          inputs)  # fmt: skip
     started = time.perf_counter()
     # B from the settled assignment's estimate (B's fixed point from the prior mean may be
     # another optimum with a pairing that skips modes); from the prior mean otherwise
