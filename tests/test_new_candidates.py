@@ -257,3 +257,55 @@ def test_point_support_mirror_images_have_equal_frequencies():
     for image in images:
         np.testing.assert_allclose(ps.apply(model, image).solve(B_REF, 8).eigenvalues, f0,
                                    rtol=1e-8)  # fmt: skip
+
+
+# --- end to end -----------------------------------------------------------------------
+
+
+def _concealed(physics, theta, seed):
+    """plate1 recordings with the effect, made on a mesh twice as fine, 0.2 % noise.
+
+    As tests/test_diagnose.py makes them: diagnose sees only the nominal case.
+    """
+    from test_diagnose import _plate1_case, _recordings
+
+    return _recordings(_plate1_case(), physics, theta, seed=seed)
+
+
+def _near_truth_or_mirror(model, got_xy, truth_xy, tol_mm):
+    from bayesplate.discrepancy.base import mirror_positions
+
+    places = [tuple(truth_xy), *mirror_positions(model, *truth_xy)]
+    return min(np.hypot(*(np.asarray(got_xy) - np.asarray(p))) for p in places) < tol_mm
+
+
+@pytest.mark.slow
+def test_concealed_point_support_is_named():
+    from test_diagnose import MESH, _plate1_case
+
+    from bayesplate.discrepancy.diagnose import diagnose
+
+    model = PlateModel.from_case(_plate1_case(), mesh=MESH)
+    b = laminate.stiffness_from_engineering(_plate1_case().reference)
+    # a spring of k_ref near a corner: mode 1 up 7 %, modes 2-5 by 0.1-0.3 % (0.2 % noise)
+    truth = np.array([np.log10(reference_stiffness(model, b)), 20.0, 15.0])
+    d = diagnose(_concealed(PointSupport(), truth, seed=3), model=model, rng=0)
+    assert d.verdict == "explained" and d.chosen.name == "point_support"
+    got, sd = d.chosen.fit.theta, d.chosen.fit.theta_sd
+    assert abs(got[0] - truth[0]) < 3 * sd[0] + 0.1  # log10 k: within 3 deviations
+    assert _near_truth_or_mirror(model, got[1:], truth[1:], 15.0)
+
+
+@pytest.mark.slow
+def test_concealed_cutout_is_named():
+    from test_diagnose import MESH, _plate1_case
+
+    from bayesplate.discrepancy.diagnose import diagnose
+
+    model = PlateModel.from_case(_plate1_case(), mesh=MESH)
+    truth = np.array([60.0, 35.0, 30.0])  # a 30 mm hole in the 200 x 100 mm plate: 3.5 % mass
+    d = diagnose(_concealed(Cutout(), truth, seed=2), model=model, rng=0)
+    assert d.verdict == "explained" and d.chosen.name == "cutout"
+    got, sd = d.chosen.fit.theta, d.chosen.fit.theta_sd
+    assert abs(got[2] - truth[2]) < 3 * sd[2] + 2.0  # diameter, mm
+    assert _near_truth_or_mirror(model, got[:2], truth[:2], 15.0)

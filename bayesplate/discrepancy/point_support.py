@@ -37,7 +37,10 @@ class PointSupport(Physics):
     The spring holds the mid-plane deflection ``w`` only (no rotation, no in-plane
     motion), independent of the elastic constants (a ``K_0`` like the foundation's). It
     lifts the bouncing rigid-body motion off zero; the eigen solver still recognises it by
-    its shape while it stays mostly rigid, and drops it like the free plate's.
+    its shape while it stays mostly rigid, and drops it like the free plate's. A spring
+    stiff enough to lift it among the lowest elastic modes mixes it with them (an avoided
+    crossing); a mode more than half rigid-body motion is then dropped, the package's one
+    rule (the full solve, the Ritz pencil and the scan apply it alike).
 
     The stiffness is fitted as ``log10_k_N_m`` (the issue's ``k_N_m``, on a log scale):
     the frequencies change with ``k`` over many decades (from no effect, through
