@@ -33,6 +33,18 @@ def _snapshots_and_probe(physics, model, b):
             np.array([70.0, 35.0, 20.0, 15.0, 0.4]),
             np.array([30.0, 20.0, 20.0, 15.0, 0.6]),
         ], np.array([70.0, 35.0, 20.0, 15.0, 0.7])
+    if physics.name == "cutout":  # the scan's holes, a diameter between two at one of them
+        # (a new diameter cuts other elements by other shares: not in the span of one
+        # snapshot, as a patch's factor is)
+        return [
+            np.array([70.0, 35.0, 12.0]),
+            np.array([70.0, 35.0, 8.0]),
+            np.array([30.0, 20.0, 8.0]),
+        ], np.array([70.0, 35.0, 10.0])
+    if physics.name == "point_support":  # springs lifting mode 1 by ~1-10 %, another at one
+        return [np.array([4.0, 23.0, 14.0]), np.array([3.5, 70.0, 40.0])], np.array(
+            [3.7, 23.0, 14.0]
+        )
     mean = np.array([p.mean for p in params])
     sd = np.array([p.sd for p in params])
     lo, hi = np.array([p.lower for p in params]), np.array([p.upper for p in params])
@@ -67,8 +79,10 @@ def test_reduced_candidate_matches_full_solve(plate, physics):
             2e-3 * h[i]
         )
         assert np.max(np.abs(d_theta[:, i] - own)) <= 1e-4 * np.abs(own).max() + 1e-9
-        if (i > 0 and physics.name == "point_mass") or (
-            i < 4 and physics.name == "local_stiffness_loss"
+        if (
+            (i > 0 and physics.name in ("point_mass", "point_support"))
+            or (i < 4 and physics.name == "local_stiffness_loss")
+            or (i < 2 and physics.name == "cutout")
         ):
             continue
         up, down = probe.copy(), probe.copy()

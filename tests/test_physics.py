@@ -5,10 +5,12 @@ import pytest
 
 from bayesplate import laminate
 from bayesplate.discrepancy import (
+    Cutout,
     ElasticFoundation,
     LocalStiffnessLoss,
     PlyMisalignment,
     PointMass,
+    PointSupport,
     ThicknessTaper,
     candidates,
 )
@@ -41,7 +43,8 @@ def test_parameters_have_units_priors_and_bounds(physics):
     "physics, theta",
     [(PointMass(), [0.0, 30.0, 20.0]), (ThicknessTaper("x"), [0.0]), (ThicknessTaper("y"), [0.0]),
      (PlyMisalignment(), [0.0]), (ElasticFoundation(), [0.0]),
-     (LocalStiffnessLoss(), [50.0, 26.5, 20.0, 10.0, 1.0])],
+     (LocalStiffnessLoss(), [50.0, 26.5, 20.0, 10.0, 1.0]), (Cutout(), [31.0, 17.0, 0.0]),
+     (PointSupport(), [-np.inf, 30.0, 20.0])],
     ids=lambda x: getattr(x, "name", ""),
 )  # fmt: skip
 def test_zero_effect_is_the_nominal_plate(physics, theta):

@@ -8,20 +8,24 @@ a new candidate, located or not, is one module.
 """
 
 from .base import Parameter, Physics
+from .cutout import Cutout
 from .elastic_foundation import ElasticFoundation
 from .local_stiffness_loss import LocalStiffnessLoss
 from .ply_misalignment import PlyMisalignment
 from .point_mass import PointMass
+from .point_support import PointSupport
 from .thickness_taper import ThicknessTaper
 
 __all__ = [
     "CANDIDATES",
+    "Cutout",
     "ElasticFoundation",
     "LocalStiffnessLoss",
     "Parameter",
     "Physics",
     "PlyMisalignment",
     "PointMass",
+    "PointSupport",
     "ThicknessTaper",
     "candidates",
 ]
@@ -36,6 +40,8 @@ def candidates():
         PlyMisalignment(),
         ElasticFoundation(),
         LocalStiffnessLoss(),
+        Cutout(),
+        PointSupport(),
     ]
 
 
