@@ -89,7 +89,8 @@ def register(sub):
         help="locate a model-data mismatch, name the missing physics, refit",
         description="Fit the nominal model, test it (chi-square), locate the misfit, rank "
         "candidate physics (point_mass, thickness_taper, ply_misalignment, "
-        "elastic_foundation, local_stiffness_loss) by Laplace evidence, refit, and give a "
+        "elastic_foundation, local_stiffness_loss, cutout, point_support) and, when the best "
+        "single one is still rejected, pairs of them by Laplace evidence, refit, and give a "
         "verdict: consistent, explained, ambiguous (two candidates fit about equally: both named, "
         "with the measurement that would tell them apart) or unexplained.",
     )

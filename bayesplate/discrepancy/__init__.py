@@ -2,7 +2,8 @@
 
 Every candidate implements the small interface of :class:`.base.Physics`: its parameters
 with units and priors, and how it changes the plate (a modified ``PlateModel``). A located
-candidate (:mod:`.point_mass`, :mod:`.local_stiffness_loss`) also implements the hooks
+candidate (:mod:`.point_mass`, :mod:`.local_stiffness_loss`, :mod:`.cutout`,
+:mod:`.point_support`) also implements the hooks
 ``location_map`` and ``scan``, which :func:`.diagnose.diagnose` calls on every candidate:
 a new candidate, located or not, is one module.
 """
