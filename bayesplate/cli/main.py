@@ -17,7 +17,10 @@ import sys
 
 from . import batch, cases, diagnose, estimate, import_case, modes, report, sample
 
-__all__ = ["main", "build_parser"]
+__all__ = ["INTERRUPTED", "main", "build_parser"]
+
+#: Exit status after Ctrl-C (SIGINT): 128 + 2, as shells report it.
+INTERRUPTED = 130
 
 #: The subcommands' modules, in the order of ``bayesplate --help``.
 _COMMANDS = (cases, modes, import_case, diagnose, estimate, report, sample, batch)
@@ -68,6 +71,11 @@ def main(argv=None):
     except CaseError as err:
         print(f"bayesplate: error: {err}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        # Ctrl-C: one line, the shell's status for SIGINT; every file is written whole
+        # (temporary name, then rename) and caches and chains keep what was done
+        print(f"bayesplate {args.command}: interrupted; run it again to resume", file=sys.stderr)
+        return INTERRUPTED
 
 
 if __name__ == "__main__":
