@@ -154,6 +154,27 @@ def test_sample_killed_resumes_to_the_same_numbers(tmp_path, sample_reference, s
     SURVIVED[sig.name] += status is not None
 
 
+@pytest.mark.slow
+def test_sample_killed_again_and_again_resumes_to_the_same_numbers(tmp_path, sample_reference):
+    # one chain file through six kills in a row (SIGINT and SIGKILL by turns), then to the end
+    reference, wall = sample_reference
+    args = [*_SAMPLE, "--backend", "chain.h5", "--json", "out.json"]
+    survived = []
+    for i in range(6):
+        sig = (signal.SIGINT, signal.SIGKILL)[i % 2]
+        status, err = _interrupt(args, tmp_path, sig, _RNG.uniform(0.5, wall))
+        if status is not None:
+            _check_interrupted(sig, status, err)
+            _whole_json(tmp_path / "out.json", reference)
+            _chain_readable(tmp_path / "chain.h5")
+            survived.append(sig.name)
+    status, err, _ = _run(args, tmp_path)
+    assert status in (0, 1), err
+    _same_numbers(json.loads((tmp_path / "out.json").read_text()), reference)
+    for name in survived:
+        SURVIVED[name] += 1
+
+
 # ----------------------------------------------------------------------------- report
 
 _REPORT = ["report", CASE, "--quick", "--mesh", 6, 4, "--seed", 5, "--no-diagnose", "-o", "rep"]
@@ -205,6 +226,24 @@ def test_report_killed_resumes_to_the_same_numbers(tmp_path, report_reference, s
     _same_numbers(_cache_numbers(tmp_path / "rep"), numbers)
     assert _report_text((tmp_path / "rep" / "report.md").read_text()) == _report_text(text)
     SURVIVED[sig.name] += status is not None
+
+
+@pytest.mark.slow
+def test_report_killed_again_and_again_resumes_to_the_same_numbers(tmp_path, report_reference):
+    numbers, text, wall = report_reference
+    survived = []
+    for i in range(4):
+        sig = (signal.SIGKILL, signal.SIGINT)[i % 2]
+        status, err = _interrupt(_REPORT, tmp_path, sig, _RNG.uniform(0.5, wall))
+        if status is not None:
+            _check_interrupted(sig, status, err)
+            survived.append(sig.name)
+    status, err, _ = _run(_REPORT, tmp_path)
+    assert status == 0, err
+    _same_numbers(_cache_numbers(tmp_path / "rep"), numbers)
+    assert _report_text((tmp_path / "rep" / "report.md").read_text()) == _report_text(text)
+    for name in survived:
+        SURVIVED[name] += 1
 
 
 # ----------------------------------------------------------------------------- diagnose

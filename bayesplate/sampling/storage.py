@@ -110,6 +110,12 @@ def commit(backend):
         raise
 
 
+def _remove_stale(path):
+    """Remove what a killed :func:`commit` left: ``.NAME.*.tmp`` beside the chain file."""
+    for stale in path.parent.glob(f".{path.name}.*.tmp"):
+        stale.unlink(missing_ok=True)
+
+
 def open_backend(path, density, n_walkers):
     """An emcee backend and, for an HDF file that holds a chain, its stored settings.
 
@@ -134,6 +140,7 @@ def open_backend(path, density, n_walkers):
     if path is None:
         return emcee.backends.Backend(), None
     backend = _Stored(path)
+    _remove_stale(backend.path)
     fingerprint = _fingerprint(density.problem)
     stored = _read(path, backend) if pathlib.Path(path).exists() else None
     if stored is not None:
