@@ -11,7 +11,8 @@ a flat optimum (values ~1e-8 of a taper ratio or a misalignment, where the chi-s
 change within round-off), and where it stops depends on the last bits of the BLAS reductions,
 which may be threaded differently in a worker. Such values (|x| < 1e-6 in both runs) are
 compared to an absolute 1e-6, orders of magnitude below anything the diagnosis reports as
-found; every other number is compared exactly.
+found; every other number is compared exactly. (On the 2-core machine the tests were written
+on, 1 and 2 workers agree to the last bit, flat parameters included.)
 """
 
 import json
@@ -131,7 +132,9 @@ def _plain(value):
 def test_diagnose_same_seed_same_numbers_with_one_and_two_workers():
     one, again, two = _small_diagnosis(1), _small_diagnosis(1), _small_diagnosis(2)
     assert _differences(one, again) == []
-    assert _differences(one, two) == []  # exactly, here (no flat parameter moves)
+    # identical to the last bit on the 2-core test machine; the tolerance is for machines
+    # where this process runs more BLAS threads than a forked worker (module docstring)
+    assert _differences(one, two, flat_atol=_FLAT_ATOL) == []
 
 
 @pytest.mark.slow
