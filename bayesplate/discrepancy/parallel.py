@@ -10,11 +10,16 @@ the tasks run in this process, in order, with the same results.
 from __future__ import annotations
 
 import multiprocessing
-from concurrent.futures import ProcessPoolExecutor
+import signal
 
 __all__ = ["fork_map"]
 
 _TASK = None  # (function, items) of the map in progress, inherited by forked workers
+
+
+def _ignore_interrupt():
+    """Workers leave Ctrl-C to the parent, which stops them (no traceback from each)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _call(index):
@@ -45,7 +50,9 @@ def fork_map(function, items, workers=1):
     _TASK = (function, items)
     try:
         context = multiprocessing.get_context("fork")
-        with ProcessPoolExecutor(max_workers=n, mp_context=context) as pool:
-            return list(pool.map(_call, range(len(items))))
+        # a Pool, not a ProcessPoolExecutor: on Ctrl-C (or a failed task) leaving the block
+        # terminates the workers at once, where the executor waits for their tasks
+        with context.Pool(n, initializer=_ignore_interrupt) as pool:
+            return pool.map(_call, range(len(items)), chunksize=1)
     finally:
         _TASK = None

@@ -13,6 +13,8 @@ stopping rule (:mod:`bayesplate.sampling.stopping`) or ``max_steps``; an HDF bac
 from __future__ import annotations
 
 import logging
+import signal
+import threading
 import time
 from dataclasses import replace
 
@@ -26,7 +28,7 @@ from .moves import InBox, LaplaceMove, RitzScreen, ScreenedDEMove, default_moves
 from .result import build_result
 from .seeding import generator, resolve_rng
 from .stopping import StoppingRule, autocorr_time
-from .storage import open_backend, restore_tuning, store_tuning
+from .storage import commit, open_backend, restore_tuning, store_tuning
 
 __all__ = ["TUNE_ROUNDS", "TUNE_STEPS", "sample_problem"]
 
@@ -66,25 +68,67 @@ def _progress_bar(progress, total, initial):
     return tqdm(total=total, initial=initial, desc="sampling", unit="step", leave=False)
 
 
-def _run_chain(sampler, state, max_steps, check_every, stop, bar, n_tune):
-    """Advance ``check_every`` steps at a time until ``stop(sampler)`` or ``max_steps``."""
+class _Interrupt:
+    """Ctrl-C while sampling is taken at the end of the step under way, not inside emcee.
+
+    emcee prints the traceback of any exception raised in the log-density (Ctrl-C
+    included) before passing it on; within this block the first SIGINT only sets
+    :attr:`asked`, and :func:`_advance` raises ``KeyboardInterrupt`` after the step. A
+    second Ctrl-C interrupts at once. Outside the main thread nothing changes.
+    """
+
+    def __enter__(self):
+        self.asked, self.saved = False, None
+        if threading.current_thread() is threading.main_thread():
+            self.saved = signal.signal(signal.SIGINT, self._ask)
+        return self
+
+    def _ask(self, signum, frame):
+        if self.asked:
+            raise KeyboardInterrupt
+        self.asked = True
+
+    def __exit__(self, *exc):
+        if self.saved is not None:
+            signal.signal(signal.SIGINT, self.saved)
+        return False
+
+
+def _advance(sampler, state, steps, interrupt):
+    """``steps`` steps of the sampler; ``KeyboardInterrupt`` after a step if Ctrl-C came."""
+    for _ in sampler.sample(state, iterations=steps, skip_initial_state_check=True):
+        if interrupt is not None and interrupt.asked:
+            raise KeyboardInterrupt
+    return sampler.backend.get_last_sample()
+
+
+def _run_chain(sampler, state, max_steps, check_every, stop, bar, n_tune, interrupt=None):
+    """Advance ``check_every`` steps at a time until ``stop(sampler)`` or ``max_steps``.
+
+    The chain is committed to its file after every block (:func:`.storage.commit`), so a
+    resumed chain starts on a check and meets the rule on the same step as one never
+    stopped; a resumed chain is checked before it runs (it may have met the rule already).
+    """
     history = []
     converged = False
-    while sampler.iteration < max_steps:
+    if sampler.iteration > n_tune:
+        tau = autocorr_time(sampler, n_tune)
+        history.append([sampler.iteration, *tau])
+        converged, _ = stop(sampler, tau)
+    while not converged and sampler.iteration < max_steps:
         steps = min(check_every, max_steps - sampler.iteration)
-        state = sampler.run_mcmc(state, steps, progress=False, skip_initial_state_check=True)
+        state = _advance(sampler, state, steps, interrupt)
+        commit(sampler.backend)
         tau = autocorr_time(sampler, n_tune)
         history.append([sampler.iteration, *tau])
         converged, note = stop(sampler, tau)
         if bar is not None:
             bar.update(steps)
             bar.set_postfix_str(note, refresh=False)
-        if converged:
-            break
     return state, np.array(history).reshape(-1, 7), converged
 
 
-def _tune(sampler, state, move, rounds, steps, max_steps, bar):
+def _tune(sampler, state, move, rounds, steps, max_steps, bar, interrupt=None):
     """Rounds of ``steps``; after each, ``move`` proposes from the ensemble's last half.
 
     Returns the state and the step at which the proposal was frozen (the burn-in).
@@ -93,7 +137,7 @@ def _tune(sampler, state, move, rounds, steps, max_steps, bar):
         steps = min(steps, max_steps - sampler.iteration)
         if steps < 4:
             break
-        state = sampler.run_mcmc(state, steps, progress=False, skip_initial_state_check=True)
+        state = _advance(sampler, state, steps, interrupt)
         z = sampler.get_chain(discard=sampler.iteration - steps // 2).reshape(-1, 6)
         move.set_proposal(z.mean(axis=0), np.cov(z, rowvar=False))
         if bar is not None:
@@ -163,8 +207,9 @@ def sample_problem(
         E.g. a ``multiprocessing.Pool``; the log-density (problem and model) is pickled
         with every batch of proposals, which pays for slow models only.
     backend_path : path, optional
-        HDF5 file (emcee ``HDFBackend``) holding the chain; if it holds one of the same
-        problem, the run continues it (same coordinates, proposal and random state).
+        HDF5 file (emcee ``HDFBackend`` layout) holding the chain, written whole at every
+        check (:mod:`.storage`); if it holds one of the same problem, the run continues it
+        from its last check (same coordinates, proposal and random state).
     progress : bool
         Progress bar (tqdm) with the current ``tau`` and ESS.
     moves : list, optional
@@ -211,15 +256,18 @@ def sample_problem(
     # (up to ten times on a busy machine, reports/benchmark_reduced.md)
     limits = threadpool_limits(limits=1, user_api="blas")
     try:
-        n_tune = restore_tuning(stored, laplace)
-        if n_tune is None:
-            rounds = tune_rounds if laplace is not None else 0
-            state, n_tune = _tune(sampler, state, laplace, rounds, tune_steps, max_steps, bar)
-            store_tuning(backend, laplace, n_tune)
-        stop = StoppingRule(density, n_tune, target_tau_factor, min_ess, max_rhat)
-        state, history, converged = _run_chain(
-            sampler, state, max_steps, check_every, stop, bar, n_tune
-        )
+        with _Interrupt() as interrupt:
+            n_tune = restore_tuning(stored, laplace)
+            if n_tune is None:
+                rounds = tune_rounds if laplace is not None else 0
+                state, n_tune = _tune(
+                    sampler, state, laplace, rounds, tune_steps, max_steps, bar, interrupt
+                )
+                store_tuning(backend, laplace, n_tune)
+            stop = StoppingRule(density, n_tune, target_tau_factor, min_ess, max_rhat)
+            state, history, converged = _run_chain(
+                sampler, state, max_steps, check_every, stop, bar, n_tune, interrupt
+            )
     finally:
         limits.restore_original_limits()
         if bar is not None:

@@ -1,0 +1,282 @@
+"""Interrupt anything, lose nothing: commands killed at a random moment, then run again.
+
+Each command runs as a subprocess on a small but real setting (a bundled case on a coarse
+mesh, few steps), once uninterrupted (the reference) and once killed at a moment drawn from
+a seeded generator between 0.5 s and the reference's wall time (SIGINT, as Ctrl-C, or
+SIGKILL), then run again with the same options. Checked:
+
+- the killed run leaves no partial output: each output file is absent or whole (parses, and
+  equals the reference); a SIGINT ends with one line on standard error, no traceback, and
+  exit status 130;
+- the run again resumes from what was stored (the report's step cache, the sampler's chain)
+  and ends with the same numbers as the reference, bit for bit: the same seed makes the same
+  arithmetic in the same order on this machine, so no tolerance is needed. Left out of the
+  comparison: wall times and counts of this run's own work (evaluations and full solves
+  made by this process; a resumed run makes fewer).
+
+:data:`SURVIVED` counts the interruptions survived; the count is printed at the end.
+"""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+CASE = "frederiksen_t300"
+#: Interruptions survived (killed, nothing partial left, resumed to the reference numbers).
+SURVIVED = {"SIGINT": 0, "SIGKILL": 0}
+_RNG = np.random.default_rng(20261125)  # the moments of the kills
+
+# work counts and clocks of a run (not results): a resumed run does less work
+_NOT_NUMBERS = {"timings_s", "n_evaluations", "n_full_solves_sampling", "timings", "wall_time"}
+
+
+def _env():
+    env = dict(os.environ, PYTHONPATH=str(ROOT), MPLBACKEND="Agg")
+    env.pop("PYTHONWARNINGS", None)
+    return env
+
+
+def _command(args):
+    return [sys.executable, "-m", "bayesplate.cli", *map(str, args)]
+
+
+def _run(args, cwd):
+    """Run to the end; (exit status, stderr, wall time)."""
+    started = time.perf_counter()
+    done = subprocess.run(_command(args), cwd=cwd, env=_env(), capture_output=True, text=True)
+    return done.returncode, done.stderr, time.perf_counter() - started
+
+
+def _interrupt(args, cwd, sig, delay):
+    """Start the command, send `sig` after `delay` s: (exit status, stderr).
+
+    The status is None when the command finished before the signal (no interruption).
+    """
+    proc = subprocess.Popen(
+        _command(args), cwd=cwd, env=_env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+        text=True,
+    )  # fmt: skip
+    try:
+        proc.wait(timeout=delay)
+        return None, proc.stderr.read()  # finished before the kill: not an interruption
+    except subprocess.TimeoutExpired:
+        proc.send_signal(sig)
+    _, err = proc.communicate(timeout=120)
+    return proc.returncode, err
+
+
+def _check_interrupted(sig, status, err):
+    """What a killed run must end with: SIGINT one line and 130; SIGKILL -9."""
+    if sig == signal.SIGKILL:
+        assert status == -signal.SIGKILL
+        return
+    assert status == 130, err
+    assert "Traceback" not in err, err
+    lines = [line for line in err.splitlines() if "interrupted" in line]
+    assert len(lines) == 1 and err.rstrip().endswith(lines[0]), err
+
+
+def _numbers(value, path=""):
+    """The numbers of a JSON document, flattened: {"a/b/0": 1.5, ...} without clocks."""
+    if isinstance(value, dict):
+        out = {}
+        for key, item in value.items():
+            if key not in _NOT_NUMBERS:
+                out.update(_numbers(item, f"{path}/{key}"))
+        return out
+    if isinstance(value, list):
+        out = {}
+        for i, item in enumerate(value):
+            out.update(_numbers(item, f"{path}/{i}"))
+        return out
+    return {path: value}
+
+
+def _same_numbers(got, want):
+    a, b = _numbers(got), _numbers(want)
+    assert a.keys() == b.keys()
+    differ = [k for k in a if a[k] != b[k] and not (a[k] != a[k] and b[k] != b[k])]  # NaN
+    assert not differ, [(k, a[k], b[k]) for k in differ[:5]]
+
+
+def _whole_json(path, reference):
+    """An output file after a kill: absent, or whole with the reference's numbers."""
+    if path.exists():
+        _same_numbers(json.loads(path.read_text()), reference)
+
+
+# ----------------------------------------------------------------------------- sample
+
+_SAMPLE = ["sample", CASE, "--mesh", 6, 4, "--seed", 3, "--walkers", 12, "--max-steps", 190,
+           "--min-ess", 400]  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def sample_reference(tmp_path_factory):
+    """An uninterrupted run with its chain file: (JSON document, wall time)."""
+    cwd = tmp_path_factory.mktemp("sample_ref")
+    status, err, wall = _run([*_SAMPLE, "--backend", "chain.h5", "--json", "out.json"], cwd)
+    assert status in (0, 1), err  # 1: the step cap came first (a short chain on purpose)
+    return json.loads((cwd / "out.json").read_text()), wall
+
+
+def _chain_readable(path):
+    """A chain file left by a killed run: absent, or one emcee reads whole."""
+    if not path.exists():
+        return
+    import emcee
+
+    chain = emcee.backends.HDFBackend(str(path), read_only=True).get_chain()
+    assert chain.shape[1:] == (12, 6) and np.all(np.isfinite(chain))
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL], ids=["SIGINT", "SIGKILL"])
+def test_sample_killed_resumes_to_the_same_numbers(tmp_path, sample_reference, sig):
+    reference, wall = sample_reference
+    args = [*_SAMPLE, "--backend", "chain.h5", "--json", "out.json"]
+    delay = _RNG.uniform(0.5, wall)
+    status, err = _interrupt(args, tmp_path, sig, delay)
+    if status is not None:
+        _check_interrupted(sig, status, err)
+        _whole_json(tmp_path / "out.json", reference)
+        _chain_readable(tmp_path / "chain.h5")
+    status, err, _ = _run(args, tmp_path)
+    assert status in (0, 1), err
+    _same_numbers(json.loads((tmp_path / "out.json").read_text()), reference)
+    SURVIVED[sig.name] += status is not None
+
+
+@pytest.mark.slow
+def test_sample_killed_again_and_again_resumes_to_the_same_numbers(tmp_path, sample_reference):
+    # one chain file through six kills in a row (SIGINT and SIGKILL by turns), then to the end
+    reference, wall = sample_reference
+    args = [*_SAMPLE, "--backend", "chain.h5", "--json", "out.json"]
+    survived = []
+    for i in range(6):
+        sig = (signal.SIGINT, signal.SIGKILL)[i % 2]
+        status, err = _interrupt(args, tmp_path, sig, _RNG.uniform(0.5, wall))
+        if status is not None:
+            _check_interrupted(sig, status, err)
+            _whole_json(tmp_path / "out.json", reference)
+            _chain_readable(tmp_path / "chain.h5")
+            survived.append(sig.name)
+    status, err, _ = _run(args, tmp_path)
+    assert status in (0, 1), err
+    _same_numbers(json.loads((tmp_path / "out.json").read_text()), reference)
+    for name in survived:
+        SURVIVED[name] += 1
+
+
+# ----------------------------------------------------------------------------- report
+
+_REPORT = ["report", CASE, "--quick", "--mesh", 6, 4, "--seed", 5, "--no-diagnose", "-o", "rep"]
+
+
+def _cache_numbers(folder):
+    """Every cached step of a report folder as a JSON-like dict of numbers."""
+    out = {}
+    for path in sorted((folder / ".cache").glob("*.npz")):
+        with np.load(path, allow_pickle=False) as stored:
+            step = json.loads(str(stored["__json__"]))
+            step.update({k: stored[k].tolist() for k in stored.files if not k.startswith("__")})
+        out[path.stem] = step
+    return out
+
+
+@pytest.fixture(scope="module")
+def report_reference(tmp_path_factory):
+    cwd = tmp_path_factory.mktemp("report_ref")
+    status, err, wall = _run(_REPORT, cwd)
+    assert status == 0, err
+    return _cache_numbers(cwd / "rep"), (cwd / "rep" / "report.md").read_text(), wall
+
+
+def _report_text(text):
+    """report.md without clocks, nor the line of what this run computed and reused."""
+    import re
+
+    lines = [line for line in text.splitlines() if "reused from the cache" not in line]
+    return re.sub(r"\b\d+(\.\d+)? s\b", "# s", "\n".join(lines))
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL], ids=["SIGINT", "SIGKILL"])
+def test_report_killed_resumes_to_the_same_numbers(tmp_path, report_reference, sig):
+    numbers, text, wall = report_reference
+    delay = _RNG.uniform(0.5, wall)
+    status, err = _interrupt(_REPORT, tmp_path, sig, delay)
+    if status is not None:
+        _check_interrupted(sig, status, err)
+        for path in (tmp_path / "rep").glob("*"):
+            assert not path.name.endswith(".tmp") or sig == signal.SIGKILL
+        cached = _cache_numbers(tmp_path / "rep") if (tmp_path / "rep").exists() else {}
+        for step, value in cached.items():  # every step stored is whole and the same
+            _same_numbers(value, numbers[step])
+        if (tmp_path / "rep" / "report.md").exists():
+            assert _report_text((tmp_path / "rep" / "report.md").read_text()) == _report_text(text)
+    status, err, _ = _run(_REPORT, tmp_path)
+    assert status == 0, err
+    _same_numbers(_cache_numbers(tmp_path / "rep"), numbers)
+    assert _report_text((tmp_path / "rep" / "report.md").read_text()) == _report_text(text)
+    SURVIVED[sig.name] += status is not None
+
+
+@pytest.mark.slow
+def test_report_killed_again_and_again_resumes_to_the_same_numbers(tmp_path, report_reference):
+    numbers, text, wall = report_reference
+    survived = []
+    for i in range(4):
+        sig = (signal.SIGKILL, signal.SIGINT)[i % 2]
+        status, err = _interrupt(_REPORT, tmp_path, sig, _RNG.uniform(0.5, wall))
+        if status is not None:
+            _check_interrupted(sig, status, err)
+            survived.append(sig.name)
+    status, err, _ = _run(_REPORT, tmp_path)
+    assert status == 0, err
+    _same_numbers(_cache_numbers(tmp_path / "rep"), numbers)
+    assert _report_text((tmp_path / "rep" / "report.md").read_text()) == _report_text(text)
+    for name in survived:
+        SURVIVED[name] += 1
+
+
+# ----------------------------------------------------------------------------- diagnose
+
+
+def test_diagnose_sigint_ends_with_one_line_and_130(tmp_path):
+    # two worker processes: Ctrl-C reaches them too; they leave it to the parent
+    args = ["diagnose", CASE, "--mesh", 4, 2, "--seed", 1, "--workers", 2, "--json", "out.json"]
+    status, err = _interrupt(args, tmp_path, signal.SIGINT, _RNG.uniform(3.0, 8.0))
+    assert status is not None, "finished before the interruption: raise the delay's bound"
+    _check_interrupted(signal.SIGINT, status, err)
+    assert not (tmp_path / "out.json").exists()
+    assert not list(tmp_path.glob(".*.tmp"))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL], ids=["SIGINT", "SIGKILL"])
+def test_diagnose_killed_then_run_again_gives_the_same_numbers(tmp_path, sig):
+    args = ["diagnose", CASE, "--mesh", 4, 2, "--seed", 1, "--workers", 2, "--json", "out.json"]
+    status, err, wall = _run(args, tmp_path)
+    assert status == 0, err
+    reference = json.loads((tmp_path / "out.json").read_text())
+    (tmp_path / "out.json").unlink()
+    status, err = _interrupt(args, tmp_path, sig, _RNG.uniform(0.5, wall))
+    if status is not None:
+        _check_interrupted(sig, status, err)
+        _whole_json(tmp_path / "out.json", reference)
+    status, err, _ = _run(args, tmp_path)
+    assert status == 0, err
+    _same_numbers(json.loads((tmp_path / "out.json").read_text()), reference)
+    SURVIVED[sig.name] += status is not None
+
+
+def test_zz_count_of_interruptions_survived():
+    """Prints the interruptions survived by this module's tests (for the README)."""
+    print(f"\ninterruptions survived: {SURVIVED}")
