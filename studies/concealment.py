@@ -15,12 +15,13 @@ from __future__ import annotations
 import json
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
 from bayesplate import PlateModel, bundled_case_path, load_case, stiffness_from_engineering
+from bayesplate.batch import map_tasks
 from bayesplate.discrepancy import (
     ElasticFoundation,
     LocalStiffnessLoss,
@@ -85,20 +86,37 @@ def run_scenario(index, quick=False):
     return row
 
 
-def main(out_dir="reports", quick=False, workers=1):
+def main(out_dir="reports", quick=False, workers=1, scheduler=None):
     """Run every scenario and write ``concealment.md``; returns the rows.
+
+    The scenarios run as independent tasks (:func:`bayesplate.batch.map_tasks`): in this
+    process with one worker, else on a local Dask cluster of `workers` processes or on the
+    Dask scheduler at `scheduler`; each row is the same wherever it ran.
 
     Finished rows are kept in ``out_dir/.cache/`` and reused when the study is run again.
     """
     cache = Path(out_dir) / ".cache" / f"concealment{'-quick' if quick else ''}.json"
     done = json.loads(cache.read_text()) if cache.exists() else {}
     todo = [i for i in range(len(scenarios(quick))) if str(i) not in done]
-    with ProcessPoolExecutor(max_workers=workers) if workers > 1 else _Serial() as pool:
-        for i, row in zip(todo, pool.map(run_scenario, todo, [quick] * len(todo)), strict=True):
-            done[str(i)] = row
-            atomic_write_text(cache, json.dumps(done, default=_plain))
-            write_report(out_dir, quick)
+
+    def keep(position, row):  # each row stored as it comes: an interrupted run resumes
+        done[str(todo[position])] = row
+        atomic_write_text(cache, json.dumps(done, default=_plain))
+        write_report(out_dir, quick)
+
+    _ship_by_value()
+    map_tasks(partial(run_scenario, quick=quick), todo, workers=workers, scheduler=scheduler,
+              on_result=keep)  # fmt: skip
     return write_report(out_dir, quick)
+
+
+def _ship_by_value():
+    """Let Dask workers run this script's functions without importing it (not a package)."""
+    module = sys.modules.get(__name__)
+    if __name__ != "__main__" and module is not None:
+        import cloudpickle
+
+        cloudpickle.register_pickle_by_value(module)
 
 
 def write_report(out_dir="reports", quick=False):
@@ -118,19 +136,6 @@ def write_report(out_dir="reports", quick=False):
         )
     atomic_write_text(Path(out_dir) / "concealment.md", text)
     return rows
-
-
-class _Serial:
-    """A map in this process, for one worker."""
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        return False
-
-    def map(self, fn, *iterables):
-        return map(fn, *iterables)
 
 
 def _plain(value):

@@ -1,0 +1,119 @@
+"""The batch engine for any independent tasks: :func:`map_tasks` and :class:`TaskPool`.
+
+The reference is the serial path, the plain ``[fn(item) for item in items]`` in this process
+with one BLAS thread (as on the Dask workers, where a different thread count may change the
+last bits of an eigen solve): the cluster must give the same results, bit for bit, in the
+order of the items, whichever worker ran which task. The study-like task is the concealment
+study's shape in small: a plate model built in the task, frequencies with noise from the
+task's own stream of one seed, a row of plain data back.
+"""
+
+import sys
+
+import cloudpickle
+import numpy as np
+import pytest
+from threadpoolctl import threadpool_limits
+
+from bayesplate import PlateModel, bundled_case_path, load_case, stiffness_from_engineering
+from bayesplate.batch import TaskPool, map_tasks
+
+SEED = 20261125
+N_TASKS = 5
+
+# the workers cannot import this test module: its functions travel by value
+cloudpickle.register_pickle_by_value(sys.modules[__name__])
+
+
+def _study_row(index):
+    """One scenario of a study in small: its own noise stream, a model built here."""
+    case = load_case(bundled_case_path("plate1"))
+    model = PlateModel.from_case(case, mesh=(6, 4))
+    rng = np.random.default_rng(np.random.SeedSequence(SEED).spawn(index + 1)[index])
+    f = model.solve(stiffness_from_engineering(case.reference), 6).frequency_Hz
+    noisy = f * (1 + 0.002 * rng.standard_normal(f.size))
+    return {"index": index, "f_Hz": noisy.tolist(), "mean_Hz": float(noisy.mean())}
+
+
+@pytest.fixture(scope="module")
+def client():
+    """A client of a local cluster of 2 single-threaded workers, given to the engine."""
+    from distributed import Client, LocalCluster
+
+    from bayesplate.batch.run import _ONE_THREAD
+
+    with (
+        LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                     dashboard_address=None, env=_ONE_THREAD) as cluster,
+        Client(cluster) as given,
+    ):  # fmt: skip
+        yield given
+
+
+def _fails(index):
+    if index == 2:
+        raise ValueError(f"task {index} fails")
+    return index
+
+
+def test_the_same_rows_with_one_and_two_workers():
+    items = list(range(N_TASKS))
+    with threadpool_limits(limits=1):
+        serial = [_study_row(i) for i in items]
+        one = map_tasks(_study_row, items, workers=1, progress=False)
+    seen, lines = {}, []
+    two = map_tasks(_study_row, items, workers=2, progress=lines.append,
+                    on_result=seen.__setitem__)  # fmt: skip
+    assert one == serial
+    assert two == serial  # bit for bit, in the order of the items
+    assert seen == dict(enumerate(serial))  # each row handed over once, as it came
+    assert "2 workers" in lines[0] and len(lines) == 1 + N_TASKS
+    # the noise streams differ between tasks: the order is not trivially right
+    assert len({r["mean_Hz"] for r in two}) == N_TASKS
+
+
+def test_a_failing_task_raises_its_error_on_both_paths(client):
+    with pytest.raises(ValueError, match="task 2 fails"):
+        map_tasks(_fails, range(4), workers=1, progress=False)
+    with pytest.raises(ValueError, match="task 2 fails"):
+        map_tasks(_fails, range(4), scheduler=client, progress=False)
+    assert map_tasks(_fails, [0, 1, 3], scheduler=client, progress=False) == [0, 1, 3]
+
+
+def test_no_items_start_no_cluster():
+    assert map_tasks(_fails, [], workers=2, progress=False) == []
+
+
+# a 40-step chain is too short for emcee's and arviz's diagnostics: they warn, rightly
+@pytest.mark.filterwarnings("ignore:More chains:UserWarning")
+@pytest.mark.filterwarnings("ignore:invalid value encountered in divide:RuntimeWarning")
+def test_task_pool_is_a_map_for_the_sampler(client):
+    from bayesplate.pairing import Pairing
+    from bayesplate.posterior import GaussianProblem, prior_in_stiffness
+    from bayesplate.sampling import sample_problem
+
+    # g(b) = A b: a problem cheap to evaluate, its log-density a closure shipped to workers
+    rng = np.random.default_rng(SEED)
+    e0 = np.array([150e9, 10e9, 0.25, 3e9, 3e9, 2e9])
+    mu, V_b = prior_in_stiffness(e0, e0 / 6, "full")
+    A = rng.uniform(0.2, 2.0, size=(8, 6)) * 1e7 / mu[None, :]
+    Y = A @ (mu * rng.uniform(0.9, 1.1, 6))
+    V_Y = np.diag((0.01 * Y) ** 2)
+
+    class Linear:
+        def __init__(self, b):
+            self.eigenvalues, self.sensitivities = A @ b, A
+
+    pairing = Pairing(np.arange(8), extra=0)
+    problem = GaussianProblem(Y, V_Y, mu, V_b, lambda b, n: Linear(b), pairing)
+    P = np.linalg.inv(A.T @ np.linalg.solve(V_Y, A) + np.linalg.inv(V_b))
+    kwargs = {"progress": False, "max_steps": 40, "min_ess": np.inf, "rng": 4,
+              "tune_rounds": 1, "tune_steps": 10, "check_every": 20}  # fmt: skip
+    plain = sample_problem(problem, mu, P, **kwargs)
+    with TaskPool(scheduler=client) as pool:
+        assert pool.map(abs, [-1, 2, -3]) == [1, 2, 3]
+        pooled = sample_problem(problem, mu, P, pool=pool, **kwargs)
+    np.testing.assert_array_equal(plain.chain, pooled.chain)
+    assert client.status == "running"  # a client given is the caller's to close
+    with pytest.raises(RuntimeError, match="outside its `with` block"):
+        pool.map(abs, [1])
