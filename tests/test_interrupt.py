@@ -44,6 +44,16 @@ def _env():
     return env
 
 
+def _default_sigint():
+    """In the child: Ctrl-C as a terminal gives it, whatever this process inherited.
+
+    A job started in the background by a non-interactive shell (as a CI script may start
+    the tests) ignores SIGINT, its children inherit that, and Python then installs no
+    KeyboardInterrupt handler: the command would never see the signal the test sends.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _command(args):
     return [sys.executable, "-m", "bayesplate.cli", *map(str, args)]
 
@@ -62,7 +72,7 @@ def _interrupt(args, cwd, sig, delay):
     """
     proc = subprocess.Popen(
         _command(args), cwd=cwd, env=_env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-        text=True,
+        text=True, preexec_fn=_default_sigint,
     )  # fmt: skip
     try:
         proc.wait(timeout=delay)
@@ -254,8 +264,10 @@ def test_report_killed_again_and_again_resumes_to_the_same_numbers(tmp_path, rep
 def test_diagnose_sigint_ends_with_one_line_and_130(tmp_path):
     # two worker processes: Ctrl-C reaches them too; they leave it to the parent
     args = ["diagnose", CASE, "--mesh", 4, 2, "--seed", 1, "--workers", 2, "--json", "out.json"]
-    # early (start-up takes about 1.5 s): a quiet machine finishes this run in a few seconds
-    status, err = _interrupt(args, tmp_path, signal.SIGINT, _RNG.uniform(2.0, 3.5))
+    # inside the run, however fast the machine: a quiet one finishes it in about 3 s
+    _, _, wall = _run(args, tmp_path)
+    (tmp_path / "out.json").unlink()
+    status, err = _interrupt(args, tmp_path, signal.SIGINT, _RNG.uniform(0.3, 0.7) * wall)
     assert status is not None, "finished before the interruption: raise the delay's bound"
     _check_interrupted(signal.SIGINT, status, err)
     assert not (tmp_path / "out.json").exists()
