@@ -30,8 +30,12 @@ REPORT = "benchmark_diagnose.md"
 TARGET_MEDIAN_S, TARGET_WORST_S = 30.0, 90.0
 
 
-def one(index):
-    """Diagnose scenario ``index`` of the concealment study; a JSON line on stdout."""
+def one(index, quick=False):
+    """Diagnose scenario ``index`` of the concealment study; a JSON line on stdout.
+
+    ``quick``: on the concealment study's quick mesh (12 x 6; recordings on 24 x 12), a
+    regression run of this script, not a measurement.
+    """
     import numpy as np
 
     sys.path.insert(0, str(ROOT / "studies"))
@@ -42,8 +46,9 @@ def one(index):
 
     label, physics, size, theta = scenarios()[index]
     case = load_case(bundled_case_path("frederiksen_t300"))
-    model = PlateModel.from_case(case, mesh=case.mesh)
-    fine = PlateModel.from_case(case, mesh=(2 * case.mesh[0], 2 * case.mesh[1]))
+    mesh = (12, 6) if quick else case.mesh
+    model = PlateModel.from_case(case, mesh=mesh)
+    fine = PlateModel.from_case(case, mesh=(2 * mesh[0], 2 * mesh[1]))
     rng = np.random.default_rng(np.random.SeedSequence(SEED).spawn(index + 1)[index])
     f = recordings(case, fine, physics, theta, rng)
     blind = case.with_measured(frequency_Hz=f, sigma_Hz=NOISE * f)
@@ -60,11 +65,12 @@ def one(index):
                       "load": [load, os.getloadavg()[0]]}))  # fmt: skip
 
 
-def run(index, tree):
+def run(index, tree, quick=False):
     """Scenario ``index`` in a fresh process on the code of ``tree``; its result dict."""
     env = {**os.environ, "PYTHONPATH": str(tree)}
-    out = subprocess.run([sys.executable, __file__, "--one", str(index)], env=env, check=True,
-                         capture_output=True, text=True).stdout  # fmt: skip
+    command = [sys.executable, __file__, "--one", str(index), *(["--quick"] if quick else [])]
+    out = subprocess.run(command, env=env, check=True, capture_output=True,
+                         text=True).stdout  # fmt: skip
     return json.loads(out.strip().splitlines()[-1])
 
 
@@ -109,10 +115,10 @@ def write_report(rows, base_rows, info, out_dir, base_label):
     return path
 
 
-def main(out_dir, runs, base=None, base_runs=()):
+def main(out_dir, runs, base=None, base_runs=(), quick=False):
     rows, base_rows = [], []
     for i in runs:
-        rows.append(run(i, ROOT))
+        rows.append(run(i, ROOT, quick))
         print(json.dumps(rows[-1]), flush=True)
         if base is not None and i in base_runs:
             base_rows.append(run(i, base))
@@ -128,8 +134,9 @@ if __name__ == "__main__":
     parser.add_argument("--base", help="another checkout to compare with")
     parser.add_argument("--base-runs", type=int, nargs="*", default=[0, 3])
     parser.add_argument("--out", default=ROOT / "reports")
+    parser.add_argument("--quick", action="store_true", help="12 x 6 mesh: a regression run")
     args = parser.parse_args()
     if args.one is not None:
-        one(args.one)
+        one(args.one, args.quick)
     else:
-        main(args.out, args.runs, args.base, args.base_runs)
+        main(args.out, args.runs, args.base, args.base_runs, args.quick)
