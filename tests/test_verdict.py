@@ -11,8 +11,9 @@ with 0.2 % noise, as in tests/test_diagnose.py.
 import numpy as np
 import pytest
 from scipy.special import expit
+from test_diagnose import MESH, NOISE, _plate1_case, _recordings
 
-from bayesplate import PlateModel, bundled_case_path, load_case, stiffness_from_engineering
+from bayesplate import PlateModel, stiffness_from_engineering
 from bayesplate.discrepancy import ElasticFoundation, PointMass, ThicknessTaper
 from bayesplate.discrepancy.diagnose import diagnose
 from bayesplate.discrepancy.pair import Pair, pairs_with
@@ -22,23 +23,7 @@ from bayesplate.discrepancy.separate import separate
 from bayesplate.discrepancy.verdict import runner_up, verdict
 from bayesplate.io import diagnosis_to_dict
 
-MESH = (12, 6)
-NOISE = 0.002
 N_MODES = 12
-
-
-def _plate1_case():
-    case = load_case(bundled_case_path("plate1"))
-    mean = case.reference * np.array([1.1, 0.9, 1.1, 1.1, 0.9, 1.1])
-    return case.with_prior(mean, case.reference * np.array([0.15, 0.15, 0.2, 0.15, 0.3, 0.3]))
-
-
-def _recordings(case, physics=None, theta=None, seed=0):
-    fine = PlateModel.from_case(case, mesh=(2 * MESH[0], 2 * MESH[1]))
-    plate = fine if physics is None else physics.apply(fine, np.asarray(theta, dtype=float))
-    f = plate.solve(stiffness_from_engineering(case.reference), 14).frequency_Hz
-    f = f * (1 + NOISE * np.random.default_rng(seed).standard_normal(f.size))
-    return case.with_measured(frequency_Hz=f, sigma_Hz=NOISE * f)
 
 
 @pytest.fixture(scope="module")
