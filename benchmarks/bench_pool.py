@@ -49,9 +49,15 @@ print(json.dumps({"seconds": seconds, "verdict": d.verdict,
 """  # noqa: E501
 
 
-def one_run(case, mesh, workers):
+#: the arms: label -> (workers, BLAS threads of the parent process; None: the machine's default)
+ARMS = {"1": (1, None), "1 (1 BLAS thread)": (1, "1"), "2": (2, None)}
+
+
+def one_run(case, mesh, workers, blas_threads=None):
     """The child's JSON record: seconds of ``diagnose``, verdict, chosen physics."""
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    if blas_threads is not None:
+        env.update({v: blas_threads for v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")})
     args = [sys.executable, "-c", _CHILD, case, *map(str, mesh), str(workers), str(SEED)]
     out = subprocess.run(args, check=True, capture_output=True, text=True, env=env)
     return json.loads(out.stdout.strip().splitlines()[-1])
@@ -59,10 +65,10 @@ def one_run(case, mesh, workers):
 
 def run_benchmark(runs, case, mesh):
     load = [os.getloadavg()]
-    results = {1: [], 2: []}
+    results = {k: [] for k in ARMS}
     for i in range(runs):
-        for n in (1, 2):
-            results[n].append(one_run(case, mesh, n))
+        for n, (workers, threads) in ARMS.items():
+            results[n].append(one_run(case, mesh, workers, threads))
             r = results[n][-1]
             r["load_after"] = os.getloadavg()[0]
             print(f"run {i + 1}, workers={n}: {r['seconds']:.1f} s, {r['verdict']} "
@@ -79,12 +85,13 @@ def write_report(bench, info, out_dir):
     res = bench["results"]
     med = {k: statistics.median(r["seconds"] for r in res[k]) for k in res}
     same = all(
-        (r["verdict"], r["chosen"]) == (res[1][0]["verdict"], res[1][0]["chosen"])
+        (r["verdict"], r["chosen"]) == (res["1"][0]["verdict"], res["1"][0]["chosen"])
         for k in res
         for r in res[k]
     )
-    ratio = med[1] / med[2]
-    paired = [a["seconds"] / b["seconds"] for a, b in zip(res[1], res[2], strict=True)]
+    ratio = med["1"] / med["2"]
+    paired = [a["seconds"] / b["seconds"] for a, b in zip(res["1"], res["2"], strict=True)]
+    one_thread = med["1 (1 BLAS thread)"]
     lines = [
         "# diagnose's fork pool: two workers against one, for one case (issue 15)",
         "",
@@ -96,12 +103,14 @@ def write_report(bench, info, out_dir):
         "",
         f"Workload: `diagnose` of the bundled case `{bench['case']}` on a {mesh} mesh, all "
         f"candidates, seed {SEED}; each run in a fresh process, the model built before the "
-        f"clock starts; `workers=1` and `workers=2` in turn, {bench['runs']} rounds.",
+        f"clock starts; `workers=1`, `workers=1` with one BLAS thread (OPENBLAS_NUM_THREADS=1) "
+        f"and `workers=2` in turn, {bench['runs']} rounds. The pool's workers use one BLAS "
+        "thread each (two workers with two threads each oversubscribed the two cores).",
         "",
         "| workers | median (s) | runs (s) | 1-min load after each run | verdict | chosen |",
         "|---:|---:|---|---|---|---|",
     ]
-    for k in (1, 2):
+    for k in ARMS:
         runs = ", ".join(f"{r['seconds']:.1f}" for r in res[k])
         loads = ", ".join(f"{r.get('load_after', float('nan')):.1f}" for r in res[k])
         lines.append(
@@ -122,10 +131,14 @@ def write_report(bench, info, out_dir):
     lines += [
         "",
         f"`workers=2` against `workers=1`: {ratio:.2f} x as fast by the medians "
-        f"({med[1]:.1f} s -> {med[2]:.1f} s); per round (same round, one after the other): "
+        f"({med['1']:.1f} s -> {med['2']:.1f} s); per round (same round, one after the other): "
         + ", ".join(f"{q:.2f}" for q in paired)
         + f" x. Verdict: {verdict}. The verdict and chosen physics of diagnose are "
         f"{'the same' if same else 'NOT the same'} in every run.",
+        "",
+        f"Against one process at one BLAS thread (the fair serial baseline on small dense "
+        f"problems): {one_thread / med['2']:.2f} x as fast ({one_thread:.1f} s -> "
+        f"{med['2']:.1f} s).",
     ]
     path = pathlib.Path(out_dir) / REPORT
     path.write_text("\n".join(lines) + "\n")
@@ -147,7 +160,6 @@ def main(argv=None):
     raw = pathlib.Path(args.out) / ".cache" / "benchmark_pool.json"
     if args.report_only:
         bench = json.loads(raw.read_text())
-        bench["results"] = {int(k): v for k, v in bench["results"].items()}
     else:
         bench = run_benchmark(args.runs, args.case, args.mesh)
         raw.parent.mkdir(parents=True, exist_ok=True)

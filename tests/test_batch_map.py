@@ -117,3 +117,27 @@ def test_task_pool_is_a_map_for_the_sampler(client):
     assert client.status == "running"  # a client given is the caller's to close
     with pytest.raises(RuntimeError, match="outside its `with` block"):
         pool.map(abs, [1])
+
+
+@pytest.mark.filterwarnings("ignore:More chains:UserWarning")
+@pytest.mark.filterwarnings("ignore:invalid value encountered in divide:RuntimeWarning")
+def test_sample_command_on_dask_workers_gives_the_same_chain(client, tmp_path, capsys):
+    import json
+
+    from bayesplate.cli.main import main
+
+    chain = ["plate1", "--mesh", "6", "4", "--seed", "5", "--walkers", "12",
+             "--max-steps", "200", "--min-ess", "1e9"]  # fmt: skip
+    plain, pooled = tmp_path / "plain.json", tmp_path / "pooled.json"
+    with threadpool_limits(limits=1):  # as on the workers
+        main(["sample", *chain, "--json", str(plain)])
+    address = client.scheduler.address
+    main(["sample", *chain, "--scheduler", address, "--json", str(pooled)])
+    want, got = (json.loads(p.read_text()) for p in (plain, pooled))
+    for doc in (want, got):
+        doc.pop("timings_s", None)
+        doc.pop("n_evaluations", None)  # counted in this process only: 0 on the workers
+    assert got["constants"] == want["constants"]
+    assert got["constants"]["E1_GPa"]["mean"] > 0
+    assert client.status == "running"  # a cluster reached by address is not shut down
+    capsys.readouterr()

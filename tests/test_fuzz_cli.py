@@ -104,8 +104,10 @@ OPTIONS = {
     "estimate": {"--tol": BAD_POSITIVE_FLOAT, "--max-iter": BAD_INT, "--mesh": BAD_MESH,
                  "--method": BAD_CHOICE, "--convention": BAD_CHOICE, "--pairing": BAD_CHOICE,
                  "--forward": BAD_CHOICE},
-    "sample": {"--seed": BAD_SEED, "--walkers": BAD_INT + ["11", "2"], "--max-steps": BAD_INT,
-               "--min-ess": BAD_POSITIVE_FLOAT, "--mesh": BAD_MESH, "--pairing": BAD_CHOICE},
+    "sample": {"--seed": BAD_SEED, "--walkers": BAD_INT + ["11", "2"],
+               "--max-steps": BAD_INT + ["60", "109"],
+               "--min-ess": BAD_POSITIVE_FLOAT, "--mesh": BAD_MESH, "--pairing": BAD_CHOICE,
+               "--workers": BAD_INT},
     "diagnose": {"--seed": BAD_SEED, "--workers": BAD_INT, "--mesh": BAD_MESH,
                  "--pairing": BAD_CHOICE},
     "report": {"--seed": BAD_SEED, "--mesh": BAD_MESH, "--pairing": BAD_CHOICE},
@@ -195,6 +197,16 @@ def test_an_unwritable_output_is_refused_naming_the_option(fuzz_ledger, tmp_path
 
 def test_the_parser_mesh_limit_is_the_case_files():
     assert MAX_MESH == MAX_MESH_ELEMENTS
+
+
+def test_the_parser_chain_minimum_is_the_samplers():
+    import inspect
+
+    from bayesplate.cli.options import MIN_CHAIN_STEPS
+    from bayesplate.sampling.chain import TUNE_ROUNDS, TUNE_STEPS, sample_problem
+
+    check_every = inspect.signature(sample_problem).parameters["check_every"].default
+    assert MIN_CHAIN_STEPS == TUNE_ROUNDS * TUNE_STEPS + check_every
 
 
 def test_the_base_command_lines_are_valid(tmp_path):

@@ -9,6 +9,7 @@ from .options import (
     METHOD_CHOICES,
     add_mesh_option,
     add_pairing_option,
+    chain_steps,
     mesh_of,
     positive_int,
 )
@@ -110,7 +111,7 @@ def register(sub):
     p.add_argument("--seed", type=int, default=0, help="seed of sample and diagnose (default 0)")
     p.add_argument("--walkers", type=positive_int, default=32, help="sample: walkers (32)")
     p.add_argument(
-        "--max-steps", type=positive_int, default=5000, help="sample: cap on steps (5000)"
+        "--max-steps", type=chain_steps, default=5000, help="sample: cap on steps (5000)"
     )
     p.add_argument(
         "--min-ess",

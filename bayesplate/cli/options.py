@@ -59,6 +59,23 @@ def positive_int(text):
     return value
 
 
+#: the sampler's tuning steps (``TUNE_ROUNDS * TUNE_STEPS`` of :mod:`bayesplate.sampling.chain`)
+#: and one check of its stopping rule after them: a shorter chain has nothing to report
+#: (spelled here so that the parser does not import numpy; tests/test_fuzz_cli.py holds them equal).
+MIN_CHAIN_STEPS = 110
+
+
+def chain_steps(text):
+    """A cap on the sampler's steps: a whole number of at least :data:`MIN_CHAIN_STEPS`."""
+    value = positive_int(text)
+    if value < MIN_CHAIN_STEPS:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: must be at least {MIN_CHAIN_STEPS} (the sampler's 90 tuning steps "
+            "and 20 to sample)"
+        )
+    return value
+
+
 #: :data:`bayesplate.io.checks.MAX_MESH_ELEMENTS`, spelled here so that the parser does not
 #: import numpy at start-up (tests/test_fuzz_cli.py holds the two equal).
 MAX_MESH = 400

@@ -10,6 +10,7 @@ from .options import (
     add_json_option,
     add_mesh_option,
     add_pairing_option,
+    chain_steps,
     mesh_of,
     positive_float,
     positive_int,
@@ -75,16 +76,18 @@ def run(args):
         logging.getLogger("bayesplate.sampling").setLevel(logging.INFO)  # progress
     setup = prepare(case, model=model, forward="full" if args.full else "reduced", rng=args.seed,
                     pairing=args.pairing, inputs=args.inputs or "auto")  # fmt: skip
-    result = sample(
-        case,
-        rng=args.seed,
-        n_walkers=args.walkers,
-        max_steps=args.max_steps,
-        min_ess=args.min_ess,
-        backend_path=args.backend,
-        progress=not quiet,
-        setup=setup,
-    )
+    with _walker_pool(args) as pool:
+        result = sample(
+            case,
+            rng=args.seed,
+            n_walkers=args.walkers,
+            max_steps=args.max_steps,
+            min_ess=args.min_ess,
+            backend_path=args.backend,
+            progress=not quiet,
+            setup=setup,
+            pool=pool,
+        )
     mve = None
     if args.plots or args.json:
         mve = setup.run_estimator("MVE")
@@ -104,6 +107,23 @@ def run(args):
     return 0 if result.converged else 1
 
 
+def _walker_pool(args):
+    """The walkers' pool: none (this process) unless ``--workers`` > 1 or ``--scheduler``.
+
+    The pool is the batch engine's :class:`~bayesplate.batch.TaskPool` (Dask): each step's
+    walkers are split in one chunk per worker. It pays where a log-density is a full solve
+    (``--full``: seconds each); on the certified fast model (a fraction of a millisecond) the
+    round trips cost more than they save.
+    """
+    import contextlib
+
+    if args.scheduler is None and (args.workers or 1) == 1:
+        return contextlib.nullcontext(None)
+    from ..batch import TaskPool
+
+    return TaskPool(workers=args.workers, scheduler=args.scheduler)
+
+
 def register(sub):
     """Add the ``sample`` subcommand."""
     p = sub.add_parser(
@@ -119,7 +139,7 @@ def register(sub):
     add_case_argument(p)
     p.add_argument("--seed", type=seed_int, default=None, help="seed (default: fresh entropy)")
     p.add_argument("--walkers", type=walker_count, default=32, help="emcee walkers (default 32)")
-    p.add_argument("--max-steps", type=positive_int, default=5000,
+    p.add_argument("--max-steps", type=chain_steps, default=5000,
                    help="cap on steps (default 5000)")  # fmt: skip
     p.add_argument("--min-ess", type=positive_float, default=2000.0,
                    help="effective samples per constant to reach (default 2000)")  # fmt: skip
@@ -127,6 +147,12 @@ def register(sub):
     p.add_argument("--backend", metavar="FILE.h5",
                    help="keep the chain in this HDF5 file; re-running continues it")  # fmt: skip
     p.add_argument("--full", action="store_true", help="sample the full model (slow)")
+    p.add_argument("--workers", type=positive_int, default=None,
+                   help="evaluate the walkers on this many Dask worker processes (a local "
+                   "cluster; worth it with --full; default: this process)")  # fmt: skip
+    p.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                   help="evaluate the walkers on a running Dask scheduler "
+                   "(tcp://HOST:8786) instead")  # fmt: skip
     p.add_argument("--inputs", choices=("exact", "marginal"), default=None,
                    help="the plate's thickness, density, length and width as exact numbers, "
                    "or their case deviations (plate.*_sd) marginalised to first order "

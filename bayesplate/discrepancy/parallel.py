@@ -17,9 +17,17 @@ __all__ = ["fork_map"]
 _TASK = None  # (function, items) of the map in progress, inherited by forked workers
 
 
-def _ignore_interrupt():
-    """Workers leave Ctrl-C to the parent, which stops them (no traceback from each)."""
+def _start_worker():
+    """Set up a worker: Ctrl-C ignored, one BLAS thread.
+
+    Workers leave Ctrl-C to the parent, which stops them (no traceback from each). Each uses
+    one BLAS thread: the workers share the cores, more would oversubscribe them (two workers
+    at two threads each were 0.57 x as fast as one process, ``reports/benchmark_pool.md``).
+    """
+    from threadpoolctl import threadpool_limits
+
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    threadpool_limits(limits=1)
 
 
 def _call(index):
@@ -52,7 +60,7 @@ def fork_map(function, items, workers=1):
         context = multiprocessing.get_context("fork")
         # a Pool, not a ProcessPoolExecutor: on Ctrl-C (or a failed task) leaving the block
         # terminates the workers at once, where the executor waits for their tasks
-        with context.Pool(n, initializer=_ignore_interrupt) as pool:
+        with context.Pool(n, initializer=_start_worker) as pool:
             return pool.map(_call, range(len(items)), chunksize=1)
     finally:
         _TASK = None

@@ -230,6 +230,11 @@ def sample_problem(
     """
     if n_walkers < 12:
         raise ValueError(f"n_walkers = {n_walkers}: need at least 12 (twice the dimension)")
+    if max_steps < tune_rounds * tune_steps + check_every:
+        raise ValueError(
+            f"max_steps = {max_steps}: need at least {tune_rounds * tune_steps + check_every} "
+            f"(the {tune_rounds} x {tune_steps} tuning steps and one check of the stopping rule)"
+        )
     entropy, rng = generator(resolve_rng(rng, seed, "sample_problem"))
     density = WhitenedLogPosterior(problem, center, covariance, forward)
     backend, stored = open_backend(backend_path, density, n_walkers)
