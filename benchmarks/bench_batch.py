@@ -178,10 +178,16 @@ def write_report(bench, info, out_dir):
     lines += [
         "",
         f"Two workers against one: {speedup:.2f} x the throughput (tasks to last result). "
-        f"Each task took {slowdown:.2f} x longer with two workers (sum of task seconds): "
-        f"at a load of {l1:.0f} to {a1:.0f} on {info['nproc']} cores the two workers shared "
-        f"what CPU one had alone, so the throughput could not grow here; it doubles only "
-        f"where two cores are free.",
+        f"Each task took {slowdown:.2f} x longer with two workers (sum of task seconds), at a "
+        f"load of {l1:.1f} to {a1:.1f} on {info['nproc']} cores: "
+        + (
+            "the two workers shared what CPU one had alone, so the throughput could not grow "
+            "here; it doubles only where two cores are free."
+            if speedup < 1.2
+            else "the second worker found a core mostly free; what is lost to 2x is the "
+            "tasks' slowdown on shared cores (memory bandwidth, the client and scheduler "
+            "processes on the same two cores) and the cases of unequal length at the end."
+        ),
         "",
         "## The scaling argument for a cluster",
         "",
