@@ -32,13 +32,11 @@ found about each (maps, scans, results) is keyed by its :attr:`~.base.Physics.na
 
 from __future__ import annotations
 
-import functools
 import logging
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.stats import chi2 as chi2_dist
-from threadpoolctl import threadpool_limits
 
 from ..model import PlateModel
 from ..pairing import Pairing
@@ -181,24 +179,6 @@ def mesh_error(model, b, n_modes, coarse=None):
     return (coarse.solve(b, n_modes).frequency_Hz - fine) / 3.0
 
 
-def _one_blas_thread(function):
-    """Run `function` with one BLAS thread.
-
-    diagnose's work is many small dense problems (reduced pencils of a few hundred
-    unknowns) where a second BLAS thread costs more than it gives: plate 1 on a 12 x 6 mesh
-    takes 16 s at one thread against 22 s at two on the 2-core development machine
-    (``reports/benchmark_pool.md``); its fork pool's workers use one each as well.
-    """
-
-    @functools.wraps(function)
-    def wrapper(*args, **kwargs):
-        with threadpool_limits(limits=1, user_api="blas"):
-            return function(*args, **kwargs)
-
-    return wrapper
-
-
-@_one_blas_thread
 def diagnose(
     case,
     model=None,
