@@ -30,7 +30,12 @@ def cache_dir(args):
     if args.no_cache:
         return None
     if args.cache:
-        return pathlib.Path(args.cache)
+        folder = pathlib.Path(args.cache)
+        if folder.exists() and not folder.is_dir():
+            from ..io import CaseError
+
+            raise CaseError("--cache", args.cache, "must be a folder (it is made when absent)")
+        return folder
     if args.json and args.json != "-":
         return pathlib.Path(args.json).parent / DEFAULT_CACHE
     return DEFAULT_CACHE
@@ -43,10 +48,10 @@ def run(args):
     from ..io.stage_store import DirectoryStore
     from ..model import PlateModel
 
+    folder = cache_dir(args)
     case = resolve_case(args.case)
     model = PlateModel.from_case(case, mesh=mesh_of(args))
     quiet = args.json == "-"
-    folder = cache_dir(args)
     store = None if folder is None else DirectoryStore(folder)
     d = diagnose(
         case,

@@ -73,10 +73,18 @@ class DirectoryStore:
         return stored["value"]
 
     def put(self, key, value):
-        """Write `value` under `key` (atomically; it replaces any file of that key)."""
+        """Write `value` under `key` (atomically; it replaces any file of that key).
+
+        A folder that cannot be written is logged and passed over: the diagnosis goes on.
+        """
         blob = pickle.dumps({"format": _FORMAT, "key": str(key), "value": value},
                             protocol=pickle.HIGHEST_PROTOCOL)  # fmt: skip
-        atomic_write(self.path(key), lambda handle: handle.write(blob), "wb")
+        try:
+            atomic_write(self.path(key), lambda handle: handle.write(blob), "wb")
+        except OSError as err:  # a full disk or a read-only folder costs the resume only
+            log.warning("stage not stored in %s (%s): a run again computes it", self.directory,
+                        err)  # fmt: skip
+            return
         self.puts += 1
 
     def _ignore(self, path, why):
