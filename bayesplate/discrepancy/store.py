@@ -21,7 +21,11 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import itertools
+import os
+import pickle
 import struct
+import types
 
 import numpy as np
 
@@ -57,10 +61,19 @@ class MemoryStore:
         self.puts += 1
 
 
+_TOKENS = itertools.count()
+
+
+def _unique():
+    """A token never given twice (not even after an object's id is reused): never a hit."""
+    return f"{os.getpid()}:{next(_TOKENS)}:{os.urandom(8).hex()}"
+
+
 def _feed(h, obj, depth=0):
     """Feed a canonical encoding of `obj` to the hash `h` (type-tagged, recursive)."""
-    if depth > 20:
-        raise ValueError("digest: nested too deep")
+    if depth > 20:  # (a cycle): a key never made again, so never a wrong hit
+        h.update(f"deep:{_unique()};".encode())
+        return
     if obj is None or isinstance(obj, (bool, str, bytes)):
         h.update(f"{type(obj).__name__}:{len(repr(obj))}:{obj!r};".encode())
     elif isinstance(obj, (int, np.integer)):
@@ -82,12 +95,23 @@ def _feed(h, obj, depth=0):
             _feed(h, key, depth + 1)
             _feed(h, obj[key], depth + 1)
         h.update(b"}")
-    elif dataclasses.is_dataclass(obj) or hasattr(obj, "__dict__"):
+    elif isinstance(obj, (types.FunctionType, types.MethodType, types.BuiltinFunctionType)):
+        name = f"{getattr(obj, '__module__', '')}.{obj.__qualname__}"
+        local = "<" in name or isinstance(obj, types.MethodType)  # a closure, a bound method
+        h.update((f"call:{_unique()};" if local else f"call:{name};").encode())
+    elif dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        h.update(f"{type(obj).__module__}.{type(obj).__qualname__}(".encode())
+        _feed(h, {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)}, depth + 1)
+        h.update(b")")
+    elif hasattr(obj, "__dict__") and not isinstance(obj, type):
         h.update(f"{type(obj).__module__}.{type(obj).__qualname__}(".encode())
         _feed(h, dict(vars(obj)), depth + 1)
         h.update(b")")
-    else:  # an address in the repr makes every run miss: safe, never a wrong hit
-        h.update(f"{type(obj).__qualname__}:{obj!r};".encode())
+    else:  # by its pickle; unpicklable: a key never made again, so never a wrong hit
+        try:
+            h.update(f"{type(obj).__qualname__}:".encode() + pickle.dumps(obj, protocol=4))
+        except Exception:  # noqa: BLE001 - any failure to pickle means the same here
+            h.update(f"opaque:{_unique()};".encode())
 
 
 def digest(*parts):
@@ -95,7 +119,9 @@ def digest(*parts):
 
     Numbers enter by their exact bits (a float differing in the last bit is another key);
     arrays by dtype, shape and bytes; containers in order (dicts by sorted key); other
-    objects by their class and attributes (a candidate physics and its variant).
+    objects by their class and attributes (a candidate physics and its variant), or their
+    pickle. What has no stable content (a closure, an unpicklable object) makes a key that
+    is never made again: such a stage is computed every time, never wrongly found.
     """
     h = hashlib.sha256(f"bayesplate {__version__};".encode())
     _feed(h, parts)
