@@ -139,7 +139,8 @@ def test_diagnose_same_seed_same_numbers_with_one_and_two_workers():
 
 @pytest.mark.slow
 def test_diagnose_command_same_numbers_with_one_and_two_workers(tmp_path):
-    args = ["diagnose", CASE, "--mesh", 4, 2, "--seed", 1]
+    # --no-cache: each run computes every stage (a shared store would hand the first run's on)
+    args = ["diagnose", CASE, "--mesh", 4, 2, "--seed", 1, "--no-cache"]
     one = _run([*args, "--workers", 1], tmp_path, "one.json")
     two = _run([*args, "--workers", 2], tmp_path, "two.json")
     again = _run([*args, "--workers", 2], tmp_path, "again.json")

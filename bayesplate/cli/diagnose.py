@@ -1,4 +1,8 @@
-"""``bayesplate diagnose``: locate a model-data mismatch, name the missing physics, refit."""
+"""``bayesplate diagnose``: locate a model-data mismatch, name the missing physics, refit.
+
+Its finished stages are kept in a folder (``--cache``; :mod:`bayesplate.io.stage_store`) so
+that a run killed half-way resumes where it stopped when run again.
+"""
 
 from __future__ import annotations
 
@@ -17,22 +21,45 @@ from .options import (
 
 __all__ = ["register"]
 
+#: The stages' folder by default: in the JSON output's folder, else in the working directory.
+DEFAULT_CACHE = pathlib.Path(".bayesplate-cache") / "diagnose"
+
+
+def cache_dir(args):
+    """The folder of the stored stages (None: ``--no-cache``)."""
+    if args.no_cache:
+        return None
+    if args.cache:
+        folder = pathlib.Path(args.cache)
+        if folder.exists() and not folder.is_dir():
+            from ..io import CaseError
+
+            raise CaseError("--cache", args.cache, "must be a folder (it is made when absent)")
+        return folder
+    if args.json and args.json != "-":
+        return pathlib.Path(args.json).parent / DEFAULT_CACHE
+    return DEFAULT_CACHE
+
 
 def run(args):
     """Diagnose the case; print the summary, write JSON and figures on request."""
     from ..discrepancy.diagnose import diagnose
     from ..io import diagnosis_to_dict, save_figure, write_json
+    from ..io.stage_store import DirectoryStore
     from ..model import PlateModel
 
+    folder = cache_dir(args)
     case = resolve_case(args.case)
     model = PlateModel.from_case(case, mesh=mesh_of(args))
     quiet = args.json == "-"
+    store = None if folder is None else DirectoryStore(folder)
     d = diagnose(
         case,
         model=model,
         rng=args.seed,
         pairing=args.pairing,
         workers=args.workers,
+        store=store,
         progress=None if quiet else (lambda msg: print(f"  {msg}", flush=True)),
     )
     if args.plots:
@@ -105,5 +132,15 @@ def register(sub):
     )
     add_pairing_option(p)
     add_json_option(p)
+    cache = p.add_mutually_exclusive_group()
+    cache.add_argument(
+        "--cache",
+        metavar="DIR",
+        help="keep each finished stage (nominal fit, candidate fits, refits, pairs) in DIR, so "
+        "that a run killed half-way resumes there when run again with the same case and "
+        "options; default: .bayesplate-cache/diagnose in the folder of the --json file, else "
+        "in the working directory (delete it at will: it is recomputed)",
+    )
+    cache.add_argument("--no-cache", action="store_true", help="keep nothing: compute every stage")
     p.add_argument("--plots", metavar="DIR", help="write figures (PNG) into DIR")
     p.set_defaults(func=run)

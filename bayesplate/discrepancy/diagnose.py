@@ -46,12 +46,13 @@ from . import candidates as all_candidates
 from .base import mirror_positions
 from .fit import JointFit, JointProblem
 from .locate import absorbable_projector, mode_kinds
-from .nominal import N_STARTS, check_fast, fit_nominal, nominal_reduced
+from .nominal import N_STARTS, check_fast, fit_nominal, nominal_reduced, nominal_stage
 from .pair import pairs_with
 from .probabilities import model_probabilities
 from .rank import CandidateResult, improved_nominal, rank
 from .scan import RitzBasis
 from .separate import Separation, separate
+from .store import Stages, digest, fit_digest, plate_digest
 from .verdict import basins_note, predictive_p_values, runner_up, unidentified, verdict
 
 __all__ = [
@@ -199,6 +200,7 @@ def diagnose(
     pairs=DEFAULTS["pairs"],
     prior_odds=None,
     fast=None,
+    store=None,
 ):
     """Diagnose a case: nominal fit, location, candidate ranking, refit, verdict.
 
@@ -250,6 +252,12 @@ def diagnose(
         used uncertified, also outside its box); default: one built on the half mesh over
         the prior's 3-sigma box (:func:`nominal_reduced`). The best optima are refined on
         ``model`` either way.
+    store : object with ``get(key)`` and ``put(key, value)``, optional
+        Where the expensive stages (the nominal fit, each candidate's fit, the nominal refits
+        from their constants, each pair) are looked up and stored as soon as each is done,
+        so that a run again after an interruption resumes (:mod:`.store`; on disk:
+        :class:`bayesplate.io.stage_store.DirectoryStore`). The results are the same bit for
+        bit with or without it, with any worker count. None: nothing is kept.
 
     The defaults are those of :data:`DEFAULTS`.
 
@@ -289,12 +297,14 @@ def diagnose(
     sigma = 2.0 * Y * sigma_Hz / measured.frequency_Hz  # d lambda = 2 lambda df / f
 
     nominal_problem = JointProblem(model, Y, sigma, mu_b, V_b, modes)
-    if fast is None:
-        rough = nominal_problem.on(nominal_reduced(coarse, mu_b, V_b, n_solve, rng),
-                                   (fine_lam / coarse_at_mean)[modes])  # fmt: skip
-    else:
-        rough = nominal_problem.on(fast.reduced)
-    nominal = fit_nominal(nominal_problem, rough, rng, n_starts, workers)
+    options = (alpha, evidence_threshold, n_starts, unidentified_ratio, mesh_error_ratio,
+               refine_margin, basin_margin, ambiguity_margin, pairs, prior_odds)  # fmt: skip
+    stages = Stages(store, digest(Y, sigma, measured.frequency_Hz, modes, mu_b, V_b, options,
+                                  plate_digest(model), physics, fast), say)  # fmt: skip
+    rough, nominal = nominal_stage(nominal_problem, (mu_b, V_b), coarse,
+                                   (fine_lam / coarse_at_mean)[modes], rng, n_starts, workers,
+                                   fast, stages)  # fmt: skip
+    stages = stages.then("nominal", fit_digest(nominal))
     if fast is not None:
         check_fast(fast, nominal, modes, notes)
     dof = max(m - nominal.effective_parameters, 1.0)
@@ -317,9 +327,14 @@ def diagnose(
     ritz = model.solve(nominal.b, int(modes.max()) + 1 + RITZ_EXTRA_MODES)
     level["modes"] = ritz.vectors
     scans = _scans(physics, model, nominal, modes, Y, sigma, P, ritz)
-    ranked = rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics, say)
-    better = improved_nominal(nominal_problem, nominal, ranked, level)
+    ranked = rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics, say, stages)
+    better = stages.run(
+        "nominal refit from the candidates' constants",
+        stages.key("improved", [fit_digest(c.fit) for c in ranked]),
+        lambda: improved_nominal(nominal_problem, nominal, ranked, level),
+    )
     if better is not None:
+        stages = stages.then("improved", fit_digest(better))
         say(f"nominal fit improved from a candidate's constants: chi2 = {better.chi2:.1f}")
         shift = better.log_evidence - nominal.log_evidence
         ranked = [replace(c, log_evidence_gain=c.log_evidence_gain - shift) for c in ranked]
@@ -337,7 +352,7 @@ def diagnose(
         refit_p = float(chi2_dist.sf(best.fit.chi2, refit_dof))
     if warranted and refit_p < alpha and pairs:  # two effects at once
         two = pairs_with(best, physics, ranked, model, scans)
-        two = rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, two, say)
+        two = rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, two, say, stages)
         top = next((c for c in two if c.fit.refined), None)
         if top is not None and top.log_evidence_gain > best.log_evidence_gain + evidence_threshold:
             best = top

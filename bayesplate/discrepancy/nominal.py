@@ -12,6 +12,7 @@ mesh itself: the fit reported is the finite-element model's.
 from __future__ import annotations
 
 import logging
+from dataclasses import replace
 
 import numpy as np
 
@@ -19,7 +20,7 @@ from ..reduced import ReducedModel
 from .fit import JointProblem, _local_fits, fit
 from .pencil import candidate_pencil
 
-__all__ = ["N_STARTS", "check_fast", "fit_nominal", "nominal_reduced"]
+__all__ = ["N_STARTS", "check_fast", "fit_nominal", "nominal_reduced", "nominal_stage"]
 
 log = logging.getLogger(__name__)
 
@@ -102,6 +103,58 @@ def nominal_reduced(coarse, mu_b, V_b, n_modes, rng, n_snapshots=8):
     seed = int(rng.integers(2**31))
     return ReducedModel.build(coarse, mu_b, V_b, n_modes + 2, n_snapshots=n_snapshots,
                               margin=6, rng=seed)  # fmt: skip
+
+
+def nominal_stage(problem, prior, coarse, correction, rng, n_starts, workers, fast=None,
+                  stages=None):  # fmt: skip
+    """Step 1 whole: the reduced model (unless `fast`) and :func:`fit_nominal`, or both stored.
+
+    The stage's key (:mod:`.store`) adds the generator's state and ``n_starts`` to the
+    context of `stages`; the stored value holds the generator's state after the stage, which
+    a hit restores, so that `rng` ends in the same state either way.
+
+    Parameters
+    ----------
+    problem : JointProblem
+        The nominal problem on the working mesh.
+    prior : tuple of numpy.ndarray
+        ``(mu_b, V_b)``, shapes (6,) and (6, 6): the prior of ``b``, Pa and Pa^2.
+    coarse : PlateModel
+        The half mesh the default reduced model is built on.
+    correction : numpy.ndarray, shape (m,)
+        Working-mesh to coarse eigenvalues of the paired modes at the prior mean.
+    rng : numpy.random.Generator
+    n_starts, workers : int
+    fast : bayesplate.reduced.CertifiedModel, optional
+    stages : Stages, optional
+
+    Returns
+    -------
+    rough : JointProblem
+        The nominal problem on the reduced model of the global stage.
+    nominal : JointFit
+    """
+    key = None if stages is None else stages.key("nominal", rng.bit_generator.state, n_starts)
+    found, stored = (False, None) if stages is None else stages.get(key)
+    if found:
+        reduced, nominal, state = stored
+        rng.bit_generator.state = state
+        stages.say("nominal fit: taken from the store")
+    else:
+        reduced = None
+        if fast is None:
+            n_solve = int(problem.modes.max()) + 1
+            reduced = nominal_reduced(coarse, *prior, n_solve, rng)
+    rough = problem.on(fast.reduced) if fast is not None else None
+    if reduced is not None:
+        reduced = replace(reduced, full_model=coarse)  # (stored without it)
+        rough = problem.on(reduced, correction)
+    if not found:
+        nominal = fit_nominal(problem, rough, rng, n_starts, workers)
+        if stages is not None:
+            plain = None if reduced is None else replace(reduced, full_model=None)
+            stages.put(key, (plain, nominal, rng.bit_generator.state))
+    return rough, nominal
 
 
 def check_fast(fast, nominal, modes, notes):

@@ -14,7 +14,7 @@ nominal model.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -68,7 +68,8 @@ class CandidateResult:
     mirror_images: list
 
 
-def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list, say):
+def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list, say,
+         stages=None):  # fmt: skip
     """Fit every candidate jointly with the constants; best evidence gain first.
 
     Every start is fitted on a reduced model of the modified plate on the coarse mesh
@@ -97,14 +98,31 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
         Keyed by :attr:`~.base.Physics.name`: the located candidates' scans.
     physics_list : list of Physics
     say : callable
+    stages : Stages, optional
+        Where each candidate's result is looked up and stored as soon as it is fitted
+        (:mod:`.store`; a forked worker stores its own), in a context that covers everything
+        above; its key adds the candidate and its variant.
 
     Returns
     -------
     list of CandidateResult
+        Each ``fit.physics`` is the very object of ``physics_list`` (also for a result that
+        came back from a worker or from the store: :func:`.pair.pairs_with` looks a
+        candidate's own fit up by it).
     """
 
     def promising(rough):
         return rough.log_evidence - nominal.log_evidence > level["margin"]
+
+    def stored(physics):  # (result, taken from the store)
+        if stages is None:
+            return candidate(physics), False
+        key = stages.key("candidate", physics)
+        found, result = stages.get(key)
+        if not found:
+            result = candidate(physics)
+            stages.put(key, result)
+        return result, found
 
     def candidate(physics):
         problem = JointProblem(model, Y, sigma, mu_b, V_b, modes, physics)
@@ -141,10 +159,17 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
     # the candidates with most parameters take longest: they go first to the workers
     order = sorted(range(len(physics_list)),
                    key=lambda i: -len(physics_list[i].parameters(model, nominal.b)))  # fmt: skip
-    fitted = fork_map(candidate, [physics_list[i] for i in order], level["workers"])
-    results = [fitted[order.index(i)] for i in range(len(physics_list))]
-    for r, physics in zip(results, physics_list, strict=True):
+    fitted = fork_map(stored, [physics_list[i] for i in order], level["workers"])
+    fitted = [fitted[order.index(i)] for i in range(len(physics_list))]
+    results = [replace(r, fit=replace(r.fit, physics=physics))
+               for (r, _), physics in zip(fitted, physics_list, strict=True)]  # fmt: skip
+    if stages is not None and level["workers"] > 1:  # a worker's put may not reach `store`
+        for (r, found), physics in zip(fitted, physics_list, strict=True):
+            if not found:
+                stages.put(stages.key("candidate", physics), r)
+    for r, (_, found), physics in zip(results, fitted, physics_list, strict=True):
         where = "" if r.fit.refined else " (coarse mesh, not refined)"
+        where += " (taken from the store)" if found else ""
         variant = "".join(f" ({v})" for v in physics.settings().values())
         say(f"{r.name}{variant}: chi2 = {r.fit.chi2:.1f}, evidence gain "
             f"{r.log_evidence_gain:+.1f}{where}")  # fmt: skip

@@ -21,6 +21,9 @@ from .progress import _logs_shown, _Progress
 
 __all__ = ["compute_report"]
 
+#: Subfolder of the cache where diagnose keeps its stages (a killed report resumes inside it).
+DIAGNOSE_STAGES = "diagnose-stages"
+
 
 def compute_report(case_file, options=None, cache_dir=None, progress=None, label=None):
     """Run (or reuse) every step of the report of one case file.
@@ -162,6 +165,10 @@ class _Runner:
         )
 
     def diagnose(self):
+        from ..io.stage_store import DirectoryStore
+
+        folder = self.cache.directory
+        store = None if folder is None else DirectoryStore(folder / DIAGNOSE_STAGES)
         self.step(
             "diagnose",
             "diagnose model discrepancy",
@@ -176,5 +183,6 @@ class _Runner:
                 self.data.pairing_for_steps(),
                 self.options,
                 self.say,
+                store,
             ),
         )

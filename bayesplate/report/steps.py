@@ -121,8 +121,12 @@ def modes_step(case, model, b, n_modes, n_shapes):
     }
 
 
-def diagnose_step(case, model, pairing, options, progress):
-    """Model discrepancy (:func:`bayesplate.discrepancy.diagnose.diagnose`) as plain data."""
+def diagnose_step(case, model, pairing, options, progress, store=None):
+    """Model discrepancy (:func:`bayesplate.discrepancy.diagnose.diagnose`) as plain data.
+
+    ``store`` keeps diagnose's own stages (``get``/``put``, :mod:`bayesplate.discrepancy.
+    store`), so that a report killed inside this step resumes inside it.
+    """
     from ..discrepancy.diagnose import diagnose
     from ..io import diagnosis_to_dict
 
@@ -134,6 +138,7 @@ def diagnose_step(case, model, pairing, options, progress):
         progress=lambda msg: progress(f"    {msg}"),
         n_starts=options.n_starts,
         workers=2,  # the fits are independent: the results do not depend on it
+        store=store,
     )
     data = {"diagnosis": diagnosis_to_dict(d), "mode_kinds": d.mode_kinds}
     for key, lm in d.maps.items():
