@@ -308,3 +308,104 @@ def test_the_estimate_with_the_key_widens_its_deviations():
     informed = ratio > 1.5
     assert informed.sum() >= 4
     assert np.all(ratio[informed] < lin.s_hat * np.sqrt(lin.dof / (lin.dof - 2)) * 1.01)
+
+
+# ----------------------------------------------------------------------------- the study
+
+
+def test_the_study_quick(tmp_path):
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "studies" / "error_scale.py"
+    spec = importlib.util.spec_from_file_location("error_scale_study", path)
+    study = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(study)
+    text = study.main(tmp_path, quick=True).read_text()
+    # toy, noise 3x declared, prior (1, 5), 400 replicates: without the scale ~0.47 (the
+    # Gaussian P(|Z| < 1.88 / 3)), with it ~0.915 (4,000 replicates); bands of 2,400 intervals
+    row = next(line for line in text.splitlines() if line.startswith("| 3 | 1, 5 |"))
+    without, with_ = (float(cell.split()[0]) for cell in row.split("|")[3:5])
+    assert without < 0.55 and 0.87 < with_ < 0.96
+
+
+def test_estimate_prints_the_scale_and_writes_it_to_json(tmp_path, capsys):
+    import json
+
+    from bayesplate.cli.main import main
+
+    text = bundled_case_path("plate1").read_text()
+    text = text.replace(
+        "sigma_rel = 0.01", "sigma_rel = 0.01\nerror_scale = { median = 1.0, upper95 = 3.0 }"
+    )
+    path = tmp_path / "plate1_scale.toml"
+    path.write_text(text)
+    out = tmp_path / "estimate.json"
+    main(["estimate", str(path), "--method", "B", "-q", "--json", str(out)])
+    printed = capsys.readouterr().out
+    assert "error scale s: median" in printed and "94 % interval" in printed
+    doc = json.loads(out.read_text())
+    scale = doc["error_scale"]
+    assert scale["source"] == "linearised" and scale["prior"]["upper95"] == 3.0
+    lo, hi = scale["hdi_94"]
+    assert lo < scale["median"] < hi
+
+
+# ----------------------------------------------------------------------------- the sampler
+
+
+def _scaled_linear_problem(rng, m=30, true_s=3.0):
+    """g(b) = A b, declared 1 % deviations, drawn 3 %, an almost flat prior, s unknown."""
+    from bayesplate.posterior import prior_in_stiffness
+
+    e0 = np.array([150e9, 10e9, 0.25, 3e9, 3e9, 2e9])
+    mu, V_b = prior_in_stiffness(e0, e0 / 6, "variance")
+    A = rng.uniform(0.2, 2.0, size=(m, 6)) * 1e7 / mu[None, :]
+    g = A @ (mu * rng.uniform(0.95, 1.05, 6))
+    V_Y = np.diag((0.01 * g) ** 2)
+    Y = g + true_s * 0.01 * g * rng.standard_normal(m)
+    prior = ErrorScalePrior(1.0, 5.0)
+    pairing = Pairing(np.arange(m), extra=0)
+    problem = GaussianProblem(Y, V_Y, mu, 1e6 * V_b, _Linear(A), pairing, prior)
+    # flat prior: b | Y is a Student-t, nu = 2 a + m - p, around the least-squares b
+    W = np.linalg.inv(V_Y)
+    info = A.T @ W @ A
+    b_hat = np.linalg.solve(info, A.T @ W @ Y)
+    chi2 = (Y - A @ b_hat) @ W @ (Y - A @ b_hat)
+    a1 = prior.shape + (m - 6) / 2
+    nu = 2 * a1
+    cov = (prior.scale + chi2 / 2) / a1 * np.linalg.inv(info) * nu / (nu - 2)
+    return problem, b_hat, cov, nu
+
+
+def test_the_sampler_gives_the_student_t_posterior_of_a_linear_model(rng):
+    from bayesplate.sampling import sample_problem
+    from bayesplate.sampling.stopping import load_arviz
+
+    problem, mean, cov, nu = _scaled_linear_problem(rng)
+    sd = np.sqrt(np.diag(cov))
+    result = sample_problem(problem, mean + 0.3 * sd, cov, rng=3, progress=False, min_ess=1500)
+    assert result.converged
+    draws = result.samples_b.reshape(-1, result.n_walkers, 6)
+    ess = np.array([load_arviz().ess(draws[:, :, j].T) for j in range(6)])
+    # 4 Monte Carlo sd: a mean's is sd / sqrt(ess); a variance's sqrt((kurtosis - 1) / ess),
+    # kurtosis 3 + 6 / (nu - 4) for a Student-t
+    np.testing.assert_array_less(np.abs(result.mean_b - mean), 4 * sd / np.sqrt(ess))
+    kurt = 3 + 6 / (nu - 4)
+    var_ratio = np.diag(result.covariance_b) / sd**2
+    np.testing.assert_array_less(np.abs(var_ratio - 1), 4 * np.sqrt((kurt - 1) / ess))
+
+
+def test_the_screen_bound_is_above_the_marginal_likelihood(rng):
+    from bayesplate.sampling.moves import RitzScreen
+
+    problem, mean, cov, _ = _scaled_linear_problem(rng, m=8)
+    screen = RitzScreen.__new__(RitzScreen)
+    screen.density = type("D", (), {"problem": problem})()
+    screen._diagonal = True
+    for _ in range(100):
+        b = rng.multivariate_normal(mean, cov)
+        r = problem.Y - problem.forward(b, 0).eigenvalues
+        gap = np.maximum(r * rng.uniform(0, 1, r.size), 0.0)  # residuals r >= gap where > 0
+        bound = screen._likelihood_bound(screen._misfit(gap, problem.V_Y))
+        assert bound >= problem.log_likelihood(b) - 1e-9

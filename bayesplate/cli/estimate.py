@@ -131,6 +131,9 @@ def run(args):
         print(estimate_text(case, model, result))
         if scale is not None:
             print(scale_text(scale))
+            if budget is not None:
+                print("the variance budget below is at s = 1 (the declared deviations): the "
+                      "error scale widens the frequencies' share")  # fmt: skip
         if budget is not None:
             print(budget_text(budget))
     if args.plots and budget is not None:
