@@ -347,7 +347,7 @@ def test_estimate_prints_the_scale_and_writes_it_to_json(tmp_path, capsys):
     doc = json.loads(out.read_text())
     scale = doc["error_scale"]
     assert scale["source"] == "linearised" and scale["prior"]["upper95"] == 3.0
-    lo, hi = scale["hdi_94"]
+    lo, hi = scale["interval_94"]
     assert lo < scale["median"] < hi
 
 

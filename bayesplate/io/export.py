@@ -245,7 +245,7 @@ def error_scale_to_dict(summary, linearised=None):
     """
     out = {
         "median": summary.median,
-        "hdi_94": list(summary.interval),
+        "interval_94": list(summary.interval),
         "source": summary.source,
         "status": summary.status,
         "prior": {"median": summary.prior.median, "upper95": summary.prior.upper95,
