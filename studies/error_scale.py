@@ -124,7 +124,8 @@ def fit_b(task):
 
 
 def fit_sampler(seed, true_s, rng):
-    """The sampler's 94 % HDI covers (6,) and the interval of s, or None (not converged)."""
+    """The sampler's 94 % HDI covers (6,) and the interval of s, or None (B, the MAP, or the
+    chain did not converge)."""
     from bayesplate.error_scale import scale_from_draws
     from bayesplate.sampling import prepare, sample
 
@@ -133,6 +134,8 @@ def fit_sampler(seed, true_s, rng):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # full-model fallbacks are counted in the result
         setup = prepare(case, model=model, rng=rng)
+        if not setup.estimate.converged:  # as B's failures in fit_b: no walkers around it
+            return None
         result = sample(case, rng=rng, setup=setup, progress=False, min_ess=400,
                         max_steps=3000)  # fmt: skip
     if not result.converged:
@@ -267,8 +270,9 @@ def report(toys, plates, sampled, b_seconds, sampler_seconds, command):
         hits = np.array([r[0] for r in done]) if done else np.zeros((0, 6), bool)
         s_iv = np.array([r[1] for r in done]) if done else np.zeros((0, 2))
         s_in = (s_iv[:, 0] <= TRUE_SCALE) & (TRUE_SCALE <= s_iv[:, 1])
-        out.append(f"{len(sampled)} replicates sampled ({len(sampled) - len(done)} did not meet "
-                   f"the stopping rule); 94 % HDI coverage pooled over the constants "
+        failed = len(sampled) - len(done)
+        out.append(f"{len(sampled)} replicates sampled ({failed} had no converged MAP or "
+                   f"chain); 94 % HDI coverage pooled over the constants "
                    f"{_cell(hits) if done else '-'}; s inside its 94 % interval (one draw per "
                    f"kept draw) {_cell(s_in) if done else '-'}; intervals of s: "
                    + ", ".join(f"[{a:.2f}, {b:.2f}]" for a, b in s_iv[:6]) + ".")  # fmt: skip
