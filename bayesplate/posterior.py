@@ -29,6 +29,13 @@ Settled by reproduction (``studies/paper_tables.py``, ``reports/estimators_conve
 full prior covariance do not. The paper's ``diag(d lambda)`` and ``diag(dC_ij)`` are
 shorthand for diagonal matrices of squared deviations. Both are the library defaults.
 
+Error scale (optional)
+    With ``error_scale`` (an :class:`bayesplate.error_scale.ErrorScalePrior`, the case's
+    ``measured.error_scale``) the errors are ``e ~ N(0, s^2 V_Y)`` with one unknown scale
+    ``s`` and a conjugate inverse-gamma prior on ``s^2``; :meth:`GaussianProblem.log_likelihood`
+    is then the marginal over ``s^2``, a multivariate Student-t
+    (:func:`bayesplate.error_scale.log_marginal`). Without it, ``s = 1`` (unchanged).
+
 The forward model is one callable, ``forward(b) -> ModalResult`` (anything with
 ``eigenvalues``, ``sensitivities`` and ``vectors`` for the requested modes), so a faster
 evaluator (a reduced-basis model) can replace the finite-element solve unchanged.
@@ -163,6 +170,8 @@ class GaussianProblem:
         ``forward(b, n_modes) -> ModalResult``; e.g. ``PlateModel.solve``.
     pairing : Pairing
         Which computed mode goes with which measured one.
+    error_scale : bayesplate.error_scale.ErrorScalePrior, optional
+        Prior of a common scale ``s`` of the deviations (module docstring); None: ``s = 1``.
 
     Attributes
     ----------
@@ -172,7 +181,9 @@ class GaussianProblem:
         Wall time spent in them.
     """
 
-    def __init__(self, Y, V_Y, mu_b, V_b, forward: Callable, pairing: Pairing):
+    def __init__(self, Y, V_Y, mu_b, V_b, forward: Callable, pairing: Pairing,
+                 error_scale=None):  # fmt: skip
+        self.error_scale = error_scale
         self.Y = np.asarray(Y, dtype=float)
         self.V_Y = np.asarray(V_Y, dtype=float)
         self.mu_b = np.asarray(mu_b, dtype=float)
@@ -186,6 +197,7 @@ class GaussianProblem:
         # normalising constants of eqs. 3 and 4
         self._norm_Y = np.linalg.slogdet(self.V_Y)[1] + self.Y.size * np.log(2 * np.pi)
         self._norm_b = np.linalg.slogdet(self.V_b)[1] + self.mu_b.size * np.log(2 * np.pi)
+        self._logdet_Y = np.linalg.slogdet(self.V_Y)[1]
 
     @classmethod
     def from_case(
@@ -224,6 +236,9 @@ class GaussianProblem:
             Stiffness coefficients (Pa) where ``J_p`` is evaluated; default the prior mean.
             Six full solves; none when every input deviation is 0.
 
+        The case's ``measured.error_scale`` (None when absent) becomes the problem's
+        ``error_scale``.
+
         Returns
         -------
         GaussianProblem
@@ -243,7 +258,8 @@ class GaussianProblem:
             at = mu_b if inputs_at is None else inputs_at
             mesh = (model.mesh.nx, model.mesh.ny)
             V_Y = V_Y + input_covariance(case, at, pairing.modes, mesh=mesh)
-        return cls(Y, V_Y, mu_b, V_b, model.solve, pairing)
+        scale = getattr(case.measured, "error_scale", None)
+        return cls(Y, V_Y, mu_b, V_b, model.solve, pairing, scale)
 
     @property
     def m(self):
@@ -252,11 +268,28 @@ class GaussianProblem:
 
     def with_prior(self, mu_b, V_b):
         """The same data and forward model with another prior on ``b``."""
-        return type(self)(self.Y, self.V_Y, mu_b, V_b, self.forward, self.pairing)
+        return type(self)(self.Y, self.V_Y, mu_b, V_b, self.forward, self.pairing,
+                          self.error_scale)  # fmt: skip
 
     def with_forward(self, forward):
         """The same data and prior on another forward model, ``forward(b, n_modes)``."""
-        return type(self)(self.Y, self.V_Y, self.mu_b, self.V_b, forward, self.pairing)
+        return type(self)(self.Y, self.V_Y, self.mu_b, self.V_b, forward, self.pairing,
+                          self.error_scale)  # fmt: skip
+
+    def with_observation_covariance(self, V_Y):
+        """The same problem with another declared ``V_Y`` (e.g. the inputs marginalised)."""
+        return type(self)(self.Y, V_Y, self.mu_b, self.V_b, self.forward, self.pairing,
+                          self.error_scale)  # fmt: skip
+
+    def with_error_scale(self, error_scale):
+        """The same problem with another error-scale prior (None: ``s = 1``)."""
+        return type(self)(self.Y, self.V_Y, self.mu_b, self.V_b, self.forward, self.pairing,
+                          error_scale)  # fmt: skip
+
+    def chi2(self, g):
+        """``r^T V_Y^-1 r`` with the declared ``V_Y`` at paired model eigenvalues `g`, (m,)."""
+        r = self.Y - g
+        return float(r @ self._VY_inv @ r)
 
     def predict(self, b, modes=None):
         """Paired model eigenvalues and sensitivities at ``b``.
@@ -280,9 +313,18 @@ class GaussianProblem:
         return Prediction(modal.eigenvalues[modes], modal.sensitivities[modes], modal, modes)
 
     def log_likelihood(self, b, prediction=None):
-        """``ln f(Y | b)`` of eq. 3, with its normalising constant."""
+        """``ln f(Y | b)`` of eq. 3, with its normalising constant.
+
+        With an error scale, its marginal over ``s^2`` (a multivariate Student-t,
+        :func:`bayesplate.error_scale.log_marginal`).
+        """
         prediction = prediction or self.predict(b)
         r = self.Y - prediction.g
+        if self.error_scale is not None:
+            from .error_scale import log_marginal
+
+            chi2 = r @ self._VY_inv @ r
+            return float(log_marginal(chi2, self.m, self._logdet_Y, self.error_scale))
         return -0.5 * (r @ self._VY_inv @ r + self._norm_Y)
 
     def log_prior(self, b):

@@ -70,7 +70,8 @@ def dumps(case):
 
 
 def _rich_plate1():
-    """plate1 with every optional key: ply thicknesses, sigma_Hz, mode, points and shapes."""
+    """plate1 with every optional key: ply thicknesses, sigma_Hz, mode, points, shapes and
+    the error scale's prior."""
     case = tomllib.loads(bundled_case_path("plate1").read_text())
     plate, measured = case["plate"], case["measured"]
     plate["layup_deg"] = [0.0, 90.0, 0.0]
@@ -87,6 +88,7 @@ def _rich_plate1():
         [plate["length_mm"], plate["width_mm"]],
     ]
     measured["shapes"] = [[1.0, -0.5, 0.25 * (i + 1)] for i in range(len(f))]
+    measured["error_scale"] = {"median": 1.0, "upper95": 3.0}
     case["model"] = {"mesh": [8, 4]}
     return case
 
@@ -138,6 +140,7 @@ OPTIONAL = {
     ("model", "mesh"),
     ("plate", "ply_thickness_mm"),
     ("measured", "mode"),
+    ("measured", "error_scale"),
     ("reference",),
 }
 ANGLE_OR_SHAPE = ("layup_deg", "shapes")

@@ -22,6 +22,7 @@ NUMERICS = (
     "pairing",
     "assignment",
     "posterior",
+    "error_scale",
     "inputs",
     "estimators",
     "reduced",

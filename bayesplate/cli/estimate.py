@@ -50,6 +50,15 @@ def estimate_text(case, model, result):
     return "\n".join(lines)
 
 
+def scale_text(scale):
+    """The inferred error scale at the estimate, and how the sd above include it."""
+    return (
+        f"{scale.summary}\n  s_hat {scale.s_hat:.3g} at the estimate (chi2 {scale.chi2:.3g} "
+        f"with the declared deviations, {scale.n_effective:.1f} effective constants); the sd "
+        f"above are linearised with it (Student-t, {scale.dof:.1f} degrees of freedom)"
+    )
+
+
 def budget_text(budget):
     """The variance budget table: each constant's sd from each source, and its share."""
     import numpy as np
@@ -111,10 +120,20 @@ def run(args):
     from ..inputs import converged_budget
 
     budget = converged_budget(case, result, model)
+    scale = None
+    if case.measured.error_scale is not None:
+        from ..error_scale import scale_estimate
+
+        result, scale = scale_estimate(case, model, result)
     if args.json:
-        write_json(estimate_to_dict(result, case, model, budget), args.json)
+        write_json(estimate_to_dict(result, case, model, budget, scale), args.json)
     if args.json != "-":
         print(estimate_text(case, model, result))
+        if scale is not None:
+            print(scale_text(scale))
+            if budget is not None:
+                print("the variance budget below is at s = 1 (the declared deviations): the "
+                      "error scale widens the frequencies' share")  # fmt: skip
         if budget is not None:
             print(budget_text(budget))
     if args.plots and budget is not None:

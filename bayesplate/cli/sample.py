@@ -88,6 +88,12 @@ def run(args):
             setup=setup,
             pool=pool,
         )
+    scale = None
+    if case.measured.error_scale is not None:
+        from ..error_scale import scale_from_draws
+
+        scale = scale_from_draws(setup.problem, result.samples_b, setup.sampling_forward(),
+                                 rng=args.seed)[0]  # fmt: skip
     mve = None
     if args.plots or args.json:
         mve = setup.run_estimator("MVE")
@@ -101,9 +107,11 @@ def run(args):
         for name, fig in figs.items():
             save_figure(fig, pathlib.Path(args.plots) / f"{name}.png")
     if args.json:
-        write_json(sampling_to_dict(result, case, mve), args.json)
+        write_json(sampling_to_dict(result, case, mve, scale), args.json)
     if not quiet:
         print(sample_text(case, result))
+        if scale is not None:
+            print(f"{scale} (one draw of s per kept draw of the constants)")
     return 0 if result.converged else 1
 
 

@@ -156,6 +156,9 @@ class Measurement(_EqualByValue):
         (x, y) of the measurement points on the mid-plane, m. Given with `shapes`.
     shapes : array_like, shape (m, p), optional
         Out-of-plane amplitude of each measured mode at each point (arbitrary scale).
+    error_scale : bayesplate.error_scale.ErrorScalePrior, optional
+        Prior of a common, unknown scale ``s`` of the deviations (`sigma_Hz` times ``s``),
+        inferred with the constants; None: ``s = 1`` (the deviations as declared).
     """
 
     frequency_Hz: np.ndarray
@@ -163,6 +166,7 @@ class Measurement(_EqualByValue):
     mode: np.ndarray | None = None
     points: np.ndarray | None = None
     shapes: np.ndarray | None = None
+    error_scale: object = None
 
     def __post_init__(self):
         frequency = _array(self.frequency_Hz, "measured.frequency_Hz", ndim=1)
@@ -177,6 +181,10 @@ class Measurement(_EqualByValue):
         if self.mode is not None:
             _set(self, "mode", _mode_array(self.mode, frequency.size))
         _set_shapes(self, frequency.size)
+        if self.error_scale is not None:
+            from ..error_scale import ErrorScalePrior
+
+            _require_type(self.error_scale, ErrorScalePrior, "measured.error_scale")
 
     @property
     def size(self) -> int:

@@ -22,6 +22,21 @@ eigenvalue covariance of the Gaussian problem (``inputs="marginal"``). Example::
     density_kg_m3 = 435.7
     density_sd_kg_m3 = 4.4
 
+Error scale (optional key ``error_scale`` of ``[measured]``): a lab unsure of its deviations
+states a prior on one common scale ``s`` of them (the deviations are ``s`` times the declared
+``sigma_rel`` or ``sigma_Hz``): ``error_scale = { median = 1.0, upper95 = 3.0 }``, the median of
+``s`` and the value it stays below with 95 % probability (dimensionless, both > 0). They fix an
+inverse-gamma prior on ``s^2`` (:class:`bayesplate.error_scale.ErrorScalePrior`); ``upper95``
+must lie between 1.005 and about 100 times ``median``, e.g. ``measured.error_scale.upper95 =
+1.0: must be between 1.005 and 102 times the median (1); closer, s is known (leave
+error_scale out)``. ``s`` is then inferred with the constants (integrated out of the
+likelihood: a Student-t); absent, ``s = 1`` as before::
+
+    [measured]
+    frequency_Hz = [...]
+    sigma_rel = 0.005
+    error_scale = { median = 1.0, upper95 = 3.0 }
+
 Mass-derived density (optional keys ``mass_g`` and ``mass_sd_g``): a lab that weighs the plate
 computes rho = m / (a b h), so the density's error moves with the thickness's. With ``mass_g``
 the density is derived from it and ``density_kg_m3`` may be left out; when it is given too, it
@@ -104,7 +119,10 @@ _PLATE_SD_KEYS = (
     ("thickness_sd_mm", "thickness_sd", 1e-3),
     ("density_sd_kg_m3", "density_sd", 1.0),
 )
-_MEASURED_KEYS = ("frequency_Hz", "sigma_rel", "sigma_Hz", "mode", "points_mm", "shapes")
+_MEASURED_KEYS = ("frequency_Hz", "sigma_rel", "sigma_Hz", "mode", "points_mm", "shapes",
+                  "error_scale")  # fmt: skip
+_ERROR_SCALE_KEYS = ("median", "upper95")
+_ERROR_SCALE_ENTRY = "a table { median = ..., upper95 = ... } (quantiles of the scale s)"
 _PRIOR_ENTRY_KEYS = ("mean", "sd")
 _PRIOR_ENTRY = "a table { mean = ..., sd = ... }"
 _MODEL_KEYS = ("mesh",)
@@ -308,7 +326,23 @@ def _parse_measured(raw, extent_mm: tuple[float, float]) -> Measurement:
     if "mode" in table:
         mode = _integers(table["mode"], "measured.mode", 1, _MAX_MODE_INDEX)
     points, shapes = _parse_shapes(table, extent_mm)
-    return Measurement(frequency, sigma, mode, points, shapes)
+    scale = _parse_error_scale(table["error_scale"]) if "error_scale" in table else None
+    return Measurement(frequency, sigma, mode, points, shapes, scale)
+
+
+def _parse_error_scale(raw):
+    """``measured.error_scale = { median, upper95 }``: the prior of ``s`` (module docstring)."""
+    key = "measured.error_scale"
+    entry = _table(raw, key, _ERROR_SCALE_KEYS, _ERROR_SCALE_KEYS, _ERROR_SCALE_ENTRY)
+    median = _positive(entry["median"], f"{key}.median")
+    upper = _positive(entry["upper95"], f"{key}.upper95")
+    from ..error_scale import ErrorScalePrior
+
+    try:
+        return ErrorScalePrior(median, upper)
+    except ValueError as err:
+        field, rule = str(err).split(": ", 1)
+        raise CaseError(f"{key}.{field}", entry[field], rule) from None
 
 
 def _parse_sigma(table: Mapping, frequency: np.ndarray) -> np.ndarray:

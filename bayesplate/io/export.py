@@ -26,6 +26,7 @@ __all__ = [
     "budget_to_dict",
     "constants_json",
     "diagnosis_to_dict",
+    "error_scale_to_dict",
     "estimate_to_dict",
     "jsonable",
     "sampling_to_dict",
@@ -160,7 +161,7 @@ def budget_to_dict(budget):
     }
 
 
-def estimate_to_dict(result, case, model, budget=None):
+def estimate_to_dict(result, case, model, budget=None, scale=None):
     """The JSON document of an estimate (``bayesplate estimate --json``).
 
     Parameters
@@ -174,6 +175,9 @@ def estimate_to_dict(result, case, model, budget=None):
     budget : bayesplate.inputs.VarianceBudget, optional
         Its variance budget (:func:`bayesplate.inputs.converged_budget`), under
         ``"variance_budget"``.
+    scale : bayesplate.error_scale.LinearisedScale, optional
+        The inferred error scale (the case's ``measured.error_scale``), under
+        ``"error_scale"`` (:func:`error_scale_to_dict`); `result`'s sd then include it.
 
     Returns
     -------
@@ -220,10 +224,40 @@ def estimate_to_dict(result, case, model, budget=None):
         ]
     if budget is not None:
         out["variance_budget"] = budget_to_dict(budget)
+    if scale is not None:
+        out["error_scale"] = error_scale_to_dict(scale.summary, scale)
     return out
 
 
-def sampling_to_dict(result, case, mve=None):
+def error_scale_to_dict(summary, linearised=None):
+    """The inferred error scale ``s`` (dimensionless): posterior median, 94 % interval, prior.
+
+    Parameters
+    ----------
+    summary : bayesplate.error_scale.ScaleSummary
+    linearised : bayesplate.error_scale.LinearisedScale, optional
+        At an estimate: adds ``s_hat``, ``chi2``, the effective number of constants and the
+        Student-t degrees of freedom.
+
+    Returns
+    -------
+    dict
+    """
+    out = {
+        "median": summary.median,
+        "interval_94": list(summary.interval),
+        "source": summary.source,
+        "status": summary.status,
+        "prior": {"median": summary.prior.median, "upper95": summary.prior.upper95,
+                  "shape": summary.prior.shape, "scale": summary.prior.scale},
+    }  # fmt: skip
+    if linearised is not None:
+        out.update(s_hat=linearised.s_hat, chi2=linearised.chi2,
+                   n_effective=linearised.n_effective, dof=linearised.dof)  # fmt: skip
+    return out
+
+
+def sampling_to_dict(result, case, mve=None, scale=None):
     """The JSON document of a sampled posterior (``bayesplate sample --json``).
 
     Parameters
@@ -234,6 +268,8 @@ def sampling_to_dict(result, case, mve=None):
         The case it was sampled for (its name).
     mve : bayesplate.estimators.EstimateResult, optional
         The MVE estimate, reported beside B.
+    scale : bayesplate.error_scale.ScaleSummary, optional
+        The posterior of the error scale, under ``"error_scale"`` (:func:`error_scale_to_dict`).
 
     Returns
     -------
@@ -252,7 +288,7 @@ def sampling_to_dict(result, case, mve=None):
             "n_test": cert.n_test,
             "basis_size": cert.basis_size,
         }
-    return {
+    out = {
         "case": case.name,
         "constants": result.constants_table(),
         "ess_min": result.ess_min,
@@ -279,6 +315,9 @@ def sampling_to_dict(result, case, mve=None):
             if r is not None
         },
     }
+    if scale is not None:
+        out["error_scale"] = error_scale_to_dict(scale)
+    return out
 
 
 def _fit_summary(fit_, dof, p_value):

@@ -75,6 +75,10 @@ class WhitenedLogPosterior:
     leave-one-out predictive density ``ln f(Y_i | Y_-i, b)``: with ``Q = V_Y^-1``,
     ``-((Q r)_i^2 / Q_ii + ln(2 pi / Q_ii)) / 2`` (Buerkner et al. 2021, non-factorised normal
     models), which is what LOO needs; it equals the diagonal formula when ``V_Y`` is diagonal.
+    With an error scale (``problem.error_scale``: ``s`` unknown, integrated out) the
+    likelihood is a Student-t and ``pointwise`` is each one's leave-one-out density with ``s``
+    integrated out too (:func:`bayesplate.error_scale.loo_pointwise`); the sampler still moves
+    in the six constants alone.
 
     Parameters
     ----------
@@ -145,6 +149,11 @@ class WhitenedLogPosterior:
     def pointwise(self, g):
         """Log-likelihood of each measured eigenvalue given paired model ones ``g``, (m,)."""
         r = self.problem.Y - g
+        if self.problem.error_scale is not None:
+            from ..error_scale import loo_pointwise
+
+            Q = 1.0 / self._var if self._Q is None else self._Q
+            return loo_pointwise(r, Q, self.problem.error_scale)
         if self._Q is None:
             return -0.5 * (r**2 / self._var + np.log(2 * np.pi * self._var))
         q = np.diag(self._Q)

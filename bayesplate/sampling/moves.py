@@ -188,7 +188,8 @@ class RitzScreen:
     full solve needed) the bound is ``+inf``: evaluate. With a full ``V_Y`` (the inputs
     marginalised) the misfit ``r^T V_Y^-1 r`` is at least that of the eigenvalues ``I`` with
     ``Y_i > R_i`` alone, ``r_I^T (V_Y)_II^-1 r_I >= |gap_I|^2 / lambda_max((V_Y)_II)``, and
-    the normalising term is ``-(ln det V_Y + m ln 2 pi) / 2``.
+    the normalising term is ``-(ln det V_Y + m ln 2 pi) / 2``. With an error scale the bound
+    is the Student-t marginal at that misfit (it decreases with the misfit too).
 
     Parameters
     ----------
@@ -225,8 +226,20 @@ class RitzScreen:
             except ValueError:  # the basis holds too few modes there: no bound
                 continue
             gap = np.maximum(p.Y - R * (1 + 1e-8), 0.0)
-            bounds[k] = prior + self._norm - 0.5 * self._misfit(gap, p.V_Y)
+            bounds[k] = prior + self._likelihood_bound(self._misfit(gap, p.V_Y))
         return bounds + self.density.log_jacobian(z)
+
+    def _likelihood_bound(self, misfit):
+        """``ln f(Y | b)`` at a lower bound of ``chi2``: it decreases with ``chi2``.
+
+        With an error scale, the Student-t marginal (:func:`bayesplate.error_scale.log_marginal`).
+        """
+        p = self.density.problem
+        if p.error_scale is None:
+            return self._norm - 0.5 * misfit
+        from ..error_scale import log_marginal
+
+        return float(log_marginal(misfit, p.m, np.linalg.slogdet(p.V_Y)[1], p.error_scale))
 
     def _misfit(self, gap, V_Y):
         """A lower bound of ``r^T V_Y^-1 r`` over residuals with ``r_i >= gap_i`` (gap >= 0)."""

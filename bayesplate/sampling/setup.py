@@ -170,8 +170,7 @@ def _marginal(case, model, problem, at):
     """The problem with the inputs marginalised (``J_p`` at `at`), and the full solves spent."""
     V_in = input_covariance(case, at, problem.pairing.modes, mesh=(model.mesh.nx, model.mesh.ny))
     solves = 7 if np.any(V_in) else 0  # the nominal solve and 3 central differences
-    marginal = GaussianProblem(problem.Y, problem.V_Y + V_in, problem.mu_b, problem.V_b,
-                               problem.forward, problem.pairing)  # fmt: skip
+    marginal = problem.with_observation_covariance(problem.V_Y + V_in)
     return marginal, solves
 
 
@@ -183,12 +182,27 @@ def _place_box(case, model, problem, pilot, inputs, box_sigma):
     the inputs and would leave a box a few marginal deviations wide.
     """
     if inputs != "marginal":
-        return problem, posterior_box(pilot, problem.mu_b, problem.V_b, box_sigma), 0
+        placed, spent = _widened(problem, pilot)
+        return problem, posterior_box(placed, problem.mu_b, problem.V_b, box_sigma), spent
     problem, spent = _marginal(case, model, problem, pilot.b)
     S = problem.predict(pilot.b).S
     info = S.T @ np.linalg.solve(problem.V_Y, S) + np.linalg.inv(problem.V_b)
-    placed = replace(pilot, covariance_b=np.linalg.inv(info))
-    return problem, posterior_box(placed, problem.mu_b, problem.V_b, box_sigma), spent + 1
+    placed, more = _widened(problem, replace(pilot, covariance_b=np.linalg.inv(info)))
+    return problem, posterior_box(placed, problem.mu_b, problem.V_b, box_sigma), spent + 1 + more
+
+
+def _widened(problem, pilot):
+    """The pilot with ``P`` widened by an inferred error scale (linearised), full solves spent.
+
+    With ``s`` unknown the posterior is ``s_hat`` times wider than ``P`` at ``s = 1``
+    (:func:`bayesplate.error_scale.linearised_scale`); a box placed with ``P`` would leave
+    most walkers to the full model's fallback when the misfit is large.
+    """
+    if problem.error_scale is None:
+        return pilot, 0
+    from ..error_scale import linearised_at
+
+    return replace(pilot, covariance_b=linearised_at(problem, pilot.b).covariance_b), 1
 
 
 def posterior_box(estimate, mu_b, V_b, n_sigma=6.0, weak=0.25, prior_sigma=3.0, floor=0.1):
@@ -354,6 +368,7 @@ def prepare(
     # B from the settled assignment's estimate (B's fixed point from the prior mean may be
     # another optimum with a pairing that skips modes); from the prior mean otherwise
     estimate = _map(setup, conventions, None if settled is None else settled.b)
+    estimate = _scaled_map(setup, estimate)
     timings["map"] = time.perf_counter() - started
     if not estimate.converged:
         log.warning("B (the MAP) did not converge: %s", estimate.message)
@@ -364,6 +379,24 @@ def prepare(
 def _map(setup, conventions, start=None):
     """B to ``MAP_TOL`` on the sampler's model: the MAP and ``P`` (eq. 9)."""
     return _run_on_fast(setup, "B", MAP_TOL, conventions=conventions, start=start)
+
+
+def _scaled_map(setup, estimate):
+    """B's estimate with ``P`` widened by an inferred error scale (linearised; none: as is).
+
+    The walkers' coordinates are whitened with ``P`` and the default moves propose from a
+    Student-t of that shape (:mod:`bayesplate.sampling.moves`): with ``s`` unknown the
+    posterior is ``s_hat`` times wider than ``P`` at ``s = 1``, and proposals that narrow
+    mix slowly. The estimate stays B's (``s = 1`` weights).
+    """
+    if setup.problem.error_scale is None:
+        return estimate
+    from ..error_scale import linearised_at
+    from ..quantities import engineering_covariance
+
+    cov_b = linearised_at(setup.problem_on_fast_model(), estimate.b).covariance_b
+    cov = engineering_covariance(estimate.constants, cov_b)
+    return replace(estimate, covariance_b=cov_b, covariance=cov, sd=np.sqrt(np.diag(cov)))
 
 
 def _run_on_fast(setup, method, tol, **kwargs):

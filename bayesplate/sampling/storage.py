@@ -42,6 +42,9 @@ class _Stored(emcee.backends.Backend):
 def _fingerprint(problem):
     """Numbers identifying a problem: its data, prior and pairing."""
     parts = [problem.Y, np.diag(problem.V_Y), problem.mu_b, problem.V_b.ravel()]
+    scale = getattr(problem, "error_scale", None)
+    if scale is not None:  # another target: a chain kept without it does not continue
+        parts.append(np.array([scale.shape, scale.scale]))
     return np.concatenate([*parts, problem.pairing.modes.astype(float)])
 
 
