@@ -12,6 +12,8 @@ from __future__ import annotations
 import multiprocessing
 import signal
 
+from threadpoolctl import threadpool_limits
+
 __all__ = ["fork_map"]
 
 _TASK = None  # (function, items) of the map in progress, inherited by forked workers
@@ -24,8 +26,6 @@ def _start_worker():
     one BLAS thread: the workers share the cores, more would oversubscribe them (two workers
     at two threads each were 0.57 x as fast as one process, ``reports/benchmark_pool.md``).
     """
-    from threadpoolctl import threadpool_limits
-
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     threadpool_limits(limits=1)
 
@@ -54,7 +54,10 @@ def fork_map(function, items, workers=1):
     items = list(items)
     n = min(int(workers), len(items))
     if n <= 1 or "fork" not in multiprocessing.get_all_start_methods() or _TASK is not None:
-        return [function(item) for item in items]  # nested maps run serially
+        # nested maps run serially; at one BLAS thread, as the workers: the results do not
+        # depend on the number of workers, to the last bit
+        with threadpool_limits(limits=1, user_api="blas"):
+            return [function(item) for item in items]
     _TASK = (function, items)
     try:
         context = multiprocessing.get_context("fork")
