@@ -139,9 +139,15 @@ def test_mac_pairing_drops_an_extra_mode_with_a_warning(plate1, rng):
     np.testing.assert_array_equal(result.modes, expected + 1)
 
 
-def test_without_shapes_pairing_is_by_order_and_says_so(plate1):
+def test_without_shapes_pairing_is_by_likelihood_or_by_order_if_asked_and_says_so(plate1):
+    # issue 16: without shapes or mode numbers "auto" is the most probable assignment (made
+    # here once, at the prior: the estimators then remake it at their estimates)
     case, model, b, *_ = plate1
     pairing = pair_measured(case, model, b)
+    assert pairing.how == "likelihood" and pairing.mac is None
+    assert pairing.assignment is not None and np.all(np.diff(pairing.modes) > 0)
+    assert pairing.describe(case.measured.size).startswith("by the most probable assignment")
+    pairing = pair_measured(case, model, b, how="order")
     assert pairing.how == "order" and pairing.mac is None
     np.testing.assert_array_equal(pairing.modes, np.arange(case.measured.size))
     assert pairing.describe(case.measured.size).startswith("by order")
