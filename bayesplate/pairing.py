@@ -292,6 +292,10 @@ class Pairing:
                 f"modes with the frequency residuals, one-to-one (Hungarian), pairs below MAC "
                 f"{self.threshold:g} rejected"
             )
+            missed = [] if self.assignment is None else self.assignment.unobserved
+            if len(missed):
+                which = "mode" if len(missed) == 1 else "modes"
+                text += f"; computed {which} {', '.join(str(j + 1) for j in missed)} unobserved"
         lost = [] if m is None else [str(i + 1) for i in self.unpaired(m)]
         if lost:
             which = "mode" if len(lost) == 1 else "modes"
