@@ -30,6 +30,11 @@ def _plate1_case():
     return case.with_prior(mean, case.reference * np.array([0.15, 0.15, 0.2, 0.15, 0.3, 0.3]))
 
 
+# The recordings below are every one of the 14 lowest modes, sorted: the tests of concealed
+# effects pair them by order (named: issue 16 made the most probable assignment the default,
+# and on this 12 x 6 mesh, at the case's 0.2 % deviations, it calls peaks that the concealed
+# effect or the mesh moved spurious, so that the nominal model passes and the effect goes
+# unseen).
 def _recordings(case, physics=None, theta=None, seed=0):
     fine = PlateModel.from_case(case, mesh=(2 * MESH[0], 2 * MESH[1]))
     plate = fine if physics is None else physics.apply(fine, np.asarray(theta, dtype=float))
@@ -62,7 +67,9 @@ def test_workers_do_not_change_the_diagnosis(model):
 
 def test_concealed_point_mass_is_named_and_recovered(model, tmp_path):
     truth = np.array([15.0, 50.0, 30.0])  # 15 g on a 132 g plate at (50, 30) mm
-    d = diagnose(_recordings(_plate1_case(), PointMass(), truth, seed=2), model=model, rng=0)
+    d = diagnose(
+        _recordings(_plate1_case(), PointMass(), truth, seed=2), model=model, pairing="order", rng=0
+    )
     assert d.p_value < 0.01  # the nominal model is rejected
     assert d.verdict == "explained" and d.chosen.name == "point_mass"
     assert d.refit_p_value > 0.01
@@ -165,7 +172,7 @@ def test_a_located_candidate_defined_outside_the_package_is_mapped_scanned_and_f
     gain = LocalStiffnessGain()
     truth = np.array([60.0, 30.0, 80.0, 50.0, 5.0])  # an 80 x 50 mm doubler at (60, 30) mm
     case = _recordings(_plate1_case(), gain, truth, seed=3)
-    d = diagnose(case, model=model, physics=[gain, PointMass()], rng=0, n_starts=1)
+    d = diagnose(case, model=model, pairing="order", physics=[gain, PointMass()], rng=0, n_starts=1)
     # mapped and scanned under its own name, on the grid it declares
     assert list(d.maps) == list(d.scans) == ["local_stiffness_gain", "point_mass"]
     assert d.maps["local_stiffness_gain"].best() is not None
@@ -188,7 +195,7 @@ def test_diagnosis_does_not_depend_on_round_off(model):
     # tolerances (least squares stops at relative changes of about 1e-8).
     truth = [15.0, 50.0, 30.0]  # as the test above: 15 g on a 132 g plate
     case = _recordings(_plate1_case(), PointMass(), truth, seed=2)
-    reference = diagnose(case, model=model, rng=0, n_starts=1)
+    reference = diagnose(case, model=model, pairing="order", rng=0, n_starts=1)
     rng = np.random.default_rng(16)
     f, s = case.measured.frequency_Hz, case.measured.sigma_Hz
     for _ in range(2):
@@ -196,7 +203,7 @@ def test_diagnosis_does_not_depend_on_round_off(model):
             frequency_Hz=f * (1 + 1e-12 * rng.standard_normal(f.size)),
             sigma_Hz=s * (1 + 1e-12 * rng.standard_normal(s.size)),
         )
-        d = diagnose(nudged, model=model, rng=0, n_starts=1)
+        d = diagnose(nudged, model=model, pairing="order", rng=0, n_starts=1)
         assert d.verdict == reference.verdict == "explained"
         assert d.chosen.name == reference.chosen.name
         assert [c.name for c in d.candidates] == [c.name for c in reference.candidates]
@@ -249,7 +256,9 @@ def test_a_taper_across_the_width_is_named_with_its_direction():
     plate = ThicknessTaper("y").apply(fine, np.array([0.15]))
     f = plate.solve(stiffness_from_engineering(case.reference), 14).frequency_Hz
     f = np.sort(f * (1 + NOISE * np.random.default_rng(7).standard_normal(f.size)))
-    d = diagnose(case.with_measured(frequency_Hz=f, sigma_Hz=NOISE * f), model=model, rng=0)
+    d = diagnose(
+        case.with_measured(frequency_Hz=f, sigma_Hz=NOISE * f), model=model, pairing="order", rng=0
+    )
     assert d.verdict == "explained" and d.chosen.name == "thickness_taper"
     assert d.chosen.parameters["direction"] == "y"
     assert (

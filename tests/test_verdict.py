@@ -118,7 +118,9 @@ class _Twin(PointMass):
 def test_a_constructed_tie_is_ambiguous_and_names_both(model):
     truth = np.array([15.0, 50.0, 30.0])  # as tests/test_diagnose.py: 15 g at (50, 30) mm
     case = _recordings(_plate1_case(), PointMass(), truth, seed=2)
-    d = diagnose(case, model=model, rng=0, n_starts=1, physics=[PointMass(), _Twin()])
+    d = diagnose(
+        case, model=model, pairing="order", rng=0, n_starts=1, physics=[PointMass(), _Twin()]
+    )
     assert d.verdict == "ambiguous"
     assert {d.chosen.name, d.rival.name} == {"point_mass", "point_mass_twin"}
     # the same physics: equal evidence, equal probabilities, nothing would separate them
@@ -230,7 +232,9 @@ def test_two_concealed_effects_are_named_as_a_pair(model, b):
     f = f * (1 + NOISE * np.random.default_rng(3).standard_normal(f.size))
     case = _plate1_case().with_measured(frequency_Hz=f, sigma_Hz=NOISE * f)
     physics = [PointMass(), ThicknessTaper("x"), ElasticFoundation()]
-    d = diagnose(case, model=model, rng=0, n_starts=1, physics=physics, mesh_error_ratio=1e9)
+    d = diagnose(
+        case, model=model, pairing="order", rng=0, n_starts=1, physics=physics, mesh_error_ratio=1e9
+    )
     assert d.verdict == "explained" and d.chosen.name == "point_mass+thickness_taper"
     single = next(c for c in d.candidates if c.name == "point_mass")
     assert d.chosen.log_evidence_gain > single.log_evidence_gain + 3.0
