@@ -3,10 +3,13 @@
 The paper pairs the i-th measured frequency with the i-th computed elastic mode (by order).
 A case file may instead name the 1-based elastic mode of each measured frequency
 (``measured.mode``). When it carries measured mode shapes (``points_mm`` and ``shapes``),
-:func:`pair_measured` pairs by shape instead: the computed ``w`` at the measurement points
-against every measured shape (MAC), one-to-one by the Hungarian method over more computed
-modes than measured, so that a mode missing from the test or an extra one is tolerated; a
-measured mode that no computed mode resembles is left unpaired and dropped. While an
+:func:`pair_measured` pairs by shape and frequency together: the computed ``w`` at the
+measurement points against every measured shape (MAC), scored with the frequency residual
+(:func:`bayesplate.assignment.assign_with_shapes`), one-to-one by the Hungarian method over
+more computed modes than measured, so that a mode missing from the test or an extra one is
+tolerated; a measured mode that no computed mode resembles is left unpaired and dropped.
+Without shapes or mode numbers the default is the most probable assignment of frequencies
+(:mod:`bayesplate.assignment`); pairing by order, the paper's, is an option. While an
 estimator iterates, the computed modes can change order
 (two close frequencies cross); :func:`track` follows them from one iterate to the next by the
 modal assurance criterion (MAC) of successive eigenvectors.
@@ -23,7 +26,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from .assignment import most_probable
+from .assignment import MAC_SCALE, assign_with_shapes, most_probable, predictive_sd_Hz
+from .quantities import stiffness_covariance
 
 __all__ = [
     "DEFAULT_EXTRA_MODES",
@@ -194,8 +198,8 @@ class Pairing:
     threshold : float, optional
         The MAC a pair had to reach.
     assignment : bayesplate.assignment.Assignment, optional
-        ``how == "likelihood"``: the assignment it came from (unobserved modes, spurious
-        peaks, its log-probability).
+        ``how`` "likelihood" or "mac": the assignment it came from (unobserved modes,
+        spurious peaks, its log-probability).
     """
 
     modes: np.ndarray
@@ -284,9 +288,14 @@ class Pairing:
         else:
             p = self.mac.shape[1] if self.mac is not None else "?"
             text = (
-                f"by mode shape: MAC of the measured shapes against {p} computed modes, "
-                f"one-to-one (Hungarian), pairs below MAC {self.threshold:g} rejected"
+                f"by mode shape and frequency: MAC of the measured shapes against {p} computed "
+                f"modes with the frequency residuals, one-to-one (Hungarian), pairs below MAC "
+                f"{self.threshold:g} rejected"
             )
+            missed = [] if self.assignment is None else self.assignment.unobserved
+            if len(missed):
+                which = "mode" if len(missed) == 1 else "modes"
+                text += f"; computed {which} {', '.join(str(j + 1) for j in missed)} unobserved"
         lost = [] if m is None else [str(i + 1) for i in self.unpaired(m)]
         if lost:
             which = "mode" if len(lost) == 1 else "modes"
@@ -301,8 +310,10 @@ def resolve_pairing(measured, how="auto"):
     ----------
     measured : bayesplate.io.Measurement
     how : {"auto", "mac", "likelihood", "index", "order"}
-        ``"auto"``: by shape (MAC) when the measurement has shapes, else by its mode numbers
-        when it has them, else by order.
+        ``"auto"``: by shape and frequency (MAC) when the measurement has shapes, else by its
+        mode numbers when it has them, else by the most probable assignment of frequencies
+        (``"likelihood"``: the assignment is part of the model). Pairing by order (the
+        paper's) is only ever chosen by name.
 
     Returns
     -------
@@ -315,7 +326,7 @@ def resolve_pairing(measured, how="auto"):
         return how
     if measured.shapes is not None and measured.points is not None:
         return "mac"
-    return "order" if measured.mode is None else "index"
+    return "likelihood" if measured.mode is None else "index"
 
 
 def shape_mac(measurement, model, vectors):
@@ -358,26 +369,32 @@ def pair_measured(
     ----------
     case : bayesplate.io.Case
     model : bayesplate.model.PlateModel
-        Only used for ``how == "mac"`` (one eigen solve at `b`, unless `modal` is given).
+        Used for ``how`` "mac" and "likelihood" (one eigen solve at `b`, unless `modal` is
+        given).
     b : array_like, shape (6,)
         Stiffness coefficients at which to compute the modes (e.g. the prior mean), Pa.
     how : {"auto", "mac", "likelihood", "index", "order"}
-        ``"auto"``: by MAC when the case carries measured shapes, else by the case's mode
-        numbers when it has them, else by order. ``"likelihood"``: by frequency, the most
-        probable assignment of :func:`bayesplate.assignment.assign` (a computed mode may go
-        unobserved, a measured peak may be spurious and is then left out).
+        ``"auto"``: by shape and frequency ("mac") when the case carries measured shapes,
+        else by the case's mode numbers when it has them, else "likelihood" (see
+        :func:`resolve_pairing`). ``"mac"``: the assignment maximising the MAC-and-frequency
+        score of :func:`bayesplate.assignment.assign_with_shapes` (``s_MAC`` =
+        :data:`bayesplate.assignment.MAC_SCALE`). ``"likelihood"``: by frequency, the most
+        probable assignment of :func:`bayesplate.assignment.most_probable` (a computed mode
+        may go unobserved, a measured peak may be spurious and is then left out).
     threshold : float
-        Smallest MAC of an accepted pair; a measured mode whose assigned computed mode stays
-        below it is left unpaired (with an :class:`UnpairedModeWarning`).
+        Smallest MAC of an allowed pair; a measured mode that pairs with no computed mode
+        (every MAC below it, or more probably spurious) is left unpaired (with an
+        :class:`UnpairedModeWarning`).
     extra_modes : int
         Computed modes offered beyond the number measured (``m + extra_modes`` in all), so
         that modes missing from the test do not force wrong pairs.
     modal : ModalResult, optional
         Modes already computed at `b` (at least ``m + extra_modes`` of them to be safe).
     prior : tuple of array_like, optional
-        ``how == "likelihood"``: ``(mu_b, V_b)``, the prior mean (Pa) and covariance (Pa^2)
-        of ``b`` that :func:`bayesplate.assignment.most_probable` integrates over (the
-        constants' uncertainty); required then.
+        ``(mu_b, V_b)``, the prior mean (Pa) and covariance (Pa^2) of ``b``: the constants'
+        uncertainty that :func:`bayesplate.assignment.most_probable` integrates over
+        ("likelihood") and that sets the computed frequencies' predictive deviations
+        ("mac"); default ``b`` and the covariance of the case's prior (first order).
     start : Pairing, optional
         ``how == "likelihood"``: a pairing in use, searched from as well.
 
@@ -390,21 +407,31 @@ def pair_measured(
     measured = case.measured
     how = resolve_pairing(measured, how)
     m = measured.size
+    if how not in ("likelihood", "mac"):
+        return Pairing.from_measurement(measured, how)
+    if prior is None:
+        cov_e = np.diag(np.asarray(case.prior.sd, dtype=float) ** 2)
+        prior = (np.asarray(b, dtype=float), stiffness_covariance(case.prior.mean, cov_e))
     if how == "likelihood":
         return _pair_by_likelihood(measured, model, b, extra_modes, modal, prior, start)
-    if how != "mac":
-        return Pairing.from_measurement(measured, how)
     if modal is None:
         modal = model.solve(np.asarray(b, dtype=float), m + int(extra_modes))
     mac = shape_mac(measured, model, modal.vectors)
-    assigned = assign_by_mac(mac, threshold)
-    kept = np.flatnonzero(assigned >= 0)
+    computed_Hz = modal.frequency_Hz
+    spread = predictive_sd_Hz(computed_Hz, modal.sensitivities, prior[1])
+    a = assign_with_shapes(
+        measured.frequency_Hz, measured.sigma_Hz, computed_Hz, spread, mac, threshold, MAC_SCALE
+    )
+    assigned = a.modes
+    kept = a.paired
     empty = _significant(np.sum(np.asarray(measured.shapes, float) ** 2, axis=1), NEGLIGIBLE_SHAPE)
-    for i in np.flatnonzero(assigned < 0):
+    for i in a.spurious:
         why = (
             "its shape has no transverse amplitude at the points (an in-plane mode?)"
             if empty[i] == 0
             else f"best MAC {mac[i].max():.2f} < {threshold:g}"
+            if mac[i].max() < threshold
+            else "more probably a spurious peak, its frequency far from every mode it resembles"
         )
         warnings.warn(
             f"measured mode {i + 1} ({measured.frequency_Hz[i]:.6g} Hz) matches no computed "
@@ -414,13 +441,11 @@ def pair_measured(
         )
     if kept.size == 0:
         raise ValueError("MAC pairing: no measured shape matches a computed mode")
-    return Pairing(assigned[kept], "mac", DEFAULT_EXTRA_MODES, kept, mac, float(threshold))
+    return Pairing(assigned[kept], "mac", DEFAULT_EXTRA_MODES, kept, mac, float(threshold), a)
 
 
 def _pair_by_likelihood(measured, model, b, extra_modes, modal, prior, start):
     """:func:`pair_measured` by the most probable assignment of frequencies."""
-    if prior is None:
-        raise ValueError("pairing = 'likelihood' needs the prior (mu_b, V_b) of b")
     m = measured.size
     b = np.asarray(b, dtype=float)
     if modal is None:

@@ -45,7 +45,9 @@ def run(case, sigma_rel, quick=False):
     mesh = (case.mesh[0] // 2, case.mesh[1] // 2) if quick else case.mesh
     model = PlateModel.from_case(case, mesh=mesh)
     start = time.perf_counter()
-    d = diagnose(case, model=model, rng=SEED, **({"n_starts": 1} if quick else {}))
+    # pairing by order, as the paper's and as from_published's check assumes
+    d = diagnose(case, model=model, rng=SEED, pairing="order",
+                 **({"n_starts": 1} if quick else {}))  # fmt: skip
     return model, d, time.perf_counter() - start
 
 

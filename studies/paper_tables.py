@@ -143,7 +143,13 @@ class _Models:
 def run_spec(spec, models, convention="paper", max_iter=DEFAULT_MAX_ITER, forward="full"):
     """Run one spec (on the full model unless `forward` says otherwise); its result."""
     case, model = models(spec.source)
-    kwargs = {"model": model, "convention": convention, "max_iter": max_iter, "forward": forward}
+    kwargs = {
+        "model": model,
+        "convention": convention,
+        "max_iter": max_iter,
+        "forward": forward,
+        "pairing": "order",
+    }  # the paper pairs by order (issue 16: not the default)
     if spec.d is not None:
         initial = np.array(PAPER[spec.source][spec.test]["initial"]) * SI
         kwargs.update(prior_mean=initial, prior_sd=FRACTION[spec.d] * initial)

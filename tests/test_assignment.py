@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from bayesplate.assignment import assign, predictive_sd_Hz
+from bayesplate.assignment import MAC_SCALE, assign, assign_with_shapes, predictive_sd_Hz
 
 # A plate-like spectrum: 14 modes, two of them close (modes 4 and 5, 1.5 % apart).
 COMPUTED = np.array(
@@ -82,6 +82,84 @@ def test_predictive_sd_is_first_order_propagation():
 def test_probabilities_are_checked():
     with pytest.raises(ValueError, match="p_spurious = 1.5"):
         assign([1.0], [0.1], [1.0], p_spurious=1.5)
+
+
+# ------------------------------------------------------------------- with shapes: MAC + Hz
+
+
+def test_a_symmetric_pair_that_the_shapes_cannot_tell_apart_is_resolved_by_frequency():
+    # Two close modes (2338.5 and 2373.0 Hz, 0-based 3 and 4) whose shapes a coarse grid of
+    # points sees alike: each measured shape has MAC about 0.6 with both, the larger with the
+    # wrong one (by 0.02, i.e. 0.4 nats at s_MAC = 0.05). The peaks sit on the modes'
+    # frequencies, 17 Hz = 8 predictive deviations (2 Hz) from the other, which costs
+    # 2 log(1 + 8^2/3) = 6.2 nats (Student-t, 3 degrees of freedom): the frequency decides,
+    # where the MAC alone would swap them.
+    f = np.array([2338.5, 2373.0])
+    s = np.full(2, 1.0)
+    computed = COMPUTED[:8]
+    mac = np.full((2, 8), 0.02)
+    mac[0, [3, 4]] = [0.60, 0.62]
+    mac[1, [3, 4]] = [0.62, 0.60]
+    a = assign_with_shapes(f, s, computed, np.full(8, 2.0), mac, threshold=0.5)
+    np.testing.assert_array_equal(a.modes, [3, 4])
+    np.testing.assert_array_equal(np.argmax(mac, axis=1), [4, 3])  # what MAC alone picks
+
+
+def test_a_clean_shape_outweighs_a_nearer_frequency():
+    # A peak at 2350 Hz, 1.5 predictive deviations (8 Hz) above mode 3 (0-based) and 2.9
+    # below mode 4, with the clean shape of mode 4 (MAC 0.97 against 0.05): by the score,
+    # mode 4 gains (0.97 - 0.05) / 0.05 = 18.4 nats of shape and loses
+    # 2 log((1 + 2.9^2/3) / (1 + 1.5^2/3)) = 1.6 of frequency; it wins (by frequency alone,
+    # mode 3). With shapes too noisy to tell (0.52 against 0.50: 0.4 nats) the frequency
+    # decides.
+    f, s = np.array([2350.0]), np.array([1.0])
+    computed = COMPUTED[:8]
+    t = np.full(8, np.sqrt(8.0**2 - 1.0))  # total deviation 8 Hz
+    clean = np.full((1, 8), 0.01)
+    clean[0, [3, 4]] = [0.05, 0.97]
+    assert assign_with_shapes(f, s, computed, t, clean).modes[0] == 4
+    assert assign(f, s, computed, t).modes[0] == 3  # by frequency alone
+    noisy = np.full((1, 8), 0.01)
+    noisy[0, [3, 4]] = [0.50, 0.52]
+    assert assign_with_shapes(f, s, computed, t, noisy).modes[0] == 3
+
+
+def test_the_combined_log_probability_is_the_stated_equation():
+    # One peak, two computed modes below it (both in the band): the score written out by
+    # hand from the module's equation for the pair the assignment takes (Student-t density
+    # with nu = 3 and scale sqrt(5) Hz at a residual of 1 Hz, written out).
+    f, s = np.array([100.0]), np.array([2.0])
+    c, t = np.array([90.0, 99.0]), np.array([1.0, 1.0])
+    mac = np.array([[0.3, 0.9]])
+    p_u, p_s = 0.1, 0.05
+    a = assign_with_shapes(f, s, c, t, mac, p_unobserved=p_u, p_spurious=p_s)
+    assert a.modes[0] == 1
+    np.testing.assert_array_equal(a.unobserved, [0])
+    var, nu = 4.0 + 1.0, 3.0
+    # Gamma(2) = 1, Gamma(3/2) = sqrt(pi) / 2
+    log_t = -np.log(np.sqrt(np.pi) / 2) - 0.5 * np.log(nu * np.pi * var)
+    log_t -= (nu + 1) / 2 * np.log1p(1.0 / (nu * var))
+    expected = (
+        log_t
+        - np.log(MAC_SCALE)
+        - 0.1 / MAC_SCALE
+        + np.log(1 - p_s)
+        + np.log(1 - p_u)  # mode 2 seen
+        + np.log(p_u)  # mode 1 unobserved
+    )
+    np.testing.assert_allclose(a.log_probability, expected, rtol=1e-12)
+
+
+def test_a_peak_whose_shape_matches_no_mode_is_spurious():
+    # below the MAC threshold a pair is not allowed, whatever the frequency says
+    f, s = np.array([2002.7, 2171.2]), np.array([1.0, 1.0])
+    mac = np.full((2, 8), 0.1)
+    mac[0, 1] = 0.95
+    a = assign_with_shapes(f, s, COMPUTED[:8], np.full(8, 5.0), mac, threshold=0.5)
+    np.testing.assert_array_equal(a.modes, [1, -1])
+    np.testing.assert_array_equal(a.unobserved, [0, 2])  # the band ends at 2171.2 Hz
+    with pytest.raises(ValueError, match="mac has shape"):
+        assign_with_shapes(f, s, COMPUTED[:8], np.full(8, 5.0), mac[:, :4])
 
 
 # ----------------------------------------------------------------------------- estimators

@@ -166,8 +166,9 @@ def add_pairing_option(p):
         "--pairing",
         choices=PAIRING_CHOICES,
         default="auto",
-        help="measured-to-computed modes: by shape (MAC) when the case has measured shapes, "
-        "else by the case's mode numbers if any, else by order; 'likelihood': the most "
-        "probable assignment by frequency (a mode may go unobserved, a peak be spurious), "
-        "settled by B",
+        help="measured-to-computed modes. 'auto' (default): by shape and frequency ('mac') "
+        "when the case has measured shapes, else by the case's mode numbers ('index') if any, "
+        "else 'likelihood': the most probable assignment by frequency (a computed mode may go "
+        "unobserved, a peak be spurious), settled by B; 'order': the i-th peak with the i-th "
+        "computed mode (the paper's pairing)",
     )

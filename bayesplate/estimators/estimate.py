@@ -67,8 +67,9 @@ def estimate(
         Explicit stage-2 deviations (SI), overriding `stage2_factor`.
     pairing : {"auto", "mac", "likelihood", "index", "order"} or Pairing
         Measured-to-computed mode pairing (:func:`bayesplate.pairing.pair_measured`, at the
-        prior mean): "auto" pairs by shape (MAC) when the case has measured shapes, else by
-        the case's mode indices if any, else by order. "likelihood": the most probable
+        prior mean): "auto" pairs by shape and frequency ("mac") when the case has measured
+        shapes, else by the case's mode indices if any, else by "likelihood"; "order" (the
+        paper's, to reproduce its tables) only when named. "likelihood": the most probable
         assignment of frequencies (:mod:`bayesplate.assignment`), made at the prior with the
         prior's spread and remade at each estimate with the estimate's, the estimator run
         again until the assignment stands (at most :data:`MAX_ASSIGNMENTS` rounds); unobserved
@@ -116,8 +117,9 @@ def estimate(
     if isinstance(pairing, Pairing):
         return _estimate_paired(case, model, pairing, method, mean, sd, options)
     how = resolve_pairing(case.measured, pairing)
+    _, V = prior_in_stiffness(mean, sd, "full")
     if how != "likelihood":
-        pair = pair_measured(case, model, b0, how)
+        pair = pair_measured(case, model, b0, how, prior=(b0, V))
         return _estimate_paired(case, model, pair, method, mean, sd, options)
     # by the most probable assignment (the constants integrated out over the prior's spread
     # centred where the model is linearised: a profile fit with its Occam factor, not the
@@ -126,7 +128,6 @@ def estimate(
     # the prior is unreliable, so two starts: pairing by order (kept when its estimate
     # confirms it), and the lowest peaks assigned at the prior and fitted first. The settled
     # one more probable at its own estimate wins. B settles it (its prior anchors it).
-    _, V = prior_in_stiffness(mean, sd, "full")
     first = _most_probable(case, model, b0, V, "B", mean, sd, options)
     if method == "B":
         return _assigned(first.result, first.pair, first.rounds, first.note)
@@ -228,9 +229,10 @@ def settle_pairing(
             prior_sd=prior_sd, pairing="likelihood", forward=forward, fast=fast,
         )  # fmt: skip
         return settled.pairing, settled
-    mean = case.prior.mean if prior_mean is None else prior_mean
-    b = laminate.stiffness_from_engineering(np.asarray(mean, dtype=float))
-    return pair_measured(case, model, b, how, modal=modal), None
+    mean = np.asarray(case.prior.mean if prior_mean is None else prior_mean, dtype=float)
+    sd = np.asarray(case.prior.sd if prior_sd is None else prior_sd, dtype=float)
+    b, V = prior_in_stiffness(mean, sd, "full")
+    return pair_measured(case, model, b, how, modal=modal, prior=(b, V)), None
 
 
 def _most_probable(case, model, b0, V, method, mean, sd, options):
