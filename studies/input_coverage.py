@@ -96,10 +96,10 @@ def draw(rng, input_errors=True, prior_mean=None, prior_sd=None):
     return nominal_case(np.sort(f), prior_mean, input_errors, prior_sd), h, rho
 
 
-def fit_b(case, model, inputs, method="B"):
-    """B or MVE (TOL 1e-6); (lower, upper) of the 94 % linearised interval, or None."""
+def fit_b(case, model, inputs, method="B", tol=1e-6):
+    """B or MVE (TOL `tol`); (lower, upper) of the 94 % linearised interval, or None."""
     problem = GaussianProblem.from_case(case, model, inputs=inputs)
-    result = run_estimator(problem, method, tol=1e-6)
+    result = run_estimator(problem, method, tol=tol)
     if not result.converged or not np.all(np.isfinite(result.sd)):
         return None
     return result.constants - Z94 * result.sd, result.constants + Z94 * result.sd
