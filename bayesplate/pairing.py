@@ -8,8 +8,8 @@ measurement points against every measured shape (MAC), scored with the frequency
 (:func:`bayesplate.assignment.assign_with_shapes`), one-to-one by the Hungarian method over
 more computed modes than measured, so that a mode missing from the test or an extra one is
 tolerated; a measured mode that no computed mode resembles is left unpaired and dropped.
-Without shapes or mode numbers the default is the most probable assignment of frequencies
-(:mod:`bayesplate.assignment`); pairing by order, the paper's, is an option. While an
+Without shapes or mode numbers the default is pairing by order, the paper's; the most
+probable assignment of frequencies (:mod:`bayesplate.assignment`) is an option. While an
 estimator iterates, the computed modes can change order
 (two close frequencies cross); :func:`track` follows them from one iterate to the next by the
 modal assurance criterion (MAC) of successive eigenvectors.
@@ -311,9 +311,10 @@ def resolve_pairing(measured, how="auto"):
     measured : bayesplate.io.Measurement
     how : {"auto", "mac", "likelihood", "index", "order"}
         ``"auto"``: by shape and frequency (MAC) when the measurement has shapes, else by its
-        mode numbers when it has them, else by the most probable assignment of frequencies
-        (``"likelihood"``: the assignment is part of the model). Pairing by order (the
-        paper's) is only ever chosen by name.
+        mode numbers when it has them, else by order (the paper's). ``"likelihood"`` (the
+        most probable assignment of frequencies) is chosen by name: as a default it let
+        diagnose explain concealed defects away as missed modes and spurious peaks (see the
+        README).
 
     Returns
     -------
@@ -326,7 +327,7 @@ def resolve_pairing(measured, how="auto"):
         return how
     if measured.shapes is not None and measured.points is not None:
         return "mac"
-    return "likelihood" if measured.mode is None else "index"
+    return "order" if measured.mode is None else "index"
 
 
 def shape_mac(measurement, model, vectors):
@@ -375,7 +376,7 @@ def pair_measured(
         Stiffness coefficients at which to compute the modes (e.g. the prior mean), Pa.
     how : {"auto", "mac", "likelihood", "index", "order"}
         ``"auto"``: by shape and frequency ("mac") when the case carries measured shapes,
-        else by the case's mode numbers when it has them, else "likelihood" (see
+        else by the case's mode numbers when it has them, else by order (see
         :func:`resolve_pairing`). ``"mac"``: the assignment maximising the MAC-and-frequency
         score of :func:`bayesplate.assignment.assign_with_shapes` (``s_MAC`` =
         :data:`bayesplate.assignment.MAC_SCALE`). ``"likelihood"``: by frequency, the most

@@ -61,47 +61,64 @@ NOMINAL = 0.94
 TREATMENTS = ("marginal", "exact")
 
 
-def nominal_case(frequency_Hz, prior_mean):
-    """The case the lab writes: nominal geometry and density with their deviations."""
-    plate = Plate(LENGTH, WIDTH, THICKNESS, DENSITY, (0,), thickness_sd=SD_H_REL * THICKNESS,
-                  density_sd=SD_RHO_REL * DENSITY)  # fmt: skip
+def nominal_case(frequency_Hz, prior_mean, input_sd=True, prior_sd=None):
+    """The case the lab writes: nominal geometry and density, with their deviations or not.
+
+    `prior_sd` (SI, shape (6,)) defaults to ``PRIOR_REL * E_TRUE``.
+    """
+    sd = {"thickness_sd": SD_H_REL * THICKNESS, "density_sd": SD_RHO_REL * DENSITY}
+    plate = Plate(LENGTH, WIDTH, THICKNESS, DENSITY, (0,), **(sd if input_sd else {}))
     measured = Measurement(frequency_Hz, SIGMA_REL * np.asarray(frequency_Hz))
-    prior = Prior(prior_mean, PRIOR_REL * E_TRUE)
+    prior = Prior(prior_mean, PRIOR_REL * E_TRUE if prior_sd is None else prior_sd)
     return Case("coverage plate", "studies/input_coverage.py", plate, measured, prior, MESH)
 
 
-def draw(rng):
-    """One replicate's truth and data: (case as written, true thickness, true density)."""
-    h = THICKNESS * (1 + SD_H_REL * rng.standard_normal())
-    rho = DENSITY * (1 + SD_RHO_REL * rng.standard_normal())
-    prior_mean = E_TRUE + PRIOR_REL * E_TRUE * rng.standard_normal(6)
+def draw(rng, input_errors=True, prior_mean=None, prior_sd=None):
+    """One replicate's truth and data: (case as written, true thickness, true density).
+
+    With ``input_errors=False`` the plate is the nominal one and the case declares no input
+    deviation (studies/posterior_coverage.py); a given `prior_mean` (SI, shape (6,)) is used
+    as is instead of a draw from the prior around ``E_TRUE``.
+    """
+    h, rho = THICKNESS, DENSITY
+    if input_errors:
+        h = THICKNESS * (1 + SD_H_REL * rng.standard_normal())
+        rho = DENSITY * (1 + SD_RHO_REL * rng.standard_normal())
+    if prior_mean is None:
+        prior_mean = E_TRUE + PRIOR_REL * E_TRUE * rng.standard_normal(6)
     true_plate = Plate(LENGTH, WIDTH, h, rho, (0,))
-    true_case = dataclasses.replace(nominal_case(np.ones(N_FREQ), prior_mean), plate=true_plate)
+    written = nominal_case(np.ones(N_FREQ), prior_mean, input_errors, prior_sd)
+    true_case = dataclasses.replace(written, plate=true_plate)
     lam = PlateModel.from_case(true_case, mesh=MESH).solve(
         laminate.stiffness_from_engineering(E_TRUE), N_FREQ
     ).eigenvalues[:N_FREQ]
     f = hz_from_eigenvalue(lam) * (1 + SIGMA_REL * rng.standard_normal(N_FREQ))
-    return nominal_case(np.sort(f), prior_mean), h, rho
+    return nominal_case(np.sort(f), prior_mean, input_errors, prior_sd), h, rho
 
 
-def fit_b(case, model, inputs):
-    """B (TOL 1e-6) on the case's problem; (lower, upper) of the 94 % interval, or None."""
+def fit_b(case, model, inputs, method="B", tol=1e-6):
+    """B or MVE (TOL `tol`); (lower, upper) of the 94 % linearised interval, or None."""
     problem = GaussianProblem.from_case(case, model, inputs=inputs)
-    result = run_estimator(problem, "B", tol=1e-6)
+    result = run_estimator(problem, method, tol=tol)
     if not result.converged or not np.all(np.isfinite(result.sd)):
         return None
     return result.constants - Z94 * result.sd, result.constants + Z94 * result.sd
 
 
-def fit_sampler(case, model, inputs, rng):
-    """The sampler's 94 % HDI (shape (2, 6)), or None when its stopping rule was not met."""
+def fit_sampler(case, model, inputs, rng, **settings):
+    """The sampler's 94 % HDI (shape (2, 6)), or None when its stopping rule was not met.
+
+    `settings`: keywords of :func:`bayesplate.sampling.sample` (default ``min_ess=400,
+    max_steps=3000``).
+    """
     from bayesplate.sampling import sample
 
+    settings = {"min_ess": 400, "max_steps": 3000, **settings}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # full-model fallbacks are counted in the result
         # the replicates are every low mode, sorted: pairing by order (named, issue 16)
         result = sample(case, rng=rng, model=model, inputs=inputs, progress=False,
-                        min_ess=400, max_steps=3000, pairing="order")  # fmt: skip
+                        **{"pairing": "order", **settings})  # fmt: skip
     return (result.hdi[0], result.hdi[1]) if result.converged else None
 
 
@@ -118,18 +135,19 @@ def run(n_replicates=200, sampler_minutes=10.0, seed=SEED):
         cases.append(case)
         for t in TREATMENTS:
             interval = fit_b(case, model, t)
-            records[("B", t)].append(None if interval is None else _covers(interval))
+            records[("B", t)].append(None if interval is None else covers(interval))
     started = time.perf_counter()
     for i, case in enumerate(cases):
         if time.perf_counter() - started >= 60 * sampler_minutes:
             break
         for t in TREATMENTS:
             interval = fit_sampler(case, model, t, 1000 + i)
-            records[("sampler", t)].append(None if interval is None else _covers(interval))
+            records[("sampler", t)].append(None if interval is None else covers(interval))
     return records, np.array(draws), time.perf_counter() - started
 
 
-def _covers(interval):
+def covers(interval):
+    """(6,) bool: whether the interval ``(lower, upper)`` (SI) holds ``E_TRUE``."""
     lower, upper = interval
     return (lower <= E_TRUE) & (E_TRUE <= upper)
 
@@ -153,7 +171,8 @@ def nominal_band(n):
     return NOMINAL - half, NOMINAL + half
 
 
-def _cpu():
+def cpu():
+    """The processor's model name (from /proc/cpuinfo), else the machine type."""
     try:
         for line in pathlib.Path("/proc/cpuinfo").read_text().splitlines():
             if line.startswith("model name"):
@@ -169,7 +188,7 @@ def report(records, draws, seconds, sampler_seconds, command):
     out = [
         "# Coverage of the 94 % intervals with uncertain thickness and density",
         "",
-        f"Made by `{command}` on {datetime.date.today()}, {_cpu()}, {os.cpu_count()} cores, "
+        f"Made by `{command}` on {datetime.date.today()}, {cpu()}, {os.cpu_count()} cores, "
         f"load {load:.1f}, {seconds:.0f} s in all ({sampler_seconds:.0f} s of sampling). "
         f"Synthetic plate {LENGTH * 1e3:.0f} x {WIDTH * 1e3:.0f} x {THICKNESS * 1e3:.0f} mm, "
         f"one orthotropic ply, density {DENSITY:.0f} kg/m^3, mesh {MESH[0]} x {MESH[1]}, "

@@ -168,7 +168,7 @@ def add_pairing_option(p):
         default="auto",
         help="measured-to-computed modes. 'auto' (default): by shape and frequency ('mac') "
         "when the case has measured shapes, else by the case's mode numbers ('index') if any, "
-        "else 'likelihood': the most probable assignment by frequency (a computed mode may go "
-        "unobserved, a peak be spurious), settled by B; 'order': the i-th peak with the i-th "
-        "computed mode (the paper's pairing)",
+        "else 'order' (the i-th peak with the i-th computed mode, the paper's pairing); "
+        "'likelihood': the most probable assignment by frequency (a computed mode may go "
+        "unobserved, a peak be spurious), settled by B",
     )

@@ -220,8 +220,9 @@ def diagnose(
     pairing : {"auto", "mac", "likelihood", "index", "order"} or Pairing
         Measured-to-computed modes (:func:`bayesplate.pairing.pair_measured` at the prior
         mean, as :func:`bayesplate.estimators.estimate` takes it): "auto" pairs by shape
-        when the case has shapes, else by mode numbers if any, else by "likelihood": the
-        assignment B settles on (on `model`). Unpaired measured modes (spurious peaks) are left out.
+        and frequency when the case has shapes, else by mode numbers if any, else by order;
+        "likelihood" takes the assignment B settles on (on `model`). Unpaired measured modes
+        (spurious peaks) are left out.
     alpha : float
         Significance of the chi-square tests (nominal fit and refit).
     evidence_threshold : float

@@ -68,8 +68,8 @@ def estimate(
     pairing : {"auto", "mac", "likelihood", "index", "order"} or Pairing
         Measured-to-computed mode pairing (:func:`bayesplate.pairing.pair_measured`, at the
         prior mean): "auto" pairs by shape and frequency ("mac") when the case has measured
-        shapes, else by the case's mode indices if any, else by "likelihood"; "order" (the
-        paper's, to reproduce its tables) only when named. "likelihood": the most probable
+        shapes, else by the case's mode indices if any, else by order (the paper's).
+        "likelihood": the most probable
         assignment of frequencies (:mod:`bayesplate.assignment`), made at the prior with the
         prior's spread and remade at each estimate with the estimate's, the estimator run
         again until the assignment stands (at most :data:`MAX_ASSIGNMENTS` rounds); unobserved
