@@ -93,13 +93,14 @@ class TaskPool:
     def __init__(self, workers=None, scheduler=None):
         self._opened = _client(scheduler, workers)
         self.client = None
+        self._shipped = None  # (function, its future on the workers)
 
     def __enter__(self):
         self.client = self._opened.__enter__()
         return self
 
     def __exit__(self, *exc):
-        self.client = None
+        self.client, self._shipped = None, None
         return self._opened.__exit__(*exc)
 
     def map(self, fn, items):
@@ -108,7 +109,8 @@ class TaskPool:
         Parameters
         ----------
         fn : callable
-            Picklable; shipped once per call (emcee's log-density with its model).
+            Picklable; shipped to the workers on its first call and kept there while the
+            same object is passed again (emcee's log-density with its model, every step).
         items : iterable
             Task arguments (emcee: one walker position per task).
 
@@ -126,7 +128,11 @@ class TaskPool:
         n = max(1, min(len(items), len(self.client.scheduler_info().get("workers", {}))))
         bounds = [len(items) * k // n for k in range(n + 1)]
         chunks = [items[a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
-        fn_future = self.client.scatter(fn, broadcast=True, hash=False)
+        # the function (emcee's log-density, holding the plate model: megabytes with the
+        # full model) is shipped to the workers once, and reused while it is the same object
+        if self._shipped is None or self._shipped[0] is not fn:
+            self._shipped = (fn, self.client.scatter(fn, broadcast=True, hash=False))
+        fn_future = self._shipped[1]
         futures = self.client.map(_apply, [fn_future] * n, chunks, pure=False)
         return [r for chunk in self.client.gather(futures) for r in chunk]
 

@@ -27,30 +27,21 @@ and the cached evaluation; split, each part would reach into the others' interna
 from __future__ import annotations
 
 import copy
-import logging
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.optimize import least_squares
 from scipy.stats import norm
 
 from .. import laminate
 from ..quantities import engineering_covariance, hz_from_eigenvalue
 from .finish import finish
-from .parallel import fork_map
+from .local import distinct as _distinct
+from .local import local_fits as _local_fits
+from .polish import polish_and_finish
 
 __all__ = ["JointFit", "JointProblem", "fit"]
 
-log = logging.getLogger(__name__)
-
 _UNPHYSICAL_RESIDUAL = 1e4  # residual returned outside the lamina's physical region
-DISTINCT = 0.3  # whitened distance under which two optima are the same
-#: A polished optimum whose objective (``chi2 + chi2_prior``) exceeds the best finished one
-#: by more than this plus the largest polish error seen is not finished on the working mesh
-#: (it cannot win). On the measured Frederiksen plate the nominal polish is within 0.002 of
-#: the finished objective and the second basin 2.55 above the best; a cutout's polish was
-#: off by up to 2.7 (plate 1), which the error term covers.
-FINISH_MARGIN = 2.0
 
 
 @dataclass(frozen=True)
@@ -342,114 +333,15 @@ def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None, keep
             return _summarise(rough_problem, rough[0], refined=False)
         starts = [r.x for r in (_distinct(rough) if distinct else rough)[:keep]]
         if polish is not None:
-            # every rough optimum is polished on a reduced model of the working mesh made at
-            # it, then finished on the working mesh itself, best polished first, and the
-            # best finished one is chosen: a reduced model only chooses where to start, the
-            # optimum reported is the finite-element one's. A polished optimum is not
-            # finished (kept as an alternative at its polished objective) when it cannot
-            # win: its polished objective exceeds the best finished one by more than
-            # FINISH_MARGIN plus the largest polish error seen (polished - finished).
-            polished = [_polished(problem, polish, z) for z in starts]
-            if all(r is None for r in polished):  # no solvable plate: the best one's error
-                _polished(problem, polish, starts[0], strict=True)
-            polished = sorted((r for r in polished if r is not None), key=lambda r: r.cost)
-            finished, far, error = [], [], 0.0
-            for r in polished:
-                if finished and 2.0 * (r.cost - finished[0].cost) > FINISH_MARGIN + error:
-                    far.append(r)
-                    continue
-                done = _finished(problem, r, max_nfev, tol)
-                if done is not None:
-                    error = max(error, 2.0 * abs(r.cost - done.cost))
-                    finished = sorted([*finished, done], key=lambda f: f.cost)
-            if not finished:  # no polished optimum could be finished: the best one's error
-                _finished(problem, polished[0], max_nfev, tol, strict=True)
-            others = sorted(((problem.unpack(r.x)[0], 2.0 * r.cost) for r in finished[1:] + far),
-                            key=lambda pair: pair[1])  # fmt: skip
+            # a reduced model only chooses where to start: the optimum reported is the
+            # finite-element one's (see .polish)
+            finished, others = polish_and_finish(problem, polish, starts, max_nfev, tol)
             return replace(_summarise(problem, finished[0]), alternatives=tuple(others))
     results = _local_fits(problem, starts, max_nfev, workers,
                           tol if rough is not None else 1e-8)  # fmt: skip
     others = tuple((problem.unpack(r.x)[0], 2.0 * r.cost) for r in results[1:])
     best = results[0] if rough is None else finish(problem, results[0], max_nfev)
     return replace(_summarise(problem, best), alternatives=others)
-
-
-def _polished(problem, polish, z, strict=False):
-    """The rough optimum ``z`` polished on ``polish(z)`` (its ``cost`` on that model).
-
-    None (unless ``strict``) when the plate at ``z`` cannot be solved (a far rough optimum
-    of an inaccurate reduced model: its modified plate is not positive definite).
-    """
-    try:
-        return _local_fits(polish(z), [z], 100)[0]
-    except (ValueError, np.linalg.LinAlgError) as error:
-        if strict:
-            raise
-        log.warning("%s: rough optimum %s not polished (%s)", _name(problem), np.round(z, 2),
-                    error)  # fmt: skip
-        return None
-
-
-def _finished(problem, polished, max_nfev, tol, strict=False):
-    """The polished optimum finished on ``problem`` (tightly, at its canonical image).
-
-    None (unless ``strict``) when a plate on the way cannot be solved.
-    """
-    try:
-        best = _local_fits(problem, [polished.x], max_nfev, 1, tol)[0]
-        best = finish(problem, best, max_nfev)  # tight, at its canonical image
-    except (ValueError, np.linalg.LinAlgError) as error:
-        if strict:
-            raise
-        log.warning("%s: polished optimum %s not finished (%s)", _name(problem),
-                    np.round(polished.x, 2), error)  # fmt: skip
-        return None
-    log.info("%s: polished %.6g, finished %.6g", _name(problem), 2 * polished.cost,
-             2 * best.cost)  # fmt: skip
-    return best
-
-
-def _distinct(results):
-    """Results (best first) farther than ``DISTINCT`` from every better one."""
-    chosen = []
-    for r in results:
-        if all(np.linalg.norm(r.x - c.x) > DISTINCT for c in chosen):
-            chosen.append(r)
-    return chosen
-
-
-def _local_fits(problem, starts, max_nfev, workers=1, tol=1e-8):
-    """Least-squares results from every start, lowest cost first (``tol``: ftol and xtol)."""
-    lo, hi = problem.bounds()
-
-    def local_fit(z0):
-        solves = problem.n_solves
-        z0 = np.clip(np.asarray(z0, dtype=float), lo + 1e-9, hi - 1e-9)
-        res = least_squares(
-            problem.residuals,
-            z0,
-            jac=problem.jacobian,
-            bounds=(lo, hi),
-            method="trf",
-            x_scale="jac",
-            max_nfev=max_nfev,
-            ftol=tol,
-            xtol=tol,
-        )
-        log.info(
-            "%s start %s: cost %.3g (%s)",
-            _name(problem),
-            np.round(z0, 2),
-            2 * res.cost,
-            res.message,
-        )
-        res.n_solves = problem.n_solves - solves
-        return res
-
-    solves = problem.n_solves
-    results = fork_map(local_fit, starts, workers)
-    problem.n_solves = solves + sum(r.n_solves for r in results)  # also those of workers
-    return sorted(results, key=lambda r: r.cost)
 
 
 def _log_mass_inside(z, sd, lo, hi):
@@ -461,10 +353,6 @@ def _log_mass_inside(z, sd, lo, hi):
     """
     inside = norm.cdf((hi - z) / sd) - norm.cdf((lo - z) / sd)
     return float(np.sum(np.log(np.maximum(inside, 1e-300))))
-
-
-def _name(problem):
-    return "nominal" if problem.physics is None else problem.physics.name
 
 
 def _summarise(problem, res, refined=True):

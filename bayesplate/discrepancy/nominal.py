@@ -17,7 +17,8 @@ from dataclasses import replace
 import numpy as np
 
 from ..reduced import ReducedModel
-from .fit import JointProblem, _local_fits, fit
+from .fit import JointProblem, fit
+from .local import local_fits
 from .pencil import candidate_pencil
 
 __all__ = ["N_STARTS", "check_fast", "fit_nominal", "nominal_reduced", "nominal_stage"]
@@ -67,7 +68,7 @@ def fit_nominal(problem, rough, rng, n_starts=N_STARTS, workers=1, keep=3):
     starts = [np.zeros(6)] + [rng.standard_normal(6) for _ in range(n_starts)]
     # a second round hops around the best first-round optimum (basins the prior's draws
     # seldom reach: on the measured Frederiksen plate the best one is two deviations off)
-    first = _local_fits(rough, starts, 200, workers)
+    first = local_fits(rough, starts, 200, workers)
     starts = [r.x for r in first] + [first[0].x + rng.standard_normal(6) for _ in range(n_starts)]
     n = int(problem.modes.max()) + 1 + POLISH_EXTRA_MODES
 
