@@ -437,3 +437,25 @@ def test_the_estimate_steps_share_one_fast_model_checked_by_the_full_one(tmp_pat
         assert data.results[method]["status"] == "converged"
     np.testing.assert_allclose(data.results["B"]["b"], full.b, rtol=1e-3)
     assert "| full-model check | confirmed" in path.read_text(encoding="utf-8")
+
+
+def test_a_report_resumed_on_the_fast_model_gives_the_same_numbers(tmp_path, monkeypatch):
+    # above FAST_MIN_DOFS unknowns the estimate steps iterate on a fast model; a step lost
+    # to a kill and run again must see the same fast model as in the unbroken run (it used to
+    # see one enriched by the steps before it only when they ran in the same process)
+    from bayesplate.estimators import fast as fast_module
+
+    monkeypatch.setattr(fast_module, "FAST_MIN_DOFS", 0)
+    _, whole = make_report(bundled_case_path("plate1"), tmp_path / "whole", FAST, None, "p")
+    out = tmp_path / "resumed"
+    make_report(bundled_case_path("plate1"), out, FAST, None, "p")
+    lost = [out / ".cache" / f"{step}.npz" for step in ("MVE", "MVE-mod")]
+    assert all(path.exists() for path in lost)
+    for path in lost:  # killed after B: MVE and MVE-mod not stored
+        path.unlink()
+    _, resumed = make_report(bundled_case_path("plate1"), out, FAST, None, "p")
+    for method in ESTIMATORS:
+        a, b = whole.results[method], resumed.results[method]
+        np.testing.assert_array_equal(a["b"], b["b"])
+        np.testing.assert_array_equal(a["sd"], b["sd"])
+        assert a["iterations"] == b["iterations"]

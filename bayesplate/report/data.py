@@ -76,8 +76,10 @@ class ReportData:
 
         One model over the prior's box (:func:`bayesplate.estimators.case_fast_model`) for
         the estimators, the sampler and diagnose, on meshes where the estimators' ``"auto"``
-        takes the fast path; None where a full solve is cheap. The estimate steps enrich it
-        where the full model corrected one of their answers (:meth:`share_fast_model`).
+        takes the fast path; None where a full solve is cheap. Every step gets it as built
+        (seeded): a step's enrichments are not handed on, so that a report resumed after a
+        kill runs each step on the same fast model as an unbroken one (the same numbers,
+        bit for bit), whichever steps came from the cache.
         """
         model = self.plate_model()
         if self.fast is None and resolve_forward("auto", model) == "fast":
@@ -87,11 +89,6 @@ class ReportData:
             self.fast = case_fast_model(self.case, model, n_modes, rng=self.options.seed)
             self.seconds["fast_model"] = self.fast.build_seconds
         return self.fast
-
-    def share_fast_model(self, fast):
-        """Keep the (enriched) fast model a step returned, for the next steps."""
-        if fast is not None:
-            self.fast = fast
 
     def pairing_for_steps(self):
         """What the estimate, sample and diagnose steps are given as their pairing.

@@ -126,7 +126,7 @@ class _Runner:
             {"pairing": self.pairing_options},
             lambda: steps.estimate_step(
                 self.case, self.data.plate_model(), method, self.data.pairing_for_steps(),
-                self.data.fast_model(), self.data.share_fast_model,
+                self.data.fast_model(),
             ),
         )  # fmt: skip
 

@@ -54,21 +54,18 @@ def pairing_step(case, model, how="auto"):
     return data
 
 
-def estimate_step(case, model, method, pairing, fast=None, share=None):
+def estimate_step(case, model, method, pairing, fast=None):
     """One of the paper's estimators (:func:`bayesplate.estimators.estimate`) as plain data.
 
     With a fast model (a :class:`bayesplate.reduced.CertifiedModel`) the estimator iterates
-    on it and the full model checks the answer (the ``check`` entry); ``share(fast)`` is
-    given the fast model back, enriched where the check corrected it.
+    on it and the full model checks the answer (the ``check`` entry).
     """
     from ..estimators import estimate, estimate_on_fast
 
     if fast is None:
         r = estimate(case, method, model=model, pairing=pairing, forward="full")
     else:
-        r, fast = estimate_on_fast(case, method, model, fast, pairing=pairing)
-        if share is not None:
-            share(fast)
+        r, _ = estimate_on_fast(case, method, model, fast, pairing=pairing)
     return {
         "method": r.method,
         "converged": bool(r.converged),
