@@ -32,7 +32,7 @@ import datetime
 import logging
 import os
 import pathlib
-import platform
+import sys
 import time
 import warnings
 
@@ -46,6 +46,11 @@ from bayesplate.io import Case, Measurement, Plate, Prior, atomic_write_text
 from bayesplate.model import PlateModel
 from bayesplate.posterior import GaussianProblem
 from bayesplate.quantities import ENGINEERING_KEYS, engineering_covariance, hz_from_eigenvalue
+
+_HERE = pathlib.Path(__file__).resolve().parent
+if str(_HERE) not in sys.path:
+    sys.path.insert(0, str(_HERE))
+from _machine import cpu  # noqa: E402  (this folder's helper, not a package)
 
 REPORT = "error_scale.md"
 SEED = 20261117
@@ -196,23 +201,13 @@ def _band(n):
     return f"{NOMINAL - half:.3f} to {NOMINAL + half:.3f}"
 
 
-def _cpu():
-    try:
-        for line in pathlib.Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.machine()
-
-
 def report(toys, plates, sampled, b_seconds, sampler_seconds, command):
     """The Markdown report."""
     n_toy = len(next(iter(toys.values()))[2])
     out = [
         "# Error scale: coverage when the frequency noise is 3 times the declared",
         "",
-        f"Made by `{command}` on {datetime.date.today()}, {_cpu()}, {os.cpu_count()} cores, "
+        f"Made by `{command}` on {datetime.date.today()}, {cpu()}, {os.cpu_count()} cores, "
         f"load {os.getloadavg()[0]:.1f}; {b_seconds:.0f} s of B fits, {sampler_seconds:.0f} s "
         f"of sampling; seed {SEED}. A cell is the share of 94 % intervals holding the truth "
         "(Wilson 95 % interval in brackets); beside it, the 95 % band of a binomial share "

@@ -34,7 +34,7 @@ import datetime
 import logging
 import os
 import pathlib
-import platform
+import sys
 import time
 import warnings
 
@@ -46,6 +46,11 @@ from bayesplate.io import Case, Measurement, Plate, Prior, atomic_write_text
 from bayesplate.model import PlateModel
 from bayesplate.posterior import GaussianProblem
 from bayesplate.quantities import ENGINEERING_KEYS, hz_from_eigenvalue
+
+_HERE = pathlib.Path(__file__).resolve().parent
+if str(_HERE) not in sys.path:
+    sys.path.insert(0, str(_HERE))
+from _machine import cpu  # noqa: E402  (this folder's helper, not a package)
 
 REPORT = "input_coverage.md"
 SEED = 20261125
@@ -89,9 +94,11 @@ def draw(rng, input_errors=True, prior_mean=None, prior_sd=None):
     true_plate = Plate(LENGTH, WIDTH, h, rho, (0,))
     written = nominal_case(np.ones(N_FREQ), prior_mean, input_errors, prior_sd)
     true_case = dataclasses.replace(written, plate=true_plate)
-    lam = PlateModel.from_case(true_case, mesh=MESH).solve(
-        laminate.stiffness_from_engineering(E_TRUE), N_FREQ
-    ).eigenvalues[:N_FREQ]
+    lam = (
+        PlateModel.from_case(true_case, mesh=MESH)
+        .solve(laminate.stiffness_from_engineering(E_TRUE), N_FREQ)
+        .eigenvalues[:N_FREQ]
+    )
     f = hz_from_eigenvalue(lam) * (1 + SIGMA_REL * rng.standard_normal(N_FREQ))
     return nominal_case(np.sort(f), prior_mean, input_errors, prior_sd), h, rho
 
@@ -171,17 +178,6 @@ def nominal_band(n):
     return NOMINAL - half, NOMINAL + half
 
 
-def cpu():
-    """The processor's model name (from /proc/cpuinfo), else the machine type."""
-    try:
-        for line in pathlib.Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.machine()
-
-
 def report(records, draws, seconds, sampler_seconds, command):
     """The Markdown report."""
     load = os.getloadavg()[0]
@@ -219,12 +215,12 @@ def report(records, draws, seconds, sampler_seconds, command):
             out.append("| " + " | ".join(cells) + " |")
     out += [
         "",
-        "Reading: with `inputs=\"exact\"` the intervals of the bending-determined moduli (E1, "
+        'Reading: with `inputs="exact"` the intervals of the bending-determined moduli (E1, '
         "E2, G12) leave out the thickness and density errors (which move them by about "
         f"{200 * SD_H_REL:.0f} % and {100 * SD_RHO_REL:.0f} %, against a frequency-only "
-        "deviation of about 1 %) and fall short; with `inputs=\"marginal\"` they include "
+        'deviation of about 1 %) and fall short; with `inputs="marginal"` they include '
         "them. nu12, G13 and G23 are little affected by a common scaling of the eigenvalues. "
-        "\"Failed\": B did not converge (it left the physical region from a prior mean drawn "
+        '"Failed": B did not converge (it left the physical region from a prior mean drawn '
         "far from the truth, e.g. E2 at 0.37 of its true value, 2.5 prior deviations), "
         "counted out of the shares. B's linearised interval carries its own shortfall when "
         "priors are drawn this far (nu12, which the inputs barely touch, shows it in both "

@@ -29,7 +29,7 @@ import dataclasses
 import datetime
 import os
 import pathlib
-import platform
+import sys
 import time
 
 import numpy as np
@@ -39,6 +39,11 @@ from bayesplate.inputs import estimate_budget, input_jacobian
 from bayesplate.io import atomic_write_text, bundled_case_path, load_case
 from bayesplate.model import PlateModel
 from bayesplate.quantities import ENGINEERING_KEYS, to_case_units
+
+_HERE = pathlib.Path(__file__).resolve().parent
+if str(_HERE) not in sys.path:
+    sys.path.insert(0, str(_HERE))
+from _machine import cpu  # noqa: E402  (this folder's helper, not a package)
 
 REPORT = "spruce_input_budget.md"
 CASE = "badiane_spruce_5R"
@@ -68,8 +73,9 @@ def mass_case(case):
     p = case.plate
     mass = p.density * p.length * p.width * p.thickness
     assert abs(mass / (MASS_G * 1e-3) - 1) < 2e-3, mass
-    return dataclasses.replace(case, plate=dataclasses.replace(p, mass=mass,
-                                                               mass_sd=SD_MASS_G * 1e-3))
+    return dataclasses.replace(
+        case, plate=dataclasses.replace(p, mass=mass, mass_sd=SD_MASS_G * 1e-3)
+    )
 
 
 SEED = 20261125
@@ -150,17 +156,6 @@ def _table(result, budget):
     return lines
 
 
-def _cpu():
-    """The processor's model name (``/proc/cpuinfo``), or the platform's machine type."""
-    try:
-        for line in pathlib.Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.machine()
-
-
 def report(case, rows, seconds, posteriors=None):
     """The Markdown report."""
     load = os.getloadavg()[0]
@@ -168,7 +163,7 @@ def report(case, rows, seconds, posteriors=None):
         "# The spruce plate's uncertain inputs: variance budget of B and MVE",
         "",
         f"Made by `python studies/spruce_input_budget.py` on {datetime.date.today()}, "
-        f"{_cpu()}, {os.cpu_count()} cores, load "
+        f"{cpu()}, {os.cpu_count()} cores, load "
         f"{load:.1f}, {seconds:.0f} s. Case `{CASE}` with the sheet's deviations: h "
         f"{SD_H_MM} mm, a {SD_A_MM} mm, b {SD_B_MM} mm, mass {SD_MASS_G} g. Linearised at "
         "each estimate; `share` is the fraction of the total variance; the sd without inputs "
