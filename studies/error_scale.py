@@ -50,7 +50,7 @@ from bayesplate.quantities import ENGINEERING_KEYS, engineering_covariance, hz_f
 _HERE = pathlib.Path(__file__).resolve().parent
 if str(_HERE) not in sys.path:
     sys.path.insert(0, str(_HERE))
-from _machine import cpu  # noqa: E402  (this folder's helper, not a package)
+from _study_host import cpu  # noqa: E402  (this folder's helper, not a package)
 
 REPORT = "error_scale.md"
 SEED = 20261117

@@ -43,7 +43,7 @@ from bayesplate.quantities import ENGINEERING_KEYS, to_case_units
 _HERE = pathlib.Path(__file__).resolve().parent
 if str(_HERE) not in sys.path:
     sys.path.insert(0, str(_HERE))
-from _machine import cpu  # noqa: E402  (this folder's helper, not a package)
+from _study_host import cpu  # noqa: E402  (this folder's helper, not a package)
 
 REPORT = "spruce_input_budget.md"
 CASE = "badiane_spruce_5R"
