@@ -1,22 +1,14 @@
 """The coverage study of uncertain inputs (studies/input_coverage.py) in quick mode."""
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
+from _studies import load_study
 from scipy import stats
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
 def study():
-    path = ROOT / "studies" / "input_coverage.py"
-    spec = importlib.util.spec_from_file_location(path.stem, path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_study("input_coverage")
 
 
 def test_quick_report(study, tmp_path):

@@ -1,24 +1,17 @@
 """The calibrated-posteriors study (studies/posterior_coverage.py) in quick mode, and its
 coverage machinery on a problem whose coverage is known exactly."""
 
-import importlib.util
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
+from _studies import load_study
 from scipy import stats
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
 def study():
-    path = ROOT / "studies" / "posterior_coverage.py"
-    spec = importlib.util.spec_from_file_location(path.stem, path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_study("posterior_coverage")
 
 
 @pytest.mark.slow  # two sampler runs: ~20 s of CPU, 129 s measured at load 11 on 2 cores

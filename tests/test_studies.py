@@ -1,34 +1,27 @@
 """Each study (and the forward benchmark) in quick mode against a number from the paper."""
 
-import importlib.util
 import inspect
 from pathlib import Path
 
 import numpy as np
 import pytest
+from _studies import load_study
 
 ROOT = Path(__file__).resolve().parents[1]
 MIN_PNG_BYTES = 10_000  # an empty or failed figure is a few kB; ours are 35-250 kB
 
 
-def _load(path):
-    spec = importlib.util.spec_from_file_location(path.stem, path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 @pytest.fixture(scope="module")
 def forward(tmp_path_factory):
     out = tmp_path_factory.mktemp("forward_model")
-    module = _load(ROOT / "studies" / "forward_model.py")
+    module = load_study(ROOT / "studies" / "forward_model.py")
     return module, module.main(out, quick=True), out
 
 
 @pytest.fixture(scope="module")
 def sensitivity(tmp_path_factory):
     out = tmp_path_factory.mktemp("sensitivity")
-    module = _load(ROOT / "studies" / "sensitivity_figures.py")
+    module = load_study(ROOT / "studies" / "sensitivity_figures.py")
     return module, module.main(out, quick=True), out
 
 
@@ -81,7 +74,7 @@ def test_sensitivity_claims_and_figures(sensitivity):
 
 
 def test_run_all_lists_studies_with_main():
-    run_all = _load(ROOT / "studies" / "run_all.py")
+    run_all = load_study(ROOT / "studies" / "run_all.py")
     assert "forward_model" in run_all.STUDIES
     for name in run_all.STUDIES:
         main = run_all.load(name).main
@@ -89,7 +82,7 @@ def test_run_all_lists_studies_with_main():
 
 
 def test_benchmark_quick(tmp_path):
-    bench = _load(ROOT / "benchmarks" / "bench_forward.py")
+    bench = load_study(ROOT / "benchmarks" / "bench_forward.py")
     result = bench.main(tmp_path, quick=True)
     rows = result["by_mesh"]
     assert [tuple(r["mesh"]) for r in rows] == bench.QUICK_MESHES
@@ -104,7 +97,7 @@ def test_benchmark_quick(tmp_path):
 def test_benchmark_diagnose_quick(tmp_path):
     # a control recording of the concealment study on the quick mesh lands in the table with
     # its verdict (nothing concealed: consistent) and the time is written with its target
-    bench = _load(ROOT / "benchmarks" / "bench_diagnose.py")
+    bench = load_study(ROOT / "benchmarks" / "bench_diagnose.py")
     rows, base_rows = bench.main(tmp_path, [0], quick=True)
     assert [r["index"] for r in rows] == [0] and base_rows == []
     assert rows[0]["verdict"] == "consistent" and rows[0]["chosen"] is None
@@ -118,7 +111,7 @@ def test_forward_full_convergence(tmp_path):
     # Paper section 6.3: the 50 x 50 mesh "satisfactorily resolves the first 14 modes".
     # Richardson on 25/50/100 puts its largest error at 0.16 % (0.16 sigma); 0.3 sigma bounds
     # it with room for the extrapolation's own uncertainty.
-    module = _load(ROOT / "studies" / "forward_model.py")
+    module = load_study(ROOT / "studies" / "forward_model.py")
     results = module.main(tmp_path, quick=False)
     conv = results["convergence"]
     i50 = conv["meshes"].index((50, 50))
@@ -129,7 +122,7 @@ def test_paper_tables_quick(tmp_path):
     # Table 4 (Plate 1, test 2, d = 1/3): the paper prints B E1 = 152.4 GPa after 10
     # iterations; 0.2 % covers its 4 printed figures plus our 0.003 % frequency difference.
     # Table 3: d = 1/3 from test 1's initial values does not converge ("-").
-    module = _load(ROOT / "studies" / "paper_tables.py")
+    module = load_study(ROOT / "studies" / "paper_tables.py")
     results = module.main(tmp_path, quick=True)
     lines = {(x.spec.table, x.spec.label, x.stage): x for x in results["lines"]}
     b = lines[("4", "B 1/3", "")]
@@ -153,7 +146,7 @@ def test_concealment_quick(tmp_path):
     # regression of the concealed-effect study on a 12 x 6 mesh: the control must stay
     # consistent; the 12 x 6 mesh's own error is far above the 0.2 % noise, so diagnose widens
     # the deviations and may not see the 1 g mass there (the full study uses the 50 x 50 mesh)
-    rows = _load(ROOT / "studies" / "concealment.py").main(tmp_path, quick=True)
+    rows = load_study(ROOT / "studies" / "concealment.py").main(tmp_path, quick=True)
     assert rows[0]["effect"] == "control" and rows[0]["verdict"] == "consistent"
     assert (tmp_path / "concealment.md").read_text().count("| control |") == 1
 
@@ -163,7 +156,7 @@ def test_diagnose_frederiksen_quick(tmp_path):
     # The measured plate on half the mesh: Frederiksen's own constants reproduce every
     # measured frequency within 0.20 % (forward-model study), so nothing is missing at the
     # case's 1 % nor at 0.2 %; every run is checked against a fit from his constants.
-    module = _load(ROOT / "studies" / "diagnose_frederiksen.py")
+    module = load_study(ROOT / "studies" / "diagnose_frederiksen.py")
     results = module.main(tmp_path, quick=True)
     assert results["1pc"].verdict == results["0p2pc"].verdict == "consistent"
     for key in ("1pc", "0p2pc"):
@@ -180,7 +173,7 @@ def test_prior_bias_quick(tmp_path):
     # 150.0 GPa; 0.2 % covers 4 printed figures plus our 0.003 % frequency difference. The
     # sampled posterior of the same problem keeps the target inside its 94 % interval for
     # every constant, while B misses G23 by 13 %.
-    module = _load(ROOT / "studies" / "prior_bias.py")
+    module = load_study(ROOT / "studies" / "prior_bias.py")
     results = module.main(tmp_path, quick=True)
     (run,) = results["runs"]
     assert run.b.constants[0] == pytest.approx(152.4e9, rel=2e-3)
@@ -199,7 +192,7 @@ def test_spruce_badiane_quick(tmp_path):
     # The measured spruce plate (issue 16): B, its peaks assigned by likelihood (all ten in
     # order), within 3 % of the source's constants rescaled to the case's h and rho on E1,
     # E2 and G12 (the source is the authors' own vibration-based identification).
-    module = _load(ROOT / "studies" / "spruce_badiane.py")
+    module = load_study(ROOT / "studies" / "spruce_badiane.py")
     rows = module.main(tmp_path, quick=True)
     case = module.load_case(module.bundled_case_path(module.CASE))
     reference, factor = module.rescaled_reference(case)
