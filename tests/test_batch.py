@@ -227,3 +227,21 @@ def test_sample_and_diagnose_in_a_batch_are_the_commands(tmp_path, capsys):
     hdi = json.loads((tmp_path / "out" / "plate1" / "sample.json").read_text())["constants"]
     assert float(rows["plate1", "sample"]["E1_GPa_lo94"]) == hdi["E1_GPa"]["hdi_3%"]
     capsys.readouterr()
+
+
+def test_a_case_with_an_error_scale_gets_it_in_the_summary():
+    """The estimate step widens its sd as `bayesplate estimate` does and reports s."""
+    text = bundled_case_path("plate1").read_text()
+    scaled = text.replace("sigma_rel = 0.01\n",
+                          "sigma_rel = 0.01\nerror_scale = { median = 1.0, upper95 = 3.0 }\n")
+    assert scaled != text
+    options = BatchOptions().for_step("estimate")
+    plain = run_step("p", "p.toml", text.encode(), "estimate", options)["row"]
+    out = run_step("s", "s.toml", scaled.encode(), "estimate", options)
+    row = out["row"]
+    assert "error_scale" not in plain
+    lo, hi = row["error_scale_lo94"], row["error_scale_hi94"]
+    assert 0 < lo < row["error_scale"] < hi
+    assert out["document"]["error_scale"]["median"] == pytest.approx(row["error_scale"])
+    # the same estimate, its sd widened or narrowed by the scale (here s < 1 or > 1)
+    assert row["E1_GPa"] == plain["E1_GPa"] and row["E1_GPa_sd"] != plain["E1_GPa_sd"]

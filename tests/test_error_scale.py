@@ -405,3 +405,49 @@ def test_the_screen_bound_is_above_the_marginal_likelihood(rng):
         gap = np.maximum(r * rng.uniform(0, 1, r.size), 0.0)  # residuals r >= gap where > 0
         bound = screen._likelihood_bound(screen._misfit(gap, problem.V_Y))
         assert bound >= problem.log_likelihood(b) - 1e-9
+
+
+# ----------------------------------------------------------------------------- in the report
+
+
+def test_the_report_widens_the_estimates_with_the_scale(tmp_path):
+    """`bayesplate report` on a case with the key: B's sd are those of `scale_estimate`."""
+    from bayesplate.error_scale import scale_estimate
+    from bayesplate.estimators import estimate
+    from bayesplate.model import PlateModel
+    from bayesplate.report import ReportOptions, make_report
+
+    text = bundled_case_path("plate1").read_text()
+    text = text.replace("sigma_rel = 0.01\n",
+                        "sigma_rel = 0.01\nerror_scale = { median = 1.0, upper95 = 3.0 }\n")
+    path = tmp_path / "plate1_scaled.toml"
+    path.write_text(text)
+    options = ReportOptions(diagnose=False, sample=False)
+    out, data = make_report(path, tmp_path / "out", options, lambda line: None, "scaled")
+    b = data.results["B"]
+    assert b["error_scale"] is not None
+    # the same widening as `bayesplate estimate` (an independent call on the full model)
+    case = _plate1_with({"median": 1.0, "upper95": 3.0})
+    model = PlateModel.from_case(case)
+    direct = estimate(case, "B", model=model, pairing="order", forward="full")
+    scaled, lin = scale_estimate(case, model, direct)
+    np.testing.assert_allclose(b["sd"], scaled.sd, rtol=1e-6)
+    assert b["error_scale"]["s_hat"] == pytest.approx(lin.s_hat, rel=1e-6)
+    report = out.read_text(encoding="utf-8")
+    assert "error scale s: median" in report and "widened by it" in report
+
+
+def test_the_sampler_with_a_setup_prepared_from_its_stream_gives_the_same_chain():
+    """The report keeps the setup (for s): seeding `prepare` with `streams(rng)[1]` must give
+    the chain `sample(case, rng)` gives on its own."""
+    from bayesplate.model import PlateModel
+    from bayesplate.sampling import prepare, sample
+    from bayesplate.sampling.seeding import streams
+
+    case = load_case(bundled_case_path("plate1"))
+    model = PlateModel.from_case(case)
+    kw = {"n_walkers": 16, "max_steps": 120, "min_ess": 10.0, "progress": False}
+    alone = sample(case, rng=3, model=model, pairing="order", **kw)
+    setup = prepare(case, model=model, rng=streams(3)[1], pairing="order")
+    kept = sample(case, rng=3, setup=setup, **kw)
+    assert np.array_equal(alone.samples_b, kept.samples_b)

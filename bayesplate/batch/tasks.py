@@ -115,7 +115,13 @@ def _estimate(case, options):
     )
     from ..inputs import converged_budget
 
-    doc = estimate_to_dict(r, case, model, converged_budget(case, r, model))
+    budget = converged_budget(case, r, model)
+    scale = None
+    if case.measured.error_scale is not None:  # as `bayesplate estimate`: the sd widened
+        from ..error_scale import scale_estimate
+
+        r, scale = scale_estimate(case, model, r)
+    doc = estimate_to_dict(r, case, model, budget, scale)
     chi2, dof = _estimate_chi2(case, r)
     row = {
         "status": r.status,
@@ -125,8 +131,17 @@ def _estimate(case, options):
         **_gaussian_columns(doc["constants"]),
         "chi2": chi2,
         "dof": dof,
+        **_scale_columns(None if scale is None else scale.summary),
     }
     return row, doc
+
+
+def _scale_columns(summary):
+    """The inferred error scale's median and 94 % interval (none without the case key)."""
+    if summary is None:
+        return {}
+    lo, hi = summary.interval
+    return {"error_scale": summary.median, "error_scale_lo94": lo, "error_scale_hi94": hi}
 
 
 def _estimate_chi2(case, r):
@@ -162,7 +177,13 @@ def _sample(case, options):
         setup=setup,
     )
     mve = setup.run_estimator("MVE")
-    doc = sampling_to_dict(r, case, mve)
+    scale = None
+    if case.measured.error_scale is not None:  # as `bayesplate sample`
+        from ..error_scale import scale_from_draws
+
+        scale = scale_from_draws(setup.problem, r.samples_b, setup.sampling_forward(),
+                                 rng=options["seed"])[0]  # fmt: skip
+    doc = sampling_to_dict(r, case, mve, scale)
     columns = {}
     for key, c in doc["constants"].items():
         columns.update(
@@ -178,6 +199,7 @@ def _sample(case, options):
         "reason": "" if r.converged else r.message,
         "mesh": f"{model.mesh.nx}x{model.mesh.ny}",
         **columns,
+        **_scale_columns(scale),
     }
     return row, doc
 

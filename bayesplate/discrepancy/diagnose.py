@@ -278,6 +278,10 @@ def diagnose(
     measured, modes = pairing.select(case.measured), pairing.modes
     m = measured.size
     notes = []
+    if getattr(case.measured, "error_scale", None) is not None:
+        notes.append("the case gives an error scale for its deviations; diagnose tests against "
+                     "the declared deviations (s = 1), so a misfit the scale would absorb "
+                     "shows here as a mismatch")  # fmt: skip
 
     coarse = coarse_model(model)
     n_solve = int(modes.max()) + 1

@@ -148,6 +148,12 @@ def _estimates_section(data, figures):
         "",
     ]
     lines += [f"- {m}: {r[m]['message']}" for m in methods] + [""]
+    scaled = [m for m in methods if r[m].get("error_scale")]
+    if scaled:
+        lines += [f"- {m}: {r[m]['error_scale']['text']}; s_hat "
+                  f"{r[m]['error_scale']['s_hat']:.3g} at the estimate. The sd above are "
+                  f"widened by it (Student-t, {r[m]['error_scale']['dof']:.1f} degrees of "
+                  "freedom)." for m in scaled] + [""]  # fmt: skip
     if any(ch is not None for ch in checks):
         lines += [
             "The estimators iterated on the certified fast (reduced-basis) model; the full "
@@ -263,6 +269,9 @@ def _sample_lines(result):
         f"sampling; {t.get('total', float('nan')):.0f} s in all.",
         "",
         *_inputs_lines(result),
+        *([f"- {result['error_scale']['text']}: the frequencies' deviations are s times the "
+           "declared ones, s integrated out (the intervals below include it).", ""]
+          if result.get("error_scale") else []),
         *[f"- Sampler warning: {w}" for w in result.get("warnings", [])],
         "",
         *_table(["constant", "mean ± sd", "94 % HDI", "ESS (bulk)", "R-hat"], rows),

@@ -66,6 +66,12 @@ def estimate_step(case, model, method, pairing, fast=None):
         r = estimate(case, method, model=model, pairing=pairing, forward="full")
     else:
         r, _ = estimate_on_fast(case, method, model, fast, pairing=pairing)
+    scale = None
+    if case.measured.error_scale is not None:  # the sd widened by the inferred scale
+        from ..error_scale import scale_estimate
+
+        r, lin = scale_estimate(case, model, r)
+        scale = {**_scale_data(lin.summary), "s_hat": lin.s_hat, "dof": lin.dof}
     return {
         "method": r.method,
         "converged": bool(r.converged),
@@ -86,7 +92,14 @@ def estimate_step(case, model, method, pairing, fast=None):
         ],
         "status": r.status,
         "check": None if r.check is None else _check_data(r.check),
+        "error_scale": scale,
     }
+
+
+def _scale_data(summary):
+    """A :class:`bayesplate.error_scale.ScaleSummary` as plain data (with its sentence)."""
+    return {"median": summary.median, "interval": list(summary.interval),
+            "status": summary.status, "text": str(summary)}  # fmt: skip
 
 
 def _check_data(check):
@@ -158,15 +171,25 @@ def sample_step(case, model, pairing, options, fast=None):
     """
     from ..inputs import describe_inputs
     from ..laminate import engineering_from_stiffness
-    from ..sampling import resolve_inputs, sample
+    from ..sampling import prepare, resolve_inputs, sample
+    from ..sampling.seeding import streams
 
     chains = _QUICK_CHAINS if options.quick else _CHAINS
     inputs = resolve_inputs(case)
+    fast = fast if inputs == "exact" else None
     with warnings.catch_warnings(record=True) as caught:  # counted below, not repeated
         warnings.simplefilter("always")
-        r = sample(case, rng=options.seed, model=model, pairing=pairing, progress=False,
-                   fast=fast if inputs == "exact" else None, inputs=inputs,
-                   **chains)  # fmt: skip
+        # the setup prepared here (as `sample` would, from the same stream) to be kept for s
+        setup = prepare(case, model=model, rng=streams(options.seed)[1], pairing=pairing,
+                        fast=fast, inputs=inputs)  # fmt: skip
+        r = sample(case, rng=options.seed, setup=setup, progress=False, **chains)
+    scale = None
+    if case.measured.error_scale is not None:
+        from ..error_scale import scale_from_draws
+
+        summary = scale_from_draws(setup.problem, r.samples_b, setup.sampling_forward(),
+                                   rng=options.seed)[0]  # fmt: skip
+        scale = _scale_data(summary)
     e = to_case_units(engineering_from_stiffness(r.samples_b))
     keep = np.linspace(0, len(e) - 1, min(len(e), _CORNER_DRAWS)).astype(int)
     return {
@@ -189,4 +212,5 @@ def sample_step(case, model, pairing, options, fast=None):
         "warnings": sorted({str(w.message) for w in caught}),
         "inputs": inputs,
         "inputs_given": describe_inputs(case.plate),
+        "error_scale": scale,
     }

@@ -12,7 +12,7 @@ import time
 from dataclasses import replace
 
 from .chain import sample_problem
-from .seeding import generator, resolve_rng
+from .seeding import resolve_rng, streams
 from .setup import prepare
 
 __all__ = ["sample"]
@@ -83,8 +83,7 @@ fast, fast_options
     SamplingResult
     """
     started = time.perf_counter()
-    entropy, rng = generator(resolve_rng(rng, seed, "sample"))
-    build_rng, walk_rng = rng.spawn(2)
+    entropy, build_rng, walk_rng = streams(resolve_rng(rng, seed, "sample"))
     given = setup is not None
     if setup is None:
         setup = prepare(

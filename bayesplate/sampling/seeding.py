@@ -11,7 +11,7 @@ import warnings
 
 import numpy as np
 
-__all__ = ["generator", "resolve_rng"]
+__all__ = ["generator", "resolve_rng", "streams"]
 
 
 def resolve_rng(rng, seed, caller):
@@ -38,6 +38,19 @@ def resolve_rng(rng, seed, caller):
         stacklevel=3,
     )
     return seed
+
+
+def streams(rng):
+    """``(entropy or None, build, walk)``: the two generators a sampler run draws from.
+
+    ``build`` seeds :func:`~bayesplate.sampling.setup.prepare` (the fast model's designs),
+    ``walk`` the chain; :func:`~bayesplate.sampling.pipeline.sample` splits its ``rng`` so,
+    and a caller that prepares the setup itself (to keep it) gets the same chain by seeding
+    ``prepare`` with ``build``.
+    """
+    entropy, g = generator(rng)
+    build, walk = g.spawn(2)
+    return entropy, build, walk
 
 
 def generator(rng):
