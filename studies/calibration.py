@@ -180,8 +180,8 @@ def sizes(quick=False):
         found = [size_for(grid, lams, noncentrality_for(p, m)) for _, p, _ in SIZES]
         found = [None if s is None or f * s > grid[-1] else f * s
                  for s, (_, _, f) in zip(found, SIZES, strict=True)]  # fmt: skip
-        out[name] = {"grid": list(map(float, grid)), "lambda": lams,
-                     "sizes": [None if s is None else float(f"{s:.2g}") for s in found]}  # fmt: skip
+        rounded = [None if s is None else float(f"{s:.2g}") for s in found]
+        out[name] = {"grid": list(map(float, grid)), "lambda": lams, "sizes": rounded}
     return out
 
 
@@ -438,7 +438,8 @@ def report(rows, stored, quick, workers):
               "latter; `ideal P(reject)` is its noncentral chi-square probability there, "
               "`ideal rejects` its count on the replicates' recordings.", "",
               "| candidate | size | ideal P(reject) | ideal rejects | diagnose names it | "
-              "Wilson 95 % | wrong name | verdicts |", "|---|---|---|---|---|---|---|---|"]  # fmt: skip
+              "Wilson 95 % | wrong name | verdicts |",
+              "|---|---|---|---|---|---|---|---|"]  # fmt: skip
     cells = power_cells(rows, size_table)
     for effect, entry in size_table.items():
         unit = EFFECTS[effect][2]

@@ -33,8 +33,8 @@ from bayesplate.discrepancy import (
     PointSupport,
     ThicknessTaper,
 )
-from bayesplate.discrepancy.pair import Pair
 from bayesplate.discrepancy.diagnose import diagnose
+from bayesplate.discrepancy.pair import Pair
 from bayesplate.io import atomic_write_text
 
 NOISE = 0.002
