@@ -104,7 +104,7 @@ def _read_spectra(args, tests):
         for test in tests:
             if not is_recording(test):
                 rule = "several files are taps of one test: each must be a WAV or a CSV time series"
-                raise CaseError("TEST", test, rule)
+                raise CaseError("TEST", rule=rule, path=test)
         force = {None: "auto", "none": None}.get(args.force_channel, args.force_channel)
         return read_taps(tests, window, force, args.channel, args.points)
     for option in ("force_channel", "channel"):

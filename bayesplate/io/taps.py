@@ -9,8 +9,13 @@ same sampling rate and length) of the same set-up and averages them into one
   ``gamma^2 = |sum_k conj(F_k) Y_k|^2 / (sum_k |F_k|^2 sum_k |Y_k|^2)`` (1 where the
   response is explained linearly by the force, lower with noise, a double hit or a
   nonlinearity; identically 1 for one tap, so it is computed for two taps or more);
-- **without a force**, the response spectra are averaged after each tap's own
-  normalisation: each tap is aligned on the first by the delay of their cross-correlation
+- **without a force**, each tap is first cut to start at its trigger (the first sample at
+  5 % of its peak; starting earlier, in the pre-trigger noise, was measured to be worse on
+  synthetic taps: a 0.05 % error at the top mode of one tap against 7.8 % two samples
+  earlier): the pre-trigger delay ``t0`` of a recording multiplies
+  its spectrum by ``exp(-i omega t0)``, which the rational model of LSCF cannot follow (1 ms
+  loses half the modes of a plate). The response spectra are then averaged after each
+  tap's own normalisation: each tap is aligned on the first by the delay of their cross-correlation
   (sub-sample, applied as ``exp(i omega tau)``) and scaled by the complex least-squares factor
   that brings it onto the first tap. A plain average would not do: the taps differ in
   strength and trigger time, and averaging spectra of different delays cancels their high
@@ -53,6 +58,7 @@ COHERENCE_WARNING = 0.9
 """A chosen pole whose coherence is below this is warned about."""
 
 _POINT_COLUMNS = ("point", "x_mm", "y_mm")
+_TRIGGER = 0.05  # without a force, a tap starts where a response first reaches 5 % of its peak
 
 
 @dataclass(frozen=True, eq=False)
@@ -255,6 +261,8 @@ def average_taps(recordings, window: str = "auto", points_mm=None) -> FRFData:
             raise err.with_path(rec.source) if rec.source else err from None
         _check_same(first, rec)
     y = np.array([rec.responses for rec in recordings])  # (K, p, n)
+    if first.force is None:
+        y = np.array([_from_trigger(taps) for taps in y])
     weights, decay, note = time_window(y, first.rate_Hz, window)
     spectra = np.fft.rfft(y * weights, axis=-1) / first.rate_Hz  # (K, p, n_f)
     frequency = np.fft.rfftfreq(y.shape[-1], 1.0 / first.rate_Hz)
@@ -311,6 +319,13 @@ def _check_signal(y: np.ndarray, rate_Hz: float) -> None:
         raise CaseError("signal", rule="must be finite and not all zero in every channel")
     if not (math.isfinite(rate_Hz) and rate_Hz > 0):
         raise CaseError("sampling rate", rate_Hz, "must be a positive number (Hz)")
+
+
+def _from_trigger(y: np.ndarray) -> np.ndarray:
+    """Responses (p, n) of one tap moved to start at its trigger, zeros appended."""
+    above = np.abs(y) >= _TRIGGER * np.abs(y).max()
+    start = int(np.argmax(above.any(axis=0)))
+    return np.concatenate([y[:, start:], np.zeros((y.shape[0], start))], axis=1)
 
 
 def _aligned(spectrum: np.ndarray, reference: np.ndarray, frequency: np.ndarray) -> np.ndarray:
