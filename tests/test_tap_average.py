@@ -294,11 +294,21 @@ def refused_case(tmp_path, kind, plate1, rng):
         test = tmp_path / "frf.csv"
         test.write_text("frequency_Hz,H1_re,H1_im\n" + "".join(f"{i},1,0\n" for i in range(99)))
         return [one, test], [], ["frf.csv: TEST", "each must be a WAV or a CSV time series"]
+    if kind == "uff-points":
+        test = tmp_path / "frf.uff"
+        test.write_text("    -1\n    58\n")
+        points = write_points(tmp_path / "points.csv", [("1", (0, 0))])
+        return [test], ["--points", points], ["--points", "carries its own node coordinates"]
+    if kind == "frf-channel":
+        test = tmp_path / "frf.csv"
+        test.write_text("frequency_Hz,H1_re,H1_im\n" + "".join(f"{i},1,0\n" for i in range(99)))
+        return [test], ["--channel", 1], ["--channel = 1", "frf.csv holds FRFs"]
     raise AssertionError(kind)
 
 
 REFUSED = ["rate", "length", "channels", "points-rows", "channel-range", "force-range",
-           "no-points", "points-bad", "frf-points-name", "frf-several"]  # fmt: skip
+           "no-points", "points-bad", "frf-points-name", "frf-several", "uff-points",
+           "frf-channel"]  # fmt: skip
 
 
 @pytest.mark.parametrize("kind", REFUSED)

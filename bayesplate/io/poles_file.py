@@ -188,8 +188,10 @@ def write_chart(path, analysis: PoleAnalysis, frequency_Hz, frf, kept=(), cohere
 
 def _coherence_panel(ax, frequency_Hz, coherence, kept) -> None:
     """Coherence of each response point against frequency, the kept poles and 0.9."""
-    for row in coherence:
-        ax.plot(frequency_Hz, row, lw=0.7)
+    for i, row in enumerate(coherence):
+        ax.plot(frequency_Hz, row, lw=0.7, label=f"point {i}")
+    if len(coherence) > 1:
+        ax.legend(loc="lower left", ncol=len(coherence), fontsize="small", framealpha=0.9)
     for pole in kept:
         ax.axvline(pole.frequency_Hz, color="k", lw=0.5, ls=":")
     ax.axhline(0.9, color="tab:red", lw=0.8, ls="--")
