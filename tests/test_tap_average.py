@@ -13,8 +13,9 @@ from scipy.io import wavfile
 
 from bayesplate.cli import main
 from bayesplate.io import bundled_case_path, load_case
+from bayesplate.io.impulse import Recording
 from bayesplate.io.poles import Pole, extract_poles
-from bayesplate.io.taps import Recording, average_taps, coherence_at_poles, read_taps
+from bayesplate.io.taps import average_taps, coherence_at_poles, read_taps
 from bayesplate.laminate import stiffness_from_engineering
 from bayesplate.model import PlateModel
 from bayesplate.pairing import resolve_pairing

@@ -96,8 +96,9 @@ def _read_spectra(args, tests):
     """The spectra of the test: the taps averaged, or the one FRF file (with --points)."""
     from ..io import CaseError
     from ..io.frf import read_frf_csv
+    from ..io.impulse import is_recording
     from ..io.modal_file import read_spectra
-    from ..io.taps import is_recording, read_taps
+    from ..io.taps import read_taps
 
     window = args.window or "auto"
     if len(tests) > 1 or is_recording(tests[0]):

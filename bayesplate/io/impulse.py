@@ -15,19 +15,32 @@ sampled spectrum, no leakage. Otherwise an exponential window ``exp(-t / tau)`` 
 to 1 % at the end of the record, which forces the decay and adds ``1 / tau`` to every
 pole's decay rate; :attr:`FRFData.added_decay_per_s` carries it and the pole estimates are
 corrected by it (the usual correction for exponential windows).
+
+:func:`read_recording` reads the channels of one tap (:class:`Recording`); several channels
+and several taps, their points and their average are the subject of :mod:`bayesplate.io.taps`.
 """
 
 from __future__ import annotations
 
 import math
 import os
+import pathlib
+from dataclasses import dataclass
 
 import numpy as np
 
 from .errors import CaseError
-from .frf import FRFData
+from .frf import FRFData, numeric_table, read_csv_rows
 
-__all__ = ["read_impulse", "impulse_spectrum", "time_window", "WINDOWS"]
+__all__ = [
+    "Recording",
+    "is_recording",
+    "read_recording",
+    "read_impulse",
+    "impulse_spectrum",
+    "time_window",
+    "WINDOWS",
+]
 
 WINDOWS = ("auto", "none", "exponential")
 """Windows :func:`impulse_spectrum` knows."""
@@ -71,6 +84,123 @@ def read_impulse(path, window: str = "auto", force_channel="auto", channel=None,
         return read_taps([path], window, force_channel, channel, points)
     except CaseError as err:
         raise err if err.path else err.with_path(path) from None
+
+
+@dataclass(frozen=True, eq=False)
+class Recording:
+    """One tap as recorded: the channels kept, before any spectrum.
+
+    Parameters
+    ----------
+    rate_Hz : float
+        Sampling rate, Hz.
+    responses : numpy.ndarray, shape (p, n)
+        Response samples of each kept response channel (any unit).
+    force : numpy.ndarray, shape (n,), optional
+        Force samples of an instrumented hammer; None without.
+    channels : tuple of int
+        The file's channel number of each response row (0-based; 0 for a CSV ``signal``).
+    source : str
+        The file.
+    """
+
+    rate_Hz: float
+    responses: np.ndarray
+    force: np.ndarray | None
+    channels: tuple[int, ...]
+    source: str
+
+
+def is_recording(path) -> bool:
+    """Whether `path` is an impulse recording: ``.wav``, or ``.csv`` with a ``time_s`` column."""
+    from .modal_file import _csv_header
+
+    suffix = pathlib.Path(path).suffix.lower()
+    return suffix == ".wav" or (suffix == ".csv" and "time_s" in _csv_header(path))
+
+
+def read_recording(path, force_channel="auto", channel=None) -> Recording:
+    """Read one tap (WAV or CSV ``time_s, signal[, force]``) and keep the channels asked for.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    force_channel : int, None or "auto"
+        WAV channel of the force (see the module docstring); a CSV's force is its ``force``
+        column, whatever this says.
+    channel : int, optional
+        The one WAV response channel to keep; default all but the force.
+
+    Returns
+    -------
+    Recording
+
+    Raises
+    ------
+    CaseError
+        Naming the file and the part of it, or the option, and the rule.
+    """
+    path = os.fspath(path)
+    try:
+        if pathlib.Path(path).suffix.lower() == ".wav":
+            rate_Hz, data = _read_wav(path)
+            return _channels(path, rate_Hz, data, force_channel, channel)
+        rate_Hz, signal, force = _read_time_csv(path)
+    except CaseError as err:
+        raise err if err.path else err.with_path(path) from None
+    if channel not in (None, 0):
+        raise CaseError("--channel", channel, f"must be 0: {path} has one response (signal)")
+    return Recording(rate_Hz, signal[None, :], force, (0,), path)
+
+
+def _channels(path, rate_Hz, data, force_channel, channel) -> Recording:
+    count = data.shape[1]
+    if force_channel == "auto":
+        force_channel = 1 if count == 2 else None
+    for option, value in (("--force-channel", force_channel), ("--channel", channel)):
+        if value is not None and not 0 <= value < count:
+            rule = f"must be a channel of {path}: 0 to {count - 1} ({count} channels)"
+            raise CaseError(option, value, rule)
+    if channel is not None and channel == force_channel:
+        raise CaseError("--channel", channel, "must not be the force channel (--force-channel)")
+    responses = [c for c in range(count) if c != force_channel]
+    if channel is not None:
+        responses = [channel]
+    if not responses:
+        raise CaseError("WAV channels", count, "need a response channel besides the force")
+    force = None if force_channel is None else data[:, force_channel]
+    return Recording(rate_Hz, data[:, responses].T, force, tuple(responses), path)
+
+
+def _read_wav(path: str):
+    from scipy.io import wavfile
+
+    try:
+        rate, data = wavfile.read(path)
+    except OSError as err:
+        raise CaseError(None, rule=f"cannot read the file ({err.strerror or err})") from None
+    except Exception as err:  # noqa: BLE001 - scipy raises ValueError and others, text varies
+        rule = f"not a readable WAV file ({' '.join(str(err).split())[:80]})"
+        raise CaseError(None, rule=rule) from None
+    data = np.asarray(data, dtype=float)
+    return float(rate), data[:, None] if data.ndim == 1 else data
+
+
+def _read_time_csv(path: str):
+    header_line, header, rows = read_csv_rows(path)
+    for name in ("time_s", "signal"):
+        if name not in header:
+            rule = f"required column is missing from the header ({', '.join(header)})"
+            raise CaseError(f"line {header_line}, column {name}", rule=rule)
+    for name in header:
+        if name not in ("time_s", "signal", "force"):
+            rule = "unknown column; allowed: time_s, signal, force"
+            raise CaseError(f"line {header_line}, column {name}", name, rule)
+    table = numeric_table(header, rows)
+    step = np.diff(table["time_s"])
+    if not np.all(step > 0) or np.ptp(step) > 1e-6 * step.mean():
+        raise CaseError("column time_s", rule="times must be ascending and evenly spaced (s)")
+    return 1.0 / step.mean(), table["signal"], table.get("force")
 
 
 def time_window(y, rate_Hz: float, window: str = "auto"):
@@ -134,7 +264,7 @@ def impulse_spectrum(signal, rate_Hz: float, force=None, window: str = "auto") -
     CaseError
         For a signal too short, not finite or all zero, or an unknown window.
     """
-    from .taps import Recording, average_taps
+    from .taps import average_taps
 
     y = np.asarray(signal, dtype=float).reshape(1, -1)
     if force is not None:
