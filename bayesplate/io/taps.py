@@ -9,18 +9,18 @@ same sampling rate and length) of the same set-up and averages them into one
   ``gamma^2 = |sum_k conj(F_k) Y_k|^2 / (sum_k |F_k|^2 sum_k |Y_k|^2)`` (1 where the
   response is explained linearly by the force, lower with noise, a double hit or a
   nonlinearity; identically 1 for one tap, so it is computed for two taps or more);
-- **without a force**, each tap is first cut to start at its trigger (the first sample at
-  5 % of its peak; starting earlier, in the pre-trigger noise, was measured to be worse on
-  synthetic taps: a 0.05 % error at the top mode of one tap against 7.8 % two samples
-  earlier): the pre-trigger delay ``t0`` of a recording multiplies
-  its spectrum by ``exp(-i omega t0)``, which the rational model of LSCF cannot follow (1 ms
-  loses half the modes of a plate). The response spectra are then averaged after each
-  tap's own normalisation: each tap is aligned on the first by the delay of their cross-correlation
-  (sub-sample, applied as ``exp(i omega tau)``) and scaled by the complex least-squares factor
-  that brings it onto the first tap. A plain average would not do: the taps differ in
-  strength and trigger time, and averaging spectra of different delays cancels their high
-  frequencies; averaging magnitudes would lose the phase LSCF needs. One delay and one scale
-  per tap, shared by all its channels, keep the relative amplitudes that make the shapes.
+- **without a force**, each tap is first cut to start at its trigger, the first sample at
+  5 % of its peak: the pre-trigger delay ``t0`` of a recording multiplies its spectrum by
+  ``exp(-i omega t0)``, which the rational model of LSCF cannot follow (1 ms loses half the
+  modes of a plate). Starting earlier, in the pre-trigger noise, was measured worse on
+  synthetic taps (largest error 7.8 % two samples earlier, against 0.05 % at the trigger).
+  The response spectra are then averaged after each tap's own normalisation: each tap is
+  aligned on the first by the delay of their cross-correlation (sub-sample, applied as
+  ``exp(i omega tau)``) and scaled by the complex least-squares factor that brings it onto
+  the first tap. A plain average would not do: the taps differ in strength and trigger
+  time, and averaging spectra of different delays cancels their high frequencies;
+  averaging magnitudes would lose the phase LSCF needs. One delay and one scale per tap,
+  shared by all its channels, keep the relative amplitudes that make the shapes.
 
 Channels of a WAV file are numbered from 0. ``force_channel`` names the force (``None``: no
 force; default ``"auto"``: channel 1 of a 2-channel file, as a hammer and a microphone are
