@@ -8,7 +8,17 @@ from .options import finite_float, positive_int
 
 __all__ = ["register"]
 
-_TAP_OPTIONS = ("poles", "chart", "use_poles", "band", "order", "window")
+_TAP_OPTIONS = (
+    "poles",
+    "chart",
+    "use_poles",
+    "band",
+    "order",
+    "window",
+    "force_channel",
+    "channel",
+    "points",
+)
 
 
 def run(args):
@@ -31,29 +41,30 @@ def run(args):
     plate = args.plate
     if not pathlib.Path(plate).exists() and plate in bundled_plate_names():
         plate = bundled_plate_path(plate)
+    tests = [str(test) for test in args.test]
     tap_options = any(getattr(args, name) is not None for name in _TAP_OPTIONS)
-    if tap_options or is_tap_test(args.test):
-        modal = _tap_modal_data(args)
+    if tap_options or len(tests) > 1 or is_tap_test(tests[0]):
+        modal = _tap_modal_data(args, tests)
     else:
-        modal = read_modal_data(args.test)
+        modal = read_modal_data(tests[0])
     text = case_from_modal_data(plate, modal, sigma_rel=args.sigma_rel)
     try:
         write_case(args.output, text)
     except OSError as err:
         raise CaseError("-o", args.output, f"cannot write ({err.strerror or err})") from None
-    print(f"{modal.size} modes, {modal.n_points} points from {args.test} -> {args.output}")
+    named = tests[0] if len(tests) == 1 else f"{len(tests)} taps ({tests[0]}, ...)"
+    print(f"{modal.size} modes, {modal.n_points} points from {named} -> {args.output}")
     return 0
 
 
-def _tap_modal_data(args):
+def _tap_modal_data(args, tests):
     """Modes of a tap test: poles extracted, written and charted on request, then chosen."""
     from ..io import CaseError
-    from ..io.modal_file import read_spectra
     from ..io.poles import DEFAULT_ORDER, extract_poles, modal_data_from_poles
     from ..io.poles_file import read_poles, write_chart, write_poles
 
     kept = read_poles(args.use_poles) if args.use_poles is not None else None
-    spectra = read_spectra(args.test, window=args.window or "auto")
+    spectra = _read_spectra(args, tests)
     order = DEFAULT_ORDER if args.order is None else args.order
     analysis = None
     if kept is None or args.poles is not None or args.chart is not None:
@@ -63,21 +74,65 @@ def _tap_modal_data(args):
         if not kept:
             rule = (f"no pole is stable over the last orders ({len(analysis.candidates)} "
                     "candidates): write them with --poles, edit, and give --use-poles")  # fmt: skip
-            raise CaseError(None, rule=rule, path=args.test)
+            raise CaseError(None, rule=rule, path=tests[0])
         listed = ", ".join(f"{pole.frequency_Hz:.6g}" for pole in kept)
         print(f"{len(kept)} stable poles taken automatically (Hz): {listed}")
     else:
         print(f"{len(kept)} poles kept in {args.use_poles}")
     for note in spectra.notes:
-        print(f"{args.test}: {note}")
+        print(f"{spectra.source}: {note}")
+    _warn_coherence(spectra, kept)
     if args.poles is not None:
-        _written("--poles", args.poles, write_poles, args.poles, analysis, str(args.test))
+        _written("--poles", args.poles, write_poles, args.poles, analysis, spectra.source)
         print(f"{len(analysis.candidates)} candidate poles -> {args.poles}")
     if args.chart is not None:
         _written("--chart", args.chart, write_chart, args.chart, analysis,
-                 spectra.frequency_Hz, spectra.frf, kept)  # fmt: skip
+                 spectra.frequency_Hz, spectra.frf, kept, spectra.coherence)  # fmt: skip
         print(f"stabilisation chart -> {args.chart}")
     return modal_data_from_poles(spectra, kept, band_Hz=args.band)
+
+
+def _read_spectra(args, tests):
+    """The spectra of the test: the taps averaged, or the one FRF file (with --points)."""
+    from ..io import CaseError
+    from ..io.frf import read_frf_csv
+    from ..io.impulse import is_recording
+    from ..io.modal_file import read_spectra
+    from ..io.taps import read_taps
+
+    window = args.window or "auto"
+    if len(tests) > 1 or is_recording(tests[0]):
+        for test in tests:
+            if not is_recording(test):
+                rule = "several files are taps of one test: each must be a WAV or a CSV time series"
+                raise CaseError("TEST", rule=rule, path=test)
+        force = {None: "auto", "none": None}.get(args.force_channel, args.force_channel)
+        return read_taps(tests, window, force, args.channel, args.points)
+    for option in ("force_channel", "channel"):
+        if getattr(args, option) is not None:
+            name = "--" + option.replace("_", "-")
+            rule = f"is for impulse recordings (WAV); {tests[0]} holds FRFs"
+            raise CaseError(name, getattr(args, option), rule)
+    if args.points is not None:
+        if not tests[0].lower().endswith(".csv"):
+            rule = f"is for a WAV or an FRF CSV; {tests[0]} carries its own node coordinates"
+            raise CaseError("--points", args.points, rule)
+        return read_frf_csv(tests[0], points=args.points)
+    return read_spectra(tests[0], window=window)
+
+
+def _warn_coherence(spectra, kept):
+    """One line on stderr naming the chosen poles whose coherence is low."""
+    import sys
+
+    from ..io.taps import COHERENCE_WARNING, coherence_at_poles
+
+    low = [(f, c) for f, c in coherence_at_poles(spectra, kept) if c < COHERENCE_WARNING]
+    if low:
+        listed = ", ".join(f"{f:.6g} Hz ({c:.2f})" for f, c in low)
+        print(f"bayesplate: warning: coherence below {COHERENCE_WARNING} at {len(low)} chosen "
+              f"poles: {listed}: noise, a double hit or a nonlinearity; see --chart",
+              file=sys.stderr)  # fmt: skip
 
 
 def _written(option, path, write, *args):
@@ -100,11 +155,19 @@ def register(sub):
         "coordinates from dataset 15 or 2411, units from dataset 164 (default mm); the z "
         "component of each shape is kept. CSV: a header with frequency_Hz and optionally "
         "sigma_Hz or sigma_rel, and mode. Tap tests: FRFs (UFF dataset 58 per response "
-        "node; CSV frequency_Hz, H1_re, H1_im, ...) or an impulse recording (WAV: channel 1 "
-        "response, 2 force; CSV time_s, signal[, force]); the modes are the LSCF poles "
-        "(sdypy-EMA) stable over the last model orders, or those kept in --use-poles.",
+        "node; CSV frequency_Hz, H1_re, H1_im, ...) or an impulse recording (WAV: channel 0 "
+        "response, 1 force, or as --force-channel says; CSV time_s, signal[, force]); the "
+        "modes are the LSCF poles (sdypy-EMA) stable over the last model orders, or those "
+        "kept in --use-poles. Several recordings are taps averaged (H1 and its coherence "
+        "with a force channel).",
     )
-    p.add_argument("test", metavar="TEST", help="the test: .uff/.unv/.uf, .csv or .wav")
+    p.add_argument(
+        "test",
+        metavar="TEST",
+        nargs="+",
+        help="the test: .uff/.unv/.uf, .csv or .wav; several WAV or CSV time series are taps "
+        "of the same test, averaged (a shell glob such as taps/*.wav gives them)",
+    )
     p.add_argument(
         "--plate",
         required=True,
@@ -138,4 +201,41 @@ def register(sub):
         help="window of an impulse recording (default auto: none if the response has "
         "decayed within the record, else exponential with the poles corrected)",
     )
+    tap.add_argument(
+        "--force-channel",
+        type=_channel_or_none,
+        metavar="N",
+        help="WAV channel (from 0) of the hammer's force, or none (default: 1 in a "
+        "2-channel file, else none); the other channels are responses",
+    )
+    tap.add_argument(
+        "--channel",
+        type=_channel,
+        metavar="N",
+        help="keep only this WAV response channel (from 0)",
+    )
+    tap.add_argument(
+        "--points",
+        metavar="CSV",
+        help="points file point,x_mm,y_mm: one row per WAV response channel in channel "
+        "order, or per H<point>_re/_im pair of an FRF CSV, matched by name; gives shapes",
+    )
     p.set_defaults(func=run)
+
+
+def _channel_or_none(text):
+    """A channel number (0 or more) or ``none`` (an argparse type)."""
+    return "none" if text.strip().lower() == "none" else _channel(text)
+
+
+def _channel(text):
+    """A channel number, 0 or more (an argparse type)."""
+    import argparse
+
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: must be a channel number (0 or more)")
+    return value

@@ -44,6 +44,9 @@ class FRFData:
         The file the spectra came from.
     notes : tuple of str
         What the reader had to assume or chose (window, units).
+    coherence : numpy.ndarray, shape (p, n), optional
+        Ordinary coherence of each FRF at each line (H1 over several taps with a force,
+        :mod:`bayesplate.io.taps`), 0 to 1; None when not measured.
     """
 
     frequency_Hz: np.ndarray
@@ -53,6 +56,7 @@ class FRFData:
     added_decay_per_s: float = 0.0
     source: str = ""
     notes: tuple[str, ...] = ()
+    coherence: np.ndarray | None = None
 
     @property
     def n_points(self) -> int:
@@ -156,17 +160,22 @@ def _check_axis(frequency: np.ndarray, key: str) -> None:
         raise CaseError(key, rule="frequencies must be >= 0, ascending and evenly spaced (Hz)")
 
 
-def read_frf_csv(path) -> FRFData:
+def read_frf_csv(path, points=None) -> FRFData:
     """Read FRFs from a CSV table: ``frequency_Hz, H1_re, H1_im[, H2_re, H2_im, ...]``.
 
     A header line, then one row per frequency line (Hz, evenly spaced, ascending); each
-    response point ``k`` has two columns ``Hk_re`` and ``Hk_im`` (real and imaginary part,
-    any consistent unit, receptance assumed). ``#`` starts a comment; blank lines are skipped.
-    The table has no coordinates: only frequencies are imported from it.
+    response point ``<point>`` has two columns ``H<point>_re`` and ``H<point>_im`` (real and
+    imaginary part, any consistent unit, receptance assumed), the points in the order of
+    the header. ``#`` starts a comment; blank lines are skipped. Coordinates come from a
+    points file (:func:`bayesplate.io.taps.read_points`, ``point,x_mm,y_mm``), matched by
+    name: its row ``point = 3`` gives the coordinates of ``H3_re, H3_im``; it must name
+    exactly the table's points (any row order). Without it only frequencies are imported.
 
     Parameters
     ----------
     path : str or os.PathLike
+    points : str or os.PathLike, optional
+        The points file.
 
     Returns
     -------
@@ -176,7 +185,8 @@ def read_frf_csv(path) -> FRFData:
     ------
     CaseError
         Naming the file, the line and the column, e.g.
-        ``frf.csv: line 1, column H1_im: required column is missing (...)``.
+        ``frf.csv: line 1, column H1_im: required column is missing (...)``, or the points
+        file and the point it lacks or has too many.
     """
     path = os.fspath(path)
     try:
@@ -185,26 +195,44 @@ def read_frf_csv(path) -> FRFData:
             rule = f"required column is missing from the header ({', '.join(header)})"
             raise CaseError(f"line {header_line}, column frequency_Hz", rule=rule)
         names = [name for name in header if name != "frequency_Hz"]
-        points = sorted({name.rsplit("_", 1)[0] for name in names})
         for name in names:
-            if not (name.startswith("H") and name.endswith(("_re", "_im"))):
+            if not (name.startswith("H") and name.endswith(("_re", "_im")) and len(name) > 4):
                 rule = "unknown column: expected frequency_Hz, then Hk_re and Hk_im per point"
                 raise CaseError(f"line {header_line}, column {name}", name, rule)
-        for point in points:
+        prefixes = list(dict.fromkeys(name.rsplit("_", 1)[0] for name in names))  # header order
+        for point in prefixes:
             for part in ("_re", "_im"):
                 if point + part not in header:
                     rule = f"required column is missing from the header ({', '.join(header)})"
                     raise CaseError(f"line {header_line}, column {point}{part}", rule=rule)
-        if not points:
+        if not prefixes:
             rule = "required: give Hk_re and Hk_im columns for at least one response point"
             raise CaseError(f"line {header_line}, column H1_re", rule=rule)
         table = numeric_table(header, rows)
         frequency = table["frequency_Hz"]
         _check_axis(frequency, "column frequency_Hz")
-        frf = np.array([table[p + "_re"] + 1j * table[p + "_im"] for p in points])
+        frf = np.array([table[p + "_re"] + 1j * table[p + "_im"] for p in prefixes])
     except CaseError as err:
         raise err.with_path(path) from None
-    return FRFData(frequency, frf, source=path)
+    points_mm = None if points is None else _coordinates(points, [p[1:] for p in prefixes], path)
+    return FRFData(frequency, frf, points_mm, source=path)
+
+
+def _coordinates(points_path, names: list[str], path: str) -> np.ndarray:
+    """(x, y) in mm of the named FRF points, from the points file (matched by name)."""
+    from .taps import read_points
+
+    given, xy = read_points(points_path)
+    points_path = os.fspath(points_path)
+    for name in names:
+        if name not in given:
+            rule = f"no row for the point of columns H{name}_re, H{name}_im of {path}"
+            raise CaseError("column point", name, rule, path=points_path)
+    for name in given:
+        if name not in names:
+            rule = f"{path} has no columns H{name}_re, H{name}_im for this point"
+            raise CaseError("column point", name, rule, path=points_path)
+    return xy[[given.index(name) for name in names]]
 
 
 def read_csv_rows(path: str, min_rows: int = 8) -> tuple[int, list[str], list]:

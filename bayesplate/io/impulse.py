@@ -15,6 +15,9 @@ sampled spectrum, no leakage. Otherwise an exponential window ``exp(-t / tau)`` 
 to 1 % at the end of the record, which forces the decay and adds ``1 / tau`` to every
 pole's decay rate; :attr:`FRFData.added_decay_per_s` carries it and the pole estimates are
 corrected by it (the usual correction for exponential windows).
+
+:func:`read_recording` reads the channels of one tap (:class:`Recording`); several channels
+and several taps, their points and their average are the subject of :mod:`bayesplate.io.taps`.
 """
 
 from __future__ import annotations
@@ -22,13 +25,22 @@ from __future__ import annotations
 import math
 import os
 import pathlib
+from dataclasses import dataclass
 
 import numpy as np
 
 from .errors import CaseError
 from .frf import FRFData, numeric_table, read_csv_rows
 
-__all__ = ["read_impulse", "impulse_spectrum", "WINDOWS"]
+__all__ = [
+    "Recording",
+    "is_recording",
+    "read_recording",
+    "read_impulse",
+    "impulse_spectrum",
+    "time_window",
+    "WINDOWS",
+]
 
 WINDOWS = ("auto", "none", "exponential")
 """Windows :func:`impulse_spectrum` knows."""
@@ -37,12 +49,14 @@ _TAIL = 0.05  # fraction of the record that must have decayed for no window
 _DECAYED = 0.01  # ... below this fraction of the peak; also the exponential window's end value
 
 
-def read_impulse(path, window: str = "auto") -> FRFData:
+def read_impulse(path, window: str = "auto", force_channel="auto", channel=None,
+                 points=None) -> FRFData:  # fmt: skip
     """Read an impulse recording (``.wav`` or a CSV time series) and return its spectrum.
 
-    WAV (scipy.io.wavfile, any sample format): channel 1 is the response, channel 2, if
-    present, the force. CSV: a header line with ``time_s`` (s, evenly spaced, ascending)
-    and ``signal`` (the response), optionally ``force``; ``#`` starts a comment.
+    WAV (scipy.io.wavfile, any sample format): one channel, the response; two, the response
+    then the force (channels 0 and 1); more, see :mod:`bayesplate.io.taps` (``force_channel``,
+    ``channel``, ``points``). CSV: a header line with ``time_s`` (s, evenly spaced,
+    ascending) and ``signal`` (the response), optionally ``force``; ``#`` starts a comment.
 
     Parameters
     ----------
@@ -50,34 +64,112 @@ def read_impulse(path, window: str = "auto") -> FRFData:
         The recording.
     window : {"auto", "none", "exponential"}
         See the module docstring.
+    force_channel, channel, points
+        See :func:`bayesplate.io.taps.read_taps`.
 
     Returns
     -------
     FRFData
-        One response point, no coordinates.
+        One FRF per response channel, with coordinates when `points` is given.
 
     Raises
     ------
     CaseError
         Naming the file, the line and column (CSV) or the part of the WAV file, and the rule.
     """
+    from .taps import read_taps
+
+    path = os.fspath(path)
+    try:
+        return read_taps([path], window, force_channel, channel, points)
+    except CaseError as err:
+        raise err if err.path else err.with_path(path) from None
+
+
+@dataclass(frozen=True, eq=False)
+class Recording:
+    """One tap as recorded: the channels kept, before any spectrum.
+
+    Parameters
+    ----------
+    rate_Hz : float
+        Sampling rate, Hz.
+    responses : numpy.ndarray, shape (p, n)
+        Response samples of each kept response channel (any unit).
+    force : numpy.ndarray, shape (n,), optional
+        Force samples of an instrumented hammer; None without.
+    channels : tuple of int
+        The file's channel number of each response row (0-based; 0 for a CSV ``signal``).
+    source : str
+        The file.
+    """
+
+    rate_Hz: float
+    responses: np.ndarray
+    force: np.ndarray | None
+    channels: tuple[int, ...]
+    source: str
+
+
+def is_recording(path) -> bool:
+    """Whether `path` is an impulse recording: ``.wav``, or ``.csv`` with a ``time_s`` column."""
+    from .modal_file import _csv_header
+
+    suffix = pathlib.Path(path).suffix.lower()
+    return suffix == ".wav" or (suffix == ".csv" and "time_s" in _csv_header(path))
+
+
+def read_recording(path, force_channel="auto", channel=None) -> Recording:
+    """Read one tap (WAV or CSV ``time_s, signal[, force]``) and keep the channels asked for.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    force_channel : int, None or "auto"
+        WAV channel of the force (see the module docstring); a CSV's force is its ``force``
+        column, whatever this says.
+    channel : int, optional
+        The one WAV response channel to keep; default all but the force.
+
+    Returns
+    -------
+    Recording
+
+    Raises
+    ------
+    CaseError
+        Naming the file and the part of it, or the option, and the rule.
+    """
     path = os.fspath(path)
     try:
         if pathlib.Path(path).suffix.lower() == ".wav":
-            rate_Hz, signal, force = _read_wav(path)
-        else:
-            rate_Hz, signal, force = _read_time_csv(path)
-        spectrum = impulse_spectrum(signal, rate_Hz, force=force, window=window)
+            rate_Hz, data = _read_wav(path)
+            return _channels(path, rate_Hz, data, force_channel, channel)
+        rate_Hz, signal, force = _read_time_csv(path)
     except CaseError as err:
-        raise err.with_path(path) from None
-    return FRFData(
-        spectrum.frequency_Hz,
-        spectrum.frf,
-        form=spectrum.form,
-        added_decay_per_s=spectrum.added_decay_per_s,
-        source=path,
-        notes=spectrum.notes,
-    )
+        raise err if err.path else err.with_path(path) from None
+    if channel not in (None, 0):
+        raise CaseError("--channel", channel, f"must be 0: {path} has one response (signal)")
+    return Recording(rate_Hz, signal[None, :], force, (0,), path)
+
+
+def _channels(path, rate_Hz, data, force_channel, channel) -> Recording:
+    count = data.shape[1]
+    if force_channel == "auto":
+        force_channel = 1 if count == 2 else None
+    for option, value in (("--force-channel", force_channel), ("--channel", channel)):
+        if value is not None and not 0 <= value < count:
+            rule = f"must be a channel of {path}: 0 to {count - 1} ({count} channels)"
+            raise CaseError(option, value, rule)
+    if channel is not None and channel == force_channel:
+        raise CaseError("--channel", channel, "must not be the force channel (--force-channel)")
+    responses = [c for c in range(count) if c != force_channel]
+    if channel is not None:
+        responses = [channel]
+    if not responses:
+        raise CaseError("WAV channels", count, "need a response channel besides the force")
+    force = None if force_channel is None else data[:, force_channel]
+    return Recording(rate_Hz, data[:, responses].T, force, tuple(responses), path)
 
 
 def _read_wav(path: str):
@@ -91,13 +183,7 @@ def _read_wav(path: str):
         rule = f"not a readable WAV file ({' '.join(str(err).split())[:80]})"
         raise CaseError(None, rule=rule) from None
     data = np.asarray(data, dtype=float)
-    if data.ndim == 1:
-        data = data[:, None]
-    if data.shape[1] > 2:
-        rule = "must be 1 (response) or 2 (response, force)"
-        raise CaseError("WAV channels", data.shape[1], rule)
-    force = data[:, 1] if data.shape[1] == 2 else None
-    return float(rate), data[:, 0], force
+    return float(rate), data[:, None] if data.ndim == 1 else data
 
 
 def _read_time_csv(path: str):
@@ -115,6 +201,43 @@ def _read_time_csv(path: str):
     if not np.all(step > 0) or np.ptp(step) > 1e-6 * step.mean():
         raise CaseError("column time_s", rule="times must be ascending and evenly spaced (s)")
     return 1.0 / step.mean(), table["signal"], table.get("force")
+
+
+def time_window(y, rate_Hz: float, window: str = "auto"):
+    """The window of impulse responses `y` and the decay it adds to every pole.
+
+    Parameters
+    ----------
+    y : numpy.ndarray, shape (..., n)
+        Response samples; "auto" leaves them unwindowed only if every one has decayed.
+    rate_Hz : float
+        Sampling rate, Hz.
+    window : {"auto", "none", "exponential"}
+        See the module docstring.
+
+    Returns
+    -------
+    weights : numpy.ndarray, shape (n,)
+    decay_per_s : float
+        ``1 / tau`` of the exponential window, 1/s; 0 without.
+    note : str
+        The window chosen, in words.
+    """
+    if window not in WINDOWS:
+        raise CaseError("--window", window, f"must be one of {', '.join(WINDOWS)}")
+    y = np.asarray(y, dtype=float)
+    n = y.shape[-1]
+    tail = np.abs(y[..., -max(1, int(_TAIL * n)) :]).max(axis=-1)
+    decayed = bool(np.all(tail < _DECAYED * np.abs(y).max(axis=-1)))
+    if window == "auto":
+        window = "none" if decayed else "exponential"
+    if window == "exponential":
+        decay = -math.log(_DECAYED) / (n / rate_Hz)  # exp(-decay t) = 1 % at the end
+        note = f"exponential window, 1 % at the end: poles corrected by {decay:.4g} 1/s"
+        return np.exp(-decay * np.arange(n) / rate_Hz), decay, note
+    note = "no window: the response has decayed within the record" if decayed else (
+        "no window, though the response has not decayed: expect leakage")  # fmt: skip
+    return np.ones(n), 0.0, note
 
 
 def impulse_spectrum(signal, rate_Hz: float, force=None, window: str = "auto") -> FRFData:
@@ -141,41 +264,11 @@ def impulse_spectrum(signal, rate_Hz: float, force=None, window: str = "auto") -
     CaseError
         For a signal too short, not finite or all zero, or an unknown window.
     """
-    y = np.asarray(signal, dtype=float)
-    if window not in WINDOWS:
-        raise CaseError("--window", window, f"must be one of {', '.join(WINDOWS)}")
-    if y.size < 64:
-        raise CaseError("signal", y.size, "needs at least 64 samples (the file is truncated?)")
-    if not (np.all(np.isfinite(y)) and np.any(y)):
-        raise CaseError("signal", rule="must be finite and not all zero")
-    if not (math.isfinite(rate_Hz) and rate_Hz > 0):
-        raise CaseError("sampling rate", rate_Hz, "must be a positive number (Hz)")
-    duration_s = y.size / rate_Hz
-    tail = np.abs(y[-max(1, int(_TAIL * y.size)) :]).max()
-    decayed = tail < _DECAYED * np.abs(y).max()
-    if window == "auto":
-        window = "none" if decayed else "exponential"
-    decay = 0.0
-    if window == "exponential":
-        decay = -math.log(_DECAYED) / duration_s  # exp(-decay t) = 1 % at the end
-        weights = np.exp(-decay * np.arange(y.size) / rate_Hz)
-        note = f"exponential window, 1 % at the end: poles corrected by {decay:.4g} 1/s"
-    else:
-        weights = np.ones(y.size)
-        note = "no window: the response has decayed within the record" if decayed else (
-            "no window, though the response has not decayed: expect leakage")  # fmt: skip
-    spectrum = np.fft.rfft(y * weights) / rate_Hz
-    frequency = np.fft.rfftfreq(y.size, 1.0 / rate_Hz)
+    from .taps import average_taps
+
+    y = np.asarray(signal, dtype=float).reshape(1, -1)
     if force is not None:
-        f = np.asarray(force, dtype=float)
-        if f.shape != y.shape or not np.all(np.isfinite(f)) or not np.any(f):
-            raise CaseError("force", rule="must be finite, not all zero, as long as the signal")
-        # the force pulse is short: no window on it (the exponential one is ~1 there anyway)
-        force_spectrum = np.fft.rfft(f) / rate_Hz
-        auto = np.abs(force_spectrum) ** 2
-        frf = np.conj(force_spectrum) * spectrum / np.where(auto > 0, auto, np.inf)
-        note += "; H1 = conj(F) Y / |F|^2"
-    else:
-        frf = spectrum
-        note += "; no force channel: the response spectrum stands for the FRF"
-    return FRFData(frequency, frf[None, :], added_decay_per_s=decay, notes=(note,))
+        force = np.asarray(force, dtype=float)
+        if force.shape != y.shape[1:]:
+            raise CaseError("force", force.size, f"must be as long as the signal ({y.size})")
+    return average_taps([Recording(float(rate_Hz), y, force, (0,), "")], window)

@@ -126,7 +126,7 @@ def _number(row: dict, name: str, number: int) -> float:
     return value
 
 
-def write_chart(path, analysis: PoleAnalysis, frequency_Hz, frf, kept=()) -> None:
+def write_chart(path, analysis: PoleAnalysis, frequency_Hz, frf, kept=(), coherence=None) -> None:
     """Write the stabilisation chart as a PNG (matplotlib, imported here).
 
     Poles of each model order at their frequency: stable in frequency and damping (green
@@ -143,11 +143,17 @@ def write_chart(path, analysis: PoleAnalysis, frequency_Hz, frf, kept=()) -> Non
         The FRFs.
     kept : sequence of Pole
         The poles taken into the case.
+    coherence : numpy.ndarray, shape (p, n), optional
+        Coherence of each FRF (several taps with a force): drawn in a second panel below,
+        with the kept poles and the warning level 0.9.
     """
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(9, 5.5))
-    ax = fig.add_subplot()
+    fig = Figure(figsize=(9, 5.5 if coherence is None else 7.5))
+    if coherence is None:
+        ax = fig.add_subplot()
+    else:
+        ax, low = fig.subplots(2, 1, sharex=True, height_ratios=(3, 1))
     lower, upper = analysis.band_Hz
     band = (frequency_Hz >= lower) & (frequency_Hz <= upper)
     magnitude = np.mean(np.abs(frf[:, band]), axis=0)
@@ -169,8 +175,25 @@ def write_chart(path, analysis: PoleAnalysis, frequency_Hz, frf, kept=()) -> Non
     top = int(analysis.orders[-1]) + 2
     ax.plot([p.frequency_Hz for p in kept], [top] * len(kept), "kv", ms=8, label="kept")
     ax.set_xlim(lower, upper)
-    ax.set_xlabel("frequency (Hz)")
+    if coherence is not None:
+        _coherence_panel(low, frequency_Hz[band], np.asarray(coherence)[:, band], kept)
+        low.set_xlabel("frequency (Hz)")
+    else:
+        ax.set_xlabel("frequency (Hz)")
     ax.set_ylabel("model order (pole pairs)")
     ax.set_title("Stabilisation chart (LSCF, sdypy-EMA)")
     ax.legend(loc="lower center", ncol=4, fontsize="small", framealpha=0.9)
     save_figure(fig, path)
+
+
+def _coherence_panel(ax, frequency_Hz, coherence, kept) -> None:
+    """Coherence of each response point against frequency, the kept poles and 0.9."""
+    for i, row in enumerate(coherence):
+        ax.plot(frequency_Hz, row, lw=0.7, label=f"point {i}")
+    if len(coherence) > 1:
+        ax.legend(loc="lower left", ncol=len(coherence), fontsize="small", framealpha=0.9)
+    for pole in kept:
+        ax.axvline(pole.frequency_Hz, color="k", lw=0.5, ls=":")
+    ax.axhline(0.9, color="tab:red", lw=0.8, ls="--")
+    ax.set_ylim(0, 1.05)
+    ax.set_ylabel("coherence")
