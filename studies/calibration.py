@@ -26,8 +26,8 @@ Every replicate is an independent task on :func:`bayesplate.batch.map_tasks` (tw
 default), seeded by its own ``SeedSequence(SEED, spawn_key=...)``; each row is stored as it
 arrives in ``out_dir/.cache/calibration*.json`` (atomic writes), so an interrupted run resumes,
 and the report is rewritten from the finished rows after each one. The tasks run clean
-replicates first, then the power sizes in the order of ``SIZES``, replicate by replicate, so
-that a partial run has even counts.
+replicates first, then the first two power sizes together replicate by replicate, then the
+third, so that a partial run has even counts.
 
 Writes ``calibration.md`` and ``calibration.png`` to ``out_dir``. Run:
 ``python studies/calibration.py [--quick] [--workers W] [--out DIR] [--report-only]``
@@ -190,13 +190,15 @@ def tasks(size_table, quick=False):
     n_clean, n_power = (2, 1) if quick else (N_CLEAN, N_POWER)
     out = [("clean", family, None, None, None, rep)
            for rep in range(n_clean) for family in FAMILIES]  # fmt: skip
-    for j in range(len(SIZES)):
+    # the first two sizes replicate by replicate together, then the rest: a partial run has
+    # even counts at both
+    blocks = [(0, 1), tuple(range(2, len(SIZES)))]
+    for block in blocks[:1] if quick else blocks:
         for rep in range(n_power):
-            for name, entry in size_table.items():
-                if entry["sizes"][j] is not None:
-                    out.append(("power", POWER_FAMILY, name, j, entry["sizes"][j], rep))
-        if quick:
-            break
+            for j in block:
+                for name, entry in size_table.items():
+                    if entry["sizes"][j] is not None and not (quick and j > 0):
+                        out.append(("power", POWER_FAMILY, name, j, entry["sizes"][j], rep))
     return out
 
 
