@@ -85,3 +85,17 @@ def test_quick_study_runs_and_clean_plates_are_consistent(tmp_path, monkeypatch)
     monkeypatch.setattr(cal, "run_task", None)  # everything must come from the cache now
     again = cal.main(tmp_path, quick=True, workers=1)
     assert again.read_text().split("\n", 3)[3] == text.split("\n", 3)[3]
+
+
+def test_what_the_constants_can_mimic_leaves_no_noncentrality():
+    """An effect that is a change of the constants (in the span of S) is absorbed entirely;
+    one orthogonal to that span keeps all of its noncentrality."""
+    rng = np.random.default_rng(3)
+    S = rng.standard_normal((14, 6))
+    sigma = rng.uniform(0.5, 2.0, 14)
+    mimic = S @ rng.standard_normal(6)
+    assert cal.fitted_noncentrality(mimic, S, sigma) == pytest.approx(0.0, abs=1e-18)
+    A = S / sigma[:, None]
+    q, _ = np.linalg.qr(A, mode="complete")
+    r = q[:, 6:] @ rng.standard_normal(8)  # whitened, orthogonal to the span of A
+    assert cal.fitted_noncentrality(r * sigma, S, sigma) == pytest.approx(np.sum(r**2))
