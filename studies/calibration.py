@@ -223,8 +223,9 @@ def absorbed(size_table, quick=False):
                 continue
             plate = make().apply(fine, np.asarray(theta_of(size), dtype=float))
             lam = np.sort(plate.solve(b, case.measured.size).eigenvalues)
-            out[name].append(fitted_noncentrality(lam - nominal.eigenvalues,
-                                                  nominal.sensitivities, sigma_lambda))
+            out[name].append(
+                fitted_noncentrality(lam - nominal.eigenvalues, nominal.sensitivities, sigma_lambda)
+            )
     return out
 
 
@@ -467,7 +468,8 @@ def report(rows, stored, quick, workers):
         f"diagnose's, its lowest 14 frequencies with {100 * NOISE:.1f} % Gaussian noise, sorted; "
         "diagnose runs blind on the nominal case, pairing by order, at its defaults "
         f"(alpha {ALPHA}). Meshes of diagnose: "
-        + ", ".join(f"{k} {v[0]} x {v[1]}" for k, v in meshes.items()) + ".",
+        + ", ".join(f"{k} {v[0]} x {v[1]}" for k, v in meshes.items())
+        + ".",
         "",
         "## False alarms (nothing concealed)",
         "",
@@ -483,8 +485,11 @@ def report(rows, stored, quick, workers):
         for r in rows:
             if r["kind"] == "clean" and family in (None, r["family"]):
                 verdicts[r["verdict"]] = verdicts.get(r["verdict"], 0) + 1
-        lines.append(f"| {family or 'both'} | {n} | {k} | {lo:.2f}-{hi:.2f} | "
-                     + ", ".join(f"{v} {c}" for v, c in sorted(verdicts.items())) + " |")
+        lines.append(
+            f"| {family or 'both'} | {n} | {k} | {lo:.2f}-{hi:.2f} | "
+            + ", ".join(f"{v} {c}" for v, c in sorted(verdicts.items()))
+            + " |"
+        )
     lines += ["", "## Power (Frederiksen plate)", "",
               "Sizes where the ideal test (chi-square at the true constants on the recordings' "
               "mesh, 14 dof, 1 %) rejects with probability 0.5 and 0.9, and three times the "
@@ -504,8 +509,10 @@ def report(rows, stored, quick, workers):
             s = entry["sizes"][j]
             c = cells.get((effect, j))
             if s is None:
-                lines.append(f"| {effect} | {SIZES[j][0]}: beyond the admissible sizes | - | - "
-                             "| - | - | - | - | - |")
+                lines.append(
+                    f"| {effect} | {SIZES[j][0]}: beyond the admissible sizes | - | - "
+                    "| - | - | - | - | - |"
+                )
                 continue
             p = f"{ideal_power(lambda_at(entry, s), 14):.2f}"
             fitted = (left.get(effect) or [None] * len(SIZES))[j]
@@ -515,9 +522,12 @@ def report(rows, stored, quick, workers):
                 lines.append(f"{head} not run | | | | |")
                 continue
             lo, hi = wilson(c["named"], c["n"])
-            lines.append(f"{head} {c['ideal']}/{c['n']} | "
-                         f"{c['named']}/{c['n']} | {lo:.2f}-{hi:.2f} | {c['wrong']} | "
-                         + ", ".join(f"{v} {k}" for v, k in sorted(c["verdicts"].items())) + " |")
+            lines.append(
+                f"{head} {c['ideal']}/{c['n']} | "
+                f"{c['named']}/{c['n']} | {lo:.2f}-{hi:.2f} | {c['wrong']} | "
+                + ", ".join(f"{v} {k}" for v, k in sorted(c["verdicts"].items()))
+                + " |"
+            )
     checks = [covered(r) for r in rows if r["kind"] == "power"]
     inside = [v for c in checks for v in c.values()]
     per = {}
@@ -527,10 +537,13 @@ def report(rows, stored, quick, workers):
     lines += ["", "## Coverage of the refit's 94 % intervals", ""]
     if inside:
         lo, hi = wilson(int(sum(inside)), len(inside))
-        lines.append(f"Over {len(inside)} parameters of {sum(bool(c) for c in checks)} replicates "
-                     f"where the concealed candidate was named: {np.mean(inside):.2f} inside "
-                     f"(Wilson 95 % {lo:.2f}-{hi:.2f}). Per parameter: "
-                     + ", ".join(f"{k} {sum(v)}/{len(v)}" for k, v in sorted(per.items())) + ".")
+        lines.append(
+            f"Over {len(inside)} parameters of {sum(bool(c) for c in checks)} replicates "
+            f"where the concealed candidate was named: {np.mean(inside):.2f} inside "
+            f"(Wilson 95 % {lo:.2f}-{hi:.2f}). Per parameter: "
+            + ", ".join(f"{k} {sum(v)}/{len(v)}" for k, v in sorted(per.items()))
+            + "."
+        )
     else:
         lines.append("No replicate named its concealed candidate yet.")
     lines += ["", "## Targets (issue 13)", ""] + _targets(rows, cells, size_table, inside)
@@ -547,14 +560,20 @@ def _targets(rows, cells, size_table, inside):
         if c is None:
             out.append(f"- {effect}: not run at the 0.9 size")
             continue
-        out.append(f"- {effect} at the 0.9 size: named in {c['named']} of {c['n']} (target: 8 of "
-                   f"10), ideal test rejected {c['ideal']} of {c['n']}")
+        out.append(
+            f"- {effect} at the 0.9 size: named in {c['named']} of {c['n']} (target: 8 of "
+            f"10), ideal test rejected {c['ideal']} of {c['n']}"
+        )
     wrong = sum(wrong_name(r) for r in rows if r["kind"] == "power")
-    out.append(f"- wrong names (`explained` with another candidate): {wrong} of "
-               f"{sum(r['kind'] == 'power' for r in rows)} power replicates (target: none)")
+    out.append(
+        f"- wrong names (`explained` with another candidate): {wrong} of "
+        f"{sum(r['kind'] == 'power' for r in rows)} power replicates (target: none)"
+    )
     if inside:
-        out.append(f"- refit coverage: {np.mean(inside):.2f} of {len(inside)} parameters "
-                   "(target: 0.85-0.99)")
+        out.append(
+            f"- refit coverage: {np.mean(inside):.2f} of {len(inside)} parameters "
+            "(target: 0.85-0.99)"
+        )
     return out
 
 
@@ -586,7 +605,7 @@ def plot(rows, size_table, path):
         ax.set_title(effect.replace("_", " "), fontsize=9)
         ax.set_xlabel(f"size ({EFFECTS[effect][2] or 'ratio'})", fontsize=8)
         ax.set_ylim(-0.05, 1.05)
-    for ax in list(axes.flat)[len(names):]:
+    for ax in list(axes.flat)[len(names) :]:
         ax.axis("off")
     axes.flat[0].set_ylabel("rate")
     axes.flat[0].legend(fontsize=7, loc="upper left")
