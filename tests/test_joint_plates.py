@@ -172,12 +172,17 @@ def test_check_plates_refuses_mixed_priors_twice_given_and_one_case():
         check_plates([a])
 
 
-def test_joint_density_is_the_sum_of_the_plates_plus_one_prior(rng):
+@pytest.fixture(scope="module")
+def two_plates():
     cases = [
         study.synthetic_plate(n, a, b, h, TRUE, s, mesh=(10, 6), data_mesh=(10, 6))
         for n, a, b, h, s in study.PLATES[:2]
     ]
-    setup = prepare_joint(cases, rng=3)
+    return prepare_joint(cases, rng=3)
+
+
+def test_joint_density_is_the_sum_of_the_plates_plus_one_prior(rng, two_plates):
+    setup = two_plates
     est = setup.estimate
     density = WhitenedLogPosterior(setup.problem, est.b, est.covariance_b, setup.sampling_forward())
     singles = [s.problem.with_forward(s.sampling_forward()) for s in setup.setups]
@@ -265,3 +270,25 @@ def test_cli_several_plates_flags_the_fourth(case_files, tmp_path, capsys):
     doc = json.loads(out.read_text())
     assert [p["flagged"] for p in doc["plates"]] == [False, False, False, True]
     assert (tmp_path / "plates.png").stat().st_size > 0
+
+
+def test_hierarchical_density_at_zero_offsets_is_the_shared_one_plus_its_priors(two_plates):
+    """eta = 0: every plate at mu; ln f is the shared form's at b(mu) plus the hyperpriors."""
+    from bayesplate.sampling.hierarchical import HierarchicalDensity
+
+    setup = two_plates
+    density = HierarchicalDensity(setup.setups, tau_scale=0.1)
+    shared = joint_problem([s.problem.with_forward(s.sampling_forward()) for s in setup.setups])
+    for scale in (0.9, 1.0, 1.05):
+        mu = np.exp(np.log(setup.estimate.constants * scale))  # exactly the density's mu
+        log_tau = np.log([0.01, 0.02, 0.05, 0.1, 0.2, 0.3])
+        theta = np.concatenate([np.log(mu), log_tau, np.zeros(6 * density.P)])
+        b = laminate.stiffness_from_engineering(mu)
+        tau = np.exp(log_tau)
+        # the change of variables b -> e -> ln e, and a half-normal in ln tau
+        jac = np.linalg.slogdet(laminate.stiffness_jacobian(mu))[1] + np.sum(np.log(mu))
+        hyper = np.sum(-0.5 * (tau / 0.1) ** 2 + log_tau)
+        expected = shared.log_posterior(b) + jac + hyper
+        # the same terms summed in another order (each plate's V_Y^-1, the stacked one's
+        # inverse, ln det of each and of the whole): equal to round-off, ~1e-12 relative
+        np.testing.assert_allclose(density.log_density_theta(theta), expected, rtol=1e-10)

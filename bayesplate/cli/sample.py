@@ -177,8 +177,9 @@ def register(sub):
                    help="case file (TOML) or the name of a bundled case; several: plates of "
                    "one material, sampled jointly")  # fmt: skip
     p.add_argument("--hierarchical", action="store_true",
-                   help="several plates: each plate's constants drawn around the material's "
-                   "mean with a spread to infer (not yet: refused)")  # fmt: skip
+                   help="several plates: also each plate's constants drawn around the "
+                   "material's mean with a spread to infer (log-normal, non-centred; slow: "
+                   "the shared constants stay the main answer)")  # fmt: skip
     p.add_argument("-o", "--output", metavar="DIR",
                    help="write the figures into DIR (several plates: plates.png, one row per "
                    "plate beside the shared estimate; one case: as --plots)")  # fmt: skip

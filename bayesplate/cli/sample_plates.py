@@ -4,8 +4,11 @@ The joint posterior (:func:`bayesplate.sampling.sample_plates`), printed as the 
 constants and one line per plate (its own B estimate's fit and the leave-one-out check
 against the others); ``--json FILE`` writes the same as JSON, ``-o DIR`` the figure (one
 row per plate beside the shared estimate), ``--out FILE.nc`` the shared constants' ArviZ
-data. Cases that cannot be one material's plates (another prior, a file given twice, an
-error scale) are refused in one line naming the file, key, value and rule (status 2).
+data. ``--hierarchical`` adds the hierarchical posterior
+(:func:`bayesplate.sampling.sample_hierarchical`: the material's mean, the spread ``tau``
+per constant, each plate's constants) after the shared one. Cases that cannot be one
+material's plates (another prior, a file given twice, an error scale) are refused in one
+line naming the file, key, value and rule (status 2).
 """
 
 from __future__ import annotations
@@ -17,11 +20,16 @@ import sys
 
 from .options import mesh_of, resolve_case
 
-__all__ = ["joint_text", "joint_to_dict", "run_plates"]
+__all__ = [
+    "hierarchical_text",
+    "hierarchical_to_dict",
+    "joint_text",
+    "joint_to_dict",
+    "run_plates",
+]
 
 #: Options of ``sample`` that one case takes and several do not (yet).
-_ONE_CASE_ONLY = (("workers", "--workers"), ("scheduler", "--scheduler"), ("plots", "--plots"),
-                  ("hierarchical", "--hierarchical"))  # fmt: skip
+_ONE_CASE_ONLY = (("workers", "--workers"), ("scheduler", "--scheduler"), ("plots", "--plots"))
 
 
 def _refuse(rule):
@@ -143,8 +151,61 @@ def run_plates(args):
         rows, shared = plate_rows(result)
         fig = plates_figure(rows, shared, title=f"{len(cases)} plates of one material")
         save_figure(fig, pathlib.Path(args.output) / "plates.png")
+    hier = None
+    if args.hierarchical:
+        from ..sampling import sample_hierarchical
+
+        hier = sample_hierarchical(result.setup.setups, result.setup.singles, rng=args.seed,
+                                   max_steps=args.max_steps, min_ess=args.min_ess,
+                                   progress=not quiet)  # fmt: skip
     if args.json:
-        write_json(joint_to_dict(result, cases), args.json)
+        doc = joint_to_dict(result, cases)
+        if hier is not None:
+            doc["hierarchical"] = hierarchical_to_dict(hier, result.names)
+        write_json(doc, args.json)
     if not quiet:
         print(joint_text(result))
-    return 0 if result.sampling.converged else 1
+        if hier is not None:
+            print(hierarchical_text(hier, result.names))
+    converged = result.sampling.converged and (hier is None or hier.converged)
+    return 0 if converged else 1
+
+
+def hierarchical_text(hier, names):
+    """The hierarchical posterior: the material's mean, the spread, each plate's constants."""
+    from ..quantities import ENGINEERING_KEYS, to_case_units
+
+    lines = [
+        f"hierarchical (ln c_p = ln mu + tau eta_p): {hier.n_walkers} walkers x "
+        f"{hier.n_steps} steps ({hier.n_burn} burn-in), tau <= {hier.tau_max:.0f} steps, "
+        f"ESS >= {hier.ess_min:.0f}, R-hat <= {hier.rhat_max:.3f}: {hier.status}"
+        + ("" if hier.converged else " (NOT converged: use the shared constants above)"),
+        f"{'constant':>9} {'mean mu':>10} {'sd':>9} {'tau':>7} {'tau 97%':>8} "
+        + " ".join(f"{n[:10]:>10}" for n in names),
+    ]
+    mean, sd = to_case_units(hier.mean), to_case_units(hier.sd)
+    plates = to_case_units(hier.plate_mean)
+    for i, key in enumerate(ENGINEERING_KEYS):
+        lines.append(f"{key:>9} {mean[i]:#10.4g} {sd[i]:#9.3g} {hier.tau_mean[i]:7.3f} "
+                     f"{hier.tau_hdi[1, i]:8.3f} "
+                     + " ".join(f"{plates[p, i]:#10.4g}" for p in range(len(names))))  # fmt: skip
+    return "\n".join(lines)
+
+
+def hierarchical_to_dict(hier, names):
+    """The hierarchical posterior as JSON (case units; ``tau`` of ``ln c``, dimensionless)."""
+    from ..quantities import ENGINEERING_KEYS, to_case_units
+
+    mean, sd = to_case_units(hier.mean), to_case_units(hier.sd)
+    plates = to_case_units(hier.plate_mean)
+    return {
+        "status": hier.status,
+        "mean": {k: {"mean": float(mean[i]), "sd": float(sd[i])}
+                 for i, k in enumerate(ENGINEERING_KEYS)},
+        "tau": {k: {"mean": float(hier.tau_mean[i]), "hdi_3%": float(hier.tau_hdi[0, i]),
+                    "hdi_97%": float(hier.tau_hdi[1, i])} for i, k in enumerate(ENGINEERING_KEYS)},
+        "plates": {n: {k: float(plates[p, i]) for i, k in enumerate(ENGINEERING_KEYS)}
+                   for p, n in enumerate(names)},
+        "chain": {"n_walkers": hier.n_walkers, "n_steps": hier.n_steps, "n_burn": hier.n_burn,
+                  "tau_max": hier.tau_max, "ess_min": hier.ess_min, "rhat_max": hier.rhat_max},
+    }  # fmt: skip

@@ -72,12 +72,14 @@ Modules
     :mod:`~bayesplate.sampling.seeding` (the ``rng`` argument); several plates of one material:
     :mod:`~bayesplate.sampling.stacked` (their stacked problem),
     :mod:`~bayesplate.sampling.joint` (:func:`sample_plates`, the shared constants) and
-    :mod:`~bayesplate.sampling.plate_checks` (which plate disagrees).
+    :mod:`~bayesplate.sampling.plate_checks` (which plate disagrees),
+    :mod:`~bayesplate.sampling.hierarchical` (each plate around the material's mean).
 """
 
 from .chain import sample_problem
 from .checks import covariance_agreement, curvature_covariance, linearisation_band
 from .density import EigenvalueForward, WhitenedLogPosterior
+from .hierarchical import HierarchicalResult, sample_hierarchical
 from .joint import (
     JointResult,
     JointSetup,
@@ -97,6 +99,7 @@ __all__ = [
     "CASE_UNITS",
     "HDI_PROB",
     "EigenvalueForward",
+    "HierarchicalResult",
     "JointForward",
     "JointResult",
     "JointSetup",
@@ -121,6 +124,7 @@ __all__ = [
     "prepare_joint",
     "resolve_inputs",
     "sample",
+    "sample_hierarchical",
     "sample_plates",
     "sample_problem",
 ]
