@@ -163,7 +163,7 @@ def main(argv=()):
     from bayesplate.io import save_figure
     from bayesplate.plots.plates import plate_rows, plates_figure
     from bayesplate.quantities import ENGINEERING_KEYS, to_case_units
-    from bayesplate.sampling import sample, sample_plates
+    from bayesplate.sampling import sample, sample_hierarchical, sample_plates
 
     warnings.simplefilter("ignore")
     quick = "--quick" in argv
@@ -174,6 +174,8 @@ def main(argv=()):
     singles = [sample(c, rng=11 + i, **opts) for i, c in enumerate(cases[:3])]
     joint = sample_plates(cases[:3], rng=21, **opts)
     four = sample_plates(cases, rng=31, **opts)
+    hier = sample_hierarchical(joint.setup.setups, joint.setup.singles, rng=41, max_steps=1500,
+                               min_ess=opts["min_ess"])  # fmt: skip
     elapsed = time.perf_counter() - started
     s = joint.sampling
     lines = [
@@ -242,6 +244,31 @@ def main(argv=()):
         "a flagged plate should be left out of the material's estimate.",
         "",
         "![many plates](many_plates.png)",
+        "",
+        "## Hierarchical option (the three plates alike)",
+        "",
+        f"ln c_p = ln mu + tau eta_p, non-centred, tau ~ half-normal(0.1) per constant: "
+        f"{hier.n_walkers} walkers x {hier.n_steps} steps (capped at 1500), "
+        f"{hier.wall_time:.0f} s; largest autocorrelation time {hier.tau_max:.0f} steps, "
+        f"ESS of the mean constants >= {hier.ess_min:.0f}, R-hat <= {hier.rhat_max:.2f}: "
+        f"{'converged' if hier.converged else 'NOT converged'}.",
+        "",
+        "| constant | mu mean | mu sd | tau mean | tau 97 % | "
+        + " | ".join(c.name for c in cases[:3])
+        + " |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    hm, hs, hp = to_case_units(hier.mean), to_case_units(hier.sd), to_case_units(hier.plate_mean)
+    for j, key in enumerate(ENGINEERING_KEYS):
+        plates_j = " | ".join(f"{hp[p, j]:.4g}" for p in range(3))
+        lines.append(f"| {key} | {hm[j]:.4g} | {hs[j]:.3g} | {hier.tau_mean[j]:.3f} | "
+                     f"{hier.tau_hdi[1, j]:.3f} | {plates_j} |")  # fmt: skip
+    lines += [
+        "",
+        "The chain mixes slowly where the plates identify a constant well (E1, E2, G12: "
+        "tau and eta_p then lie on a narrow ridge); the shared-constants form above is the "
+        "default and the hierarchical one an option whose numbers stand only with R-hat "
+        "near 1.",
     ]
     out = ROOT / "reports"
     (out / "many_plates.md").write_text("\n".join(lines) + "\n")

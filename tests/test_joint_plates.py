@@ -277,17 +277,19 @@ def test_hierarchical_density_at_zero_offsets_is_the_shared_one_plus_its_priors(
     from bayesplate.sampling.hierarchical import HierarchicalDensity
 
     setup = two_plates
-    density = HierarchicalDensity(setup.setups, tau_scale=0.1)
+    centred = np.array([True, True, False, True, False, False])  # both forms at once
+    density = HierarchicalDensity(setup.setups, tau_scale=0.1, centred=centred)
     shared = joint_problem([s.problem.with_forward(s.sampling_forward()) for s in setup.setups])
     for scale in (0.9, 1.0, 1.05):
         mu = np.exp(np.log(setup.estimate.constants * scale))  # exactly the density's mu
         log_tau = np.log([0.01, 0.02, 0.05, 0.1, 0.2, 0.3])
-        theta = np.concatenate([np.log(mu), log_tau, np.zeros(6 * density.P)])
+        theta = density.pack(np.log(mu), log_tau, np.zeros((density.P, 6)))
         b = laminate.stiffness_from_engineering(mu)
         tau = np.exp(log_tau)
         # the change of variables b -> e -> ln e, and a half-normal in ln tau
         jac = np.linalg.slogdet(laminate.stiffness_jacobian(mu))[1] + np.sum(np.log(mu))
         hyper = np.sum(-0.5 * (tau / 0.1) ** 2 + log_tau)
+        hyper -= density.P * np.sum(log_tau[centred])  # ln c_p ~ N(ln mu, tau^2): 1 / tau
         expected = shared.log_posterior(b) + jac + hyper
         # the same terms summed in another order (each plate's V_Y^-1, the stacked one's
         # inverse, ln det of each and of the whole): equal to round-off, ~1e-12 relative

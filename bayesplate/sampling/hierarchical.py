@@ -25,9 +25,12 @@ fallback.
 Convergence: the non-centred form suits the weakly identified constants (``tau`` and
 ``eta`` of G13 and G23 are the prior's); the well-identified ones (E1, E2, G12) make
 ``eta_p`` and ``tau`` strongly dependent (a narrow ridge ``tau eta_p = const``), which the
-tuned proposal only partly follows. On three plates of ``studies/many_plates.py`` see
-``reports/many_plates.md`` for the steps it took; the shared-constants form
-(:mod:`bayesplate.sampling.joint`) stays the default.
+tuned proposal only partly follows. Sampling those centred instead (``centred``: ``ln c_p``
+itself, the same posterior) was worse on these plates (1000 steps: R-hat 3.3 against 1.95
+non-centred): the MAP that whitens the coordinates then sits in the funnel's neck (``tau``
+of E1 near 0.001), so it is an option, not the default. On the three plates of
+``studies/many_plates.py`` see ``reports/many_plates.md`` for the steps it took; the
+shared-constants form (:mod:`bayesplate.sampling.joint`) stays the default.
 """
 
 from __future__ import annotations
@@ -61,6 +64,9 @@ class HierarchicalDensity:
         The plates (their problems and fast models).
     tau_scale : float
         Half-normal scale of each ``tau``.
+    centred : array_like of bool, shape (6,), optional
+        Constants sampled centred (``theta`` holds ``ln c_p`` itself, with the density's
+        ``1 / tau``); default none (non-centred throughout).
 
     Attributes
     ----------
@@ -74,7 +80,8 @@ class HierarchicalDensity:
         Plate-model evaluations.
     """
 
-    def __init__(self, setups, tau_scale=TAU_SCALE):
+    def __init__(self, setups, tau_scale=TAU_SCALE, centred=None):
+        self.centred = np.zeros(6, dtype=bool) if centred is None else np.asarray(centred, bool)
         self.setups = tuple(setups)
         self.P = len(self.setups)
         self.dim = 12 + 6 * self.P
@@ -88,12 +95,23 @@ class HierarchicalDensity:
     def split(self, theta):
         """``(ln mu (6,), ln tau (6,), eta (P, 6))`` of ``theta`` (dim,)."""
         theta = np.asarray(theta, dtype=float)
-        return theta[:6], theta[6:12], theta[12:].reshape(self.P, 6)
+        log_mu, log_tau = theta[:6], theta[6:12]
+        raw = theta[12:].reshape(self.P, 6)
+        eta = np.where(self.centred, (raw - log_mu) / np.exp(log_tau), raw)
+        return log_mu, log_tau, eta
+
+    def pack(self, log_mu, log_tau, eta):
+        """``theta`` (dim,) of ``ln mu`` (6,), ``ln tau`` (6,) and ``eta`` (P, 6)."""
+        eta = np.asarray(eta, dtype=float).reshape(self.P, 6)
+        raw = np.where(self.centred, log_mu + np.exp(log_tau) * eta, eta)
+        return np.concatenate([log_mu, log_tau, raw.ravel()])
 
     def plate_constants(self, theta):
         """Each plate's constants ``c_p`` (SI), shape (P, 6)."""
-        log_mu, log_tau, eta = self.split(theta)
-        return np.exp(log_mu + np.exp(log_tau) * eta)
+        theta = np.asarray(theta, dtype=float)
+        log_mu, log_tau = theta[:6], theta[6:12]
+        raw = theta[12:].reshape(self.P, 6)
+        return np.exp(np.where(self.centred, raw, log_mu + np.exp(log_tau) * raw))
 
     def theta(self, u):
         """``theta`` of whitened ``u``, shape (..., dim)."""
@@ -114,7 +132,7 @@ class HierarchicalDensity:
         lp += np.linalg.slogdet(laminate.stiffness_jacobian(mu))[1] + np.sum(log_mu)
         tau = np.exp(log_tau)
         lp += np.sum(-0.5 * (tau / self.tau_scale) ** 2 + log_tau)  # half-normal, in ln tau
-        lp += -0.5 * np.sum(eta**2)
+        lp += -0.5 * np.sum(eta**2) - self.P * np.sum(log_tau[self.centred])  # centred: 1/tau
         for problem, c in zip(self.problems, self.plate_constants(theta), strict=True):
             b = laminate.stiffness_from_engineering(c)
             if not laminate.is_physical(b):
@@ -143,8 +161,7 @@ class HierarchicalDensity:
         logs = np.log([s.constants for s in singles])
         log_mu = logs.mean(axis=0)
         tau = np.maximum(logs.std(axis=0), 0.2 * self.tau_scale)
-        eta = (logs - log_mu) / tau
-        return np.concatenate([log_mu, np.log(tau), eta.ravel()])
+        return self.pack(log_mu, np.log(tau), (logs - log_mu) / tau)
 
     def whiten(self, theta0, step=1e-3):
         """Centre at the MAP from `theta0` and whiten by the inverse Hessian there."""
@@ -224,8 +241,8 @@ class HierarchicalResult:
 
 
 def sample_hierarchical(setups, singles, rng=None, n_walkers=None, max_steps=5000,
-                        target_tau_factor=50.0, min_ess=2000.0, max_rhat=1.01,
-                        check_every=20, tau_scale=TAU_SCALE, progress=False):  # fmt: skip
+                        target_tau_factor=50.0, min_ess=2000.0, max_rhat=1.01, check_every=20,
+                        tau_scale=TAU_SCALE, centred=None, progress=False):  # fmt: skip
     """Sample the hierarchical posterior of plates of one material (module docstring).
 
     Parameters
@@ -242,6 +259,8 @@ def sample_hierarchical(setups, singles, rng=None, n_walkers=None, max_steps=500
         As for :func:`~bayesplate.sampling.chain.sample_problem`.
     tau_scale : float
         Half-normal scale of each ``tau``.
+    centred : array_like of bool, shape (6,), optional
+        Constants sampled centred; default none (non-centred throughout, as the issue asks).
     progress : bool
         Progress bar.
 
@@ -251,7 +270,7 @@ def sample_hierarchical(setups, singles, rng=None, n_walkers=None, max_steps=500
     """
     started = time.perf_counter()
     rng = generator(resolve_rng(rng, None, "sample_hierarchical"))[1]
-    density = HierarchicalDensity(setups, tau_scale)
+    density = HierarchicalDensity(setups, tau_scale, centred)
     limits = threadpool_limits(limits=1, user_api="blas")
     try:
         density.whiten(density.start(singles))
