@@ -10,7 +10,8 @@ jointly, and reports the deviations single against joint, the coverage of the tr
 plate's leave-one-out predictive p-value (the flag at 1 %).
 
 Writes ``reports/many_plates.md`` and ``reports/many_plates.png``. About two minutes on two
-cores. ``python studies/many_plates.py [--quick]`` (``--quick``: fewer effective samples).
+cores (119 s, load 3.9, 2026-11-25).
+``python studies/many_plates.py [--quick]`` (``--quick``: fewer effective samples).
 """
 
 from __future__ import annotations
@@ -174,7 +175,7 @@ def main(argv=()):
     singles = [sample(c, rng=11 + i, **opts) for i, c in enumerate(cases[:3])]
     joint = sample_plates(cases[:3], rng=21, **opts)
     four = sample_plates(cases, rng=31, **opts)
-    hier = sample_hierarchical(joint.setup.setups, joint.setup.singles, rng=41, max_steps=1500,
+    hier = sample_hierarchical(joint.setup.setups, joint.setup.singles, rng=41, max_steps=1000,
                                min_ess=opts["min_ess"])  # fmt: skip
     elapsed = time.perf_counter() - started
     s = joint.sampling
@@ -248,7 +249,7 @@ def main(argv=()):
         "## Hierarchical option (the three plates alike)",
         "",
         f"ln c_p = ln mu + tau eta_p, non-centred, tau ~ half-normal(0.1) per constant: "
-        f"{hier.n_walkers} walkers x {hier.n_steps} steps (capped at 1500), "
+        f"{hier.n_walkers} walkers x {hier.n_steps} steps (capped at 1000), "
         f"{hier.wall_time:.0f} s; largest autocorrelation time {hier.tau_max:.0f} steps, "
         f"ESS of the mean constants >= {hier.ess_min:.0f}, R-hat <= {hier.rhat_max:.2f}: "
         f"{'converged' if hier.converged else 'NOT converged'}.",
