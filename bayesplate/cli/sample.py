@@ -1,4 +1,11 @@
-"""``bayesplate sample``: the posterior of the constants with emcee (checks B's covariance)."""
+"""``bayesplate sample``: the posterior of the constants with emcee (checks B's covariance).
+
+One case: its posterior, as always. Several cases: plates of one material, sampled jointly
+(:func:`bayesplate.sampling.sample_plates`: the six constants shared, one prior, the first
+case's); the material's constants, then one line per plate with its own fit and whether it
+disagrees with the others (:mod:`bayesplate.sampling.plate_checks`). Cases that cannot be one
+material's plates are refused in one line naming the file, key, value and rule (status 2).
+"""
 
 from __future__ import annotations
 
@@ -6,7 +13,6 @@ import logging
 import pathlib
 
 from .options import (
-    add_case_argument,
     add_json_option,
     add_mesh_option,
     add_pairing_option,
@@ -65,6 +71,27 @@ def _inputs_line(case, inputs):
 
 def run(args):
     """Sample the posterior; print the table, write JSON, netCDF and figures on request."""
+    if len(args.case) > 1:
+        from .sample_plates import run_plates
+
+        return run_plates(args)
+    if args.hierarchical:
+        return _refuse("--hierarchical needs several case files (plates of one material)")
+    args.case = args.case[0]
+    args.plots = args.plots or args.output
+    return _run_one(args)
+
+
+def _refuse(rule):
+    """One line on standard error, status 2."""
+    import sys
+
+    print(f"bayesplate sample: error: {rule}", file=sys.stderr)
+    return 2
+
+
+def _run_one(args):
+    """One case: the posterior of its constants (the command's behaviour before issue 17)."""
     from ..io import sampling_to_dict, save_figure, write_json, write_netcdf
     from ..model import PlateModel
     from ..sampling import prepare, sample
@@ -142,9 +169,20 @@ def register(sub):
         "certified reduced-basis model around the B estimate (full-model fallback). Stops "
         "when the chain is longer than 50 autocorrelation times and every constant has "
         "--min-ess effective samples, or at --max-steps. The exit status is 1 when the "
-        "stopping rule was not met. Progress goes to standard error.",
+        "stopping rule was not met. Progress goes to standard error. Several case files: "
+        "plates of one material (one prior, the first case's, stated by every case), the six "
+        "constants shared; each plate is checked against the others (flagged at 1 %%).",
     )
-    add_case_argument(p)
+    p.add_argument("case", nargs="+",
+                   help="case file (TOML) or the name of a bundled case; several: plates of "
+                   "one material, sampled jointly")  # fmt: skip
+    p.add_argument("--hierarchical", action="store_true",
+                   help="several plates: also each plate's constants drawn around the "
+                   "material's mean with a spread to infer (log-normal, non-centred; slow: "
+                   "the shared constants stay the main answer)")  # fmt: skip
+    p.add_argument("-o", "--output", metavar="DIR",
+                   help="write the figures into DIR (several plates: plates.png, one row per "
+                   "plate beside the shared estimate; one case: as --plots)")  # fmt: skip
     p.add_argument("--seed", type=seed_int, default=None, help="seed (default: fresh entropy)")
     p.add_argument("--walkers", type=walker_count, default=32, help="emcee walkers (default 32)")
     p.add_argument("--max-steps", type=chain_steps, default=5000,

@@ -69,33 +69,62 @@ Modules
     :mod:`~bayesplate.sampling.stopping`, :mod:`~bayesplate.sampling.storage` (HDF backend),
     :mod:`~bayesplate.sampling.result`, :mod:`~bayesplate.sampling.pipeline` (:func:`sample`),
     :mod:`~bayesplate.sampling.checks` (the linearised covariance against the posterior),
-    :mod:`~bayesplate.sampling.seeding` (the ``rng`` argument).
+    :mod:`~bayesplate.sampling.seeding` (the ``rng`` argument); several plates of one material:
+    :mod:`~bayesplate.sampling.stacked` (their stacked problem),
+    :mod:`~bayesplate.sampling.joint` (:func:`sample_plates`, the shared constants) and
+    :mod:`~bayesplate.sampling.plate_checks` (which plate disagrees),
+    :mod:`~bayesplate.sampling.hierarchical` (each plate around the material's mean).
 """
 
 from .chain import sample_problem
 from .checks import covariance_agreement, curvature_covariance, linearisation_band
 from .density import EigenvalueForward, WhitenedLogPosterior
+from .hierarchical import HierarchicalResult, sample_hierarchical
+from .joint import (
+    JointResult,
+    JointSetup,
+    PlatesMismatch,
+    check_plates,
+    prepare_joint,
+    sample_plates,
+)
 from .moves import LaplaceMove, ScreenedDEMove, default_moves
 from .pipeline import sample
+from .plate_checks import PlateCheck, plate_checks, predictive_check
 from .result import CASE_UNITS, HDI_PROB, SamplingResult
 from .setup import SamplingSetup, posterior_box, prepare, resolve_inputs
+from .stacked import JointForward, joint_estimate, joint_problem
 
 __all__ = [
     "CASE_UNITS",
     "HDI_PROB",
     "EigenvalueForward",
+    "HierarchicalResult",
+    "JointForward",
+    "JointResult",
+    "JointSetup",
     "LaplaceMove",
+    "PlateCheck",
+    "PlatesMismatch",
     "SamplingResult",
     "SamplingSetup",
     "ScreenedDEMove",
     "WhitenedLogPosterior",
+    "check_plates",
     "covariance_agreement",
     "curvature_covariance",
     "default_moves",
+    "joint_estimate",
+    "joint_problem",
     "linearisation_band",
+    "plate_checks",
     "posterior_box",
+    "predictive_check",
     "prepare",
+    "prepare_joint",
     "resolve_inputs",
     "sample",
+    "sample_hierarchical",
+    "sample_plates",
     "sample_problem",
 ]

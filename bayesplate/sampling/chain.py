@@ -125,7 +125,7 @@ def _run_chain(sampler, state, max_steps, check_every, stop, bar, n_tune, interr
         if bar is not None:
             bar.update(steps)
             bar.set_postfix_str(note, refresh=False)
-    return state, np.array(history).reshape(-1, 7), converged
+    return state, np.array(history).reshape(-1, 1 + sampler.ndim), converged
 
 
 def _tune(sampler, state, move, rounds, steps, max_steps, bar, interrupt=None):
@@ -138,7 +138,7 @@ def _tune(sampler, state, move, rounds, steps, max_steps, bar, interrupt=None):
         if steps < 4:
             break
         state = _advance(sampler, state, steps, interrupt)
-        z = sampler.get_chain(discard=sampler.iteration - steps // 2).reshape(-1, 6)
+        z = sampler.get_chain(discard=sampler.iteration - steps // 2).reshape(-1, sampler.ndim)
         move.set_proposal(z.mean(axis=0), np.cov(z, rowvar=False))
         if bar is not None:
             bar.update(steps)
