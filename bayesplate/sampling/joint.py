@@ -49,7 +49,7 @@ import numpy as np
 from ..reduced import Box
 from .chain import sample_problem
 from .plate_checks import plate_checks
-from .seeding import generator, resolve_rng
+from .seeding import generator, resolve_rng, streams
 from .setup import posterior_box, prepare
 from .stacked import JointForward, joint_estimate, joint_problem
 
@@ -338,8 +338,7 @@ progress, max_rhat
     JointResult
     """
     started = time.perf_counter()
-    entropy, rng = generator(resolve_rng(rng, None, "sample_plates"))
-    build_rng, walk_rng = rng.spawn(2)
+    entropy, build_rng, walk_rng = streams(resolve_rng(rng, None, "sample_plates"))
     if setup is None:
         setup = prepare_joint(cases, rng=build_rng, **prepare_options)
     est = setup.estimate
