@@ -269,12 +269,21 @@ def _sample_lines(result):
         f"sampling; {t.get('total', float('nan')):.0f} s in all.",
         "",
         *_inputs_lines(result),
-        *([f"- {result['error_scale']['text']}: the frequencies' deviations are s times the "
-           "declared ones, s integrated out (the intervals below include it).", ""]
-          if result.get("error_scale") else []),
+        *_scale_lines(result),
         *[f"- Sampler warning: {w}" for w in result.get("warnings", [])],
         "",
         *_table(["constant", "mean ± sd", "94 % HDI", "ESS (bulk)", "R-hat"], rows),
+        "",
+    ]
+
+
+def _scale_lines(result):
+    """The error scale's posterior, when the case gives one (none otherwise)."""
+    if not result.get("error_scale"):
+        return []
+    return [
+        f"- {result['error_scale']['text']}: the frequencies' deviations are s times the "
+        "declared ones, s integrated out (the intervals below include it).",
         "",
     ]
 
