@@ -451,3 +451,23 @@ def test_the_sampler_with_a_setup_prepared_from_its_stream_gives_the_same_chain(
     setup = prepare(case, model=model, rng=streams(3)[1], pairing="order")
     kept = sample(case, rng=3, setup=setup, **kw)
     assert np.array_equal(alone.samples_b, kept.samples_b)
+
+
+def test_the_reports_posterior_gives_the_scale_from_its_draws():
+    """The report's sampling step: s from the chain's draws, and the line in the Markdown."""
+    from bayesplate.model import PlateModel
+    from bayesplate.report import ReportOptions
+    from bayesplate.report.markdown import _sample_lines
+    from bayesplate.report.steps import sample_step
+
+    case = _plate1_with({"median": 1.0, "upper95": 3.0})
+    model = PlateModel.from_case(case)
+    data = sample_step(case, model, "order", ReportOptions(quick=True, seed=4))
+    scale = data["error_scale"]
+    lo, hi = scale["interval"]
+    assert 0 < lo < scale["median"] < hi
+    assert any("error scale s: median" in line for line in _sample_lines(data))
+    plain = sample_step(case.with_measured(error_scale=None), model, "order",
+                        ReportOptions(quick=True, seed=4))  # fmt: skip
+    assert plain["error_scale"] is None
+    assert not any("error scale" in line for line in _sample_lines(plain))
