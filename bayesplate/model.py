@@ -429,11 +429,33 @@ class PlateModel:
             ``interpolation(points) @ vectors`` gives the field at the points.
         """
         element, local = self.mesh.locate(points)
-        values = self.element.fields(local)[field]  # (p, 32), all points at once
+        values = self.element.fields(local, (field,))[field]  # (p, 32), all points at once
         rows = np.repeat(np.arange(len(element)), values.shape[1])
         cols = self.mesh.element_dofs[element].ravel()
         shape = (len(element), self.mesh.n_dofs)
         return sp.csr_matrix((values.ravel(), (rows, cols)), shape=shape)
+
+    def point_values(self, points, vectors, field="w"):
+        """Fields of nodal vectors at points on the plate: ``interpolation(points) @ vectors``.
+
+        Parameters
+        ----------
+        points : array_like, shape (p, 2)
+            ``(x, y)`` in m.
+        vectors : numpy.ndarray, shape (n_dofs, n)
+        field : str or tuple of str
+            As :meth:`interpolation`'s; a tuple gives each of its fields.
+
+        Returns
+        -------
+        numpy.ndarray, shape (p, n), or (len(field), p, n) for a tuple
+        """
+        names = (field,) if isinstance(field, str) else tuple(field)
+        element, local = self.mesh.locate(points)
+        values = self.element.fields(local, names)  # each (p, 32)
+        at = vectors[self.mesh.element_dofs[element]]  # (p, 32, n)
+        out = np.array([np.einsum("pa,pan->pn", values[name], at) for name in names])
+        return out[0] if isinstance(field, str) else out
 
     def sensitivities(self, vectors):
         """``d lambda_i / d b_j = a_i^T K_j a_i`` for mass-normalised ``a_i``, shape (n, 6).

@@ -153,7 +153,7 @@ class Physics:
         """
         return None
 
-    def ritz(self, model, b, basis):
+    def ritz(self, model, b, basis, near=None):
         """The modified plate's matrices projected on a Ritz basis, as functions of ``theta``.
 
         Parameters
@@ -164,6 +164,10 @@ class Physics:
             Nominal stiffness coefficients, Pa (for priors scaled to the plate).
         basis : numpy.ndarray, shape (n_dofs, r)
             From :func:`.pencil.ritz_basis`.
+        near : numpy.ndarray, shape (k,), optional
+            When given, the form need only be exact at ``near`` and accurate around it (the
+            pencil of a round of :mod:`.polish`, exact at its snapshot): a candidate whose
+            exact form over the whole range is costly may build a cheaper local one.
 
         Returns
         -------

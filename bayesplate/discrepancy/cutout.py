@@ -7,7 +7,7 @@ import numpy as np
 from .base import Parameter, Physics, mirror_positions
 from .local_stiffness_loss import element_energies
 from .locate import effect_map
-from .pencil import project
+from .pencil import RegionProjection, project
 from .scan import Scan, misfit
 
 __all__ = ["Cutout", "cutout_map", "cutout_scan", "disc_fractions"]
@@ -136,26 +136,29 @@ class Cutout(Physics):
         return model.modified(stiffness_terms=model.stiffness_terms - np.array(removed),
                               mass_data=model.mass_data - mass)  # fmt: skip
 
-    def ritz(self, model, b, basis):
-        """``V^T K_j V - sum_e f_e V_e^T K_j^e V_e`` (and the same for M), cut elements only."""
+    def ritz(self, model, b, basis, near=None):
+        """``V^T K_j V - sum_e f_e V_e^T K_j^e V_e`` (and the same for M), cut elements only.
+
+        A difference in the place or the diameter visits only the elements along the rim
+        (:class:`~.pencil.RegionProjection`).
+        """
         terms, constant, mass = project(model, basis)
-        element_terms = model.element_stiffness_terms()
-        element_mass = model.element_mass()
-        dofs = model.mesh.element_dofs
+        element = np.concatenate([model.element_stiffness_terms(), model.element_mass()[None]])
+        region = RegionProjection(model, basis, element)
 
         def matrices(theta):
-            frac = self._fractions(model, theta)
-            inside = np.flatnonzero(frac > 0)
-            if inside.size == 0:
-                return terms, constant, mass
-            A = basis[dofs[inside]]  # (n_in, 32, r)
-            weighted = frac[inside, None, None] * A
-            out = terms.copy()
-            for j in range(6):
-                out[j] -= np.tensordot(weighted, element_terms[j] @ A, axes=([0, 1], [0, 1]))
-            lost = np.tensordot(weighted, element_mass @ A, axes=([0, 1], [0, 1]))
-            return out, constant, mass - lost
+            removed = region(self._fractions(model, theta))
+            return terms - removed[:6], constant, mass - removed[6]
 
+        def difference(theta, i, h):
+            up, down = np.array(theta, dtype=float), np.array(theta, dtype=float)
+            up[i] += h
+            down[i] -= h
+            rim = (self._fractions(model, up) - self._fractions(model, down)) / (2 * h)
+            removed = region(rim)
+            return -removed[:6], np.zeros_like(constant), -removed[6]
+
+        matrices.difference = difference
         return matrices
 
     def mirror_images(self, model, theta):

@@ -48,6 +48,7 @@ from .fit import JointFit, JointProblem
 from .locate import absorbable_projector, mode_kinds
 from .nominal import N_STARTS, check_fast, fit_nominal, nominal_reduced, nominal_stage
 from .pair import pairs_with
+from .parallel import fork_map
 from .probabilities import model_probabilities
 from .rank import CandidateResult, improved_nominal, rank
 from .scan import RitzBasis
@@ -327,11 +328,11 @@ def diagnose(
 
     coarse_nominal = coarse.solve(nominal.b, int(modes.max()) + 1 + RITZ_EXTRA_MODES)
     level = {"coarse": coarse, "scale": nominal.eigenvalues / coarse_nominal.eigenvalues[modes],
-             "margin": refine_margin, "workers": workers,
+             "margin": refine_margin, "workers": workers, "ambiguity_margin": ambiguity_margin,
              "coarse_modes": coarse_nominal.vectors, "rough": rough}  # fmt: skip
     ritz = model.solve(nominal.b, int(modes.max()) + 1 + RITZ_EXTRA_MODES)
     level["modes"] = ritz.vectors
-    scans = _scans(physics, model, nominal, modes, Y, sigma, P, ritz)
+    scans = _scans(physics, model, nominal, modes, Y, sigma, P, ritz, workers)
     ranked = rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics, say, stages)
     better = stages.run(
         "nominal refit from the candidates' constants",
@@ -435,16 +436,15 @@ def _region(model, maps):
     return best[1], [tuple(float(v) for v in p) for p in mirror_positions(model, *best[1])]
 
 
-def _scans(physics_list, model, nominal, modes, Y, sigma, P, ritz):
+def _scans(physics_list, model, nominal, modes, Y, sigma, P, ritz, workers=1):
     """Ritz scans of the located candidates at the nominal fit, keyed by name.
 
     The Ritz basis (:mod:`.scan`) holds the nominal modes up to ``RITZ_EXTRA_MODES`` beyond
-    the highest paired one (``ritz``: the nominal fit's modes).
+    the highest paired one (``ritz``: the nominal fit's modes). The candidates' scans are
+    independent: on ``workers`` processes (:func:`.parallel.fork_map`).
     """
     basis = RitzBasis.from_modes(model, ritz)
-    scans = {}
-    for physics in physics_list:
-        result = physics.scan(model, basis, nominal.b, Y, sigma, modes, P)
-        if result is not None:
-            scans[physics.name] = result
-    return scans
+    found = fork_map(lambda physics: physics.scan(model, basis, nominal.b, Y, sigma, modes, P),
+                     physics_list, workers)  # fmt: skip
+    return {physics.name: result for physics, result in zip(physics_list, found, strict=True)
+            if result is not None}  # fmt: skip

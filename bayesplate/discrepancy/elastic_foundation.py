@@ -38,7 +38,7 @@ class ElasticFoundation(Physics):
         extra = k * model.assembler.uniform_data(w_block)
         return model.modified(extra_stiffness_data=extra)
 
-    def ritz(self, model, b, basis):
+    def ritz(self, model, b, basis, near=None):
         """Exact: the stiffness is affine in ``k``."""
         (param,) = self.parameters(model, b)
 

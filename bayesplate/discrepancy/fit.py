@@ -37,11 +37,14 @@ from ..quantities import engineering_covariance, hz_from_eigenvalue
 from .finish import finish
 from .local import distinct as _distinct
 from .local import local_fits as _local_fits
-from .polish import polish_and_finish
+from .polish import MAX_ROUNDS, polish_and_finish
 
-__all__ = ["JointFit", "JointProblem", "fit"]
+__all__ = ["JointFit", "JointProblem", "fit", "rough_fit", "settle"]
 
 _UNPHYSICAL_RESIDUAL = 1e4  # residual returned outside the lamina's physical region
+#: ``ftol`` and ``xtol`` of the local fits of :func:`rough_fit`: a rough optimum only says
+#: where to refine from (the refinement converges on the working mesh).
+ROUGH_TOL = 1e-6
 
 
 @dataclass(frozen=True)
@@ -81,6 +84,13 @@ class JointFit:
     alternatives : tuple of (numpy.ndarray, float)
         The other local optima reached on the working mesh: their stiffness coefficients
         ``b`` (Pa) and objective ``chi2 + chi2_prior``, best first.
+    check : FitCheck or None
+        When the fit was settled on reduced models of the working mesh (:mod:`.polish`):
+        the full model at its answer. None when it ran on the finite-element model itself
+        or was not refined.
+    rough_optima : tuple of numpy.ndarray
+        Of a fit not refined (:func:`rough_fit`): the whitened unknowns of its best distinct
+        rough optima, best first, to refine from.
     """
 
     physics: object
@@ -99,6 +109,8 @@ class JointFit:
     modal: object = field(repr=False, default=None)
     refined: bool = True
     alternatives: tuple = ()
+    check: object = None
+    rough_optima: tuple = ()
 
     @property
     def constants(self):
@@ -281,7 +293,8 @@ class JointProblem:
 
 
 def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None, keep=1, workers=1,
-        rough=None, distinct=False, rough_nfev=None, polish=None, tol=1e-8):  # fmt: skip
+        rough=None, distinct=False, rough_nfev=None, polish=None, tol=1e-8,
+        rounds=MAX_ROUNDS):  # fmt: skip
     """Best joint fit over several starts, with its Laplace evidence.
 
     Parameters
@@ -309,16 +322,20 @@ def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None, keep
     rough_nfev : int, optional
         Evaluation cap of each local fit on ``rough`` (default ``max_nfev``).
     polish : callable, optional
-        ``polish(z) -> JointProblem``: a reduced model of ``problem`` on its own mesh,
-        accurate near the rough optimum ``z`` (:meth:`JointProblem.on_pencil`). Each of the
-        ``keep`` rough optima is then polished on it and finished on ``problem``; the best
-        finished one is reported (chosen, and its chi-square, evidence and derivatives
-        computed, on the finite-element model).
+        ``polish(z, basis=None) -> JointProblem``: a reduced model of ``problem`` on its own
+        mesh, exact at ``z`` (a finite-element snapshot there; :meth:`JointProblem.on_pencil`)
+        and keeping the vectors ``basis``. Each of the ``keep`` rough optima is then polished
+        on it and, where it can still win, settled in rounds checked by the finite-element
+        model (:mod:`.polish`); the best settled one is reported, its chi-square, evidence
+        and derivatives those of the finite-element model at its answer.
     tol : float
         ``ftol`` and ``xtol`` of the fits on ``problem`` after a rough stage.
     distinct : bool
         Refine the ``keep`` best *distinct* rough optima (whitened distance above
         ``DISTINCT``), not the ``keep`` best ones (many starts reach the same optimum).
+    rounds : int
+        Rounds at most of each settling with ``polish`` (fewer: a provisional fit, its
+        ``check.settled`` False unless it settled anyway; :func:`settle` it later).
 
     Returns
     -------
@@ -333,15 +350,73 @@ def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None, keep
             return _summarise(rough_problem, rough[0], refined=False)
         starts = [r.x for r in (_distinct(rough) if distinct else rough)[:keep]]
         if polish is not None:
-            # a reduced model only chooses where to start: the optimum reported is the
-            # finite-element one's (see .polish)
-            finished, others = polish_and_finish(problem, polish, starts, max_nfev, tol)
-            return replace(_summarise(problem, finished[0]), alternatives=tuple(others))
+            return settle(problem, polish, starts, rounds)
     results = _local_fits(problem, starts, max_nfev, workers,
                           tol if rough is not None else 1e-8)  # fmt: skip
     others = tuple((problem.unpack(r.x)[0], 2.0 * r.cost) for r in results[1:])
     best = results[0] if rough is None else finish(problem, results[0], max_nfev)
     return replace(_summarise(problem, best), alternatives=others)
+
+
+def rough_fit(rough, starts, max_nfev, keep, more=None):
+    """Every start fitted on a rough (reduced) model: the best, with its distinct optima.
+
+    Parameters
+    ----------
+    rough : JointProblem
+        On a reduced model (:meth:`JointProblem.on_pencil`).
+    starts : sequence of array_like, each shape (6 + k,)
+    max_nfev : int
+        Evaluation cap of each local fit.
+    keep : int
+        Distinct optima kept (whitened distance above ``DISTINCT``), best first.
+    more : callable, optional
+        ``more(optima) -> starts``: further starts made from the distinct optima of the
+        first ones (best first), fitted in turn.
+
+    Returns
+    -------
+    JointFit
+        On ``rough``, ``refined`` False, its ``rough_optima`` the ``keep`` best distinct ones.
+    """
+    results = _local_fits(rough, starts, max_nfev, tol=ROUGH_TOL)
+    if more is not None:
+        extra = more([r.x for r in _distinct(results)])
+        if extra:
+            results += _local_fits(rough, extra, max_nfev, tol=ROUGH_TOL)
+            results.sort(key=lambda r: r.cost)
+    optima = tuple(r.x for r in _distinct(results)[:keep])
+    return replace(_summarise(rough, results[0], refined=False), rough_optima=optima)
+
+
+def settle(problem, polish, starts, rounds=MAX_ROUNDS):
+    """The best of the optima ``starts`` settled on reduced models of the working mesh.
+
+    Each is settled in rounds of reduced models exact where they reach, each checked by
+    the finite-element model (:func:`.polish.polish_and_finish`); the reported fit's
+    chi-square, evidence and derivatives are the finite-element model's at its answer.
+
+    Parameters
+    ----------
+    problem : JointProblem
+        On the working mesh.
+    polish : callable
+        ``polish(z, earlier=()) -> JointProblem`` (see :func:`fit`).
+    starts : sequence of numpy.ndarray, each shape (6 + k,)
+        Whitened starting points (rough optima, or an earlier provisional answer).
+    rounds : int
+        Rounds at most per optimum.
+
+    Returns
+    -------
+    JointFit
+        With its ``check`` and the other optima as ``alternatives``.
+    """
+    settled, others = polish_and_finish(problem, polish, starts, rounds)
+    best = settled[0]
+    fitted = _summarise(best.problem, best.result, modal=best.snapshot)
+    solves = problem.n_solves + sum(s.check.full_solves for s in settled)
+    return replace(fitted, alternatives=tuple(others), check=best.check, n_solves=solves)
 
 
 def _log_mass_inside(z, sd, lo, hi):
@@ -355,8 +430,12 @@ def _log_mass_inside(z, sd, lo, hi):
     return float(np.sum(np.log(np.maximum(inside, 1e-300))))
 
 
-def _summarise(problem, res, refined=True):
-    """The :class:`JointFit` of the best least-squares result."""
+def _summarise(problem, res, refined=True, modal=None):
+    """The :class:`JointFit` of the best least-squares result.
+
+    ``modal``: the forward solution to report instead of ``problem``'s (the finite-element
+    one at the answer of a fit on a pencil, whose own vectors are Ritz coefficients).
+    """
     z = res.x
     out = problem.evaluate(z)
     b, theta = problem.unpack(z)
@@ -377,7 +456,8 @@ def _summarise(problem, res, refined=True):
             "the fit left the physical region",
             refined=refined,
         )
-    lam, Jg, modal = out
+    lam, Jg, own = out
+    modal = own if modal is None else modal
     Jd = Jg / problem.sigma[:, None]
     H = Jd.T @ Jd + np.eye(z.size)
     H_inv = np.linalg.inv(H)

@@ -6,7 +6,7 @@ import numpy as np
 
 from .base import Parameter, Physics, mirror_positions
 from .locate import effect_map
-from .pencil import project
+from .pencil import RegionProjection, project
 from .scan import Scan, misfit
 
 __all__ = [
@@ -95,32 +95,42 @@ class LocalStiffnessLoss(Physics):
         new = model.stiffness_terms + (multiplier - 1.0)[:, None] * np.array(region)
         return model.modified(stiffness_terms=new)
 
-    def ritz(self, model, b, basis):
+    def ritz(self, model, b, basis, near=None):
         """``V^T K_j V + (d_j - 1) sum_e frac_e V_e^T K_j^e V_e`` over the cut elements.
 
         Every element of the plate has the same matrices ``K_j^e``; only the elements the
-        rectangle touches are projected at each evaluation.
+        rectangle touches are projected at each evaluation, and a difference in a place or a
+        side only the elements along the edges that moved
+        (:class:`~.pencil.RegionProjection`).
         """
         terms, constant, mass = project(model, basis)
-        element_terms = model.element_stiffness_terms()
-        dofs = model.mesh.element_dofs
         lost = np.flatnonzero(_KEPT == 0.0)
+        region = RegionProjection(model, basis, model.element_stiffness_terms()[lost])
+        zero = np.zeros_like(constant)
+
+        def fractions(theta):
+            x, y, dx, dy, _ = theta
+            return area_fractions(model.mesh, 1e-3 * np.array([x, y]),
+                                  1e-3 * np.abs(np.array([dx, dy])))  # fmt: skip
 
         def matrices(theta):
-            x, y, dx, dy, factor = theta
-            frac = area_fractions(model.mesh, 1e-3 * np.array([x, y]),
-                                  1e-3 * np.abs(np.array([dx, dy])))  # fmt: skip
-            inside = np.flatnonzero(frac > 0)
-            if inside.size == 0:
-                return terms, constant, mass
-            A = basis[dofs[inside]]  # (n_in, 32, r)
-            weighted = frac[inside, None, None] * A
             out = terms.copy()
-            for j in lost:
-                region = np.tensordot(weighted, element_terms[j] @ A, axes=([0, 1], [0, 1]))
-                out[j] += (factor - 1.0) * region
+            out[lost] += (theta[4] - 1.0) * region(fractions(theta))
             return out, constant, mass
 
+        def difference(theta, i, h):
+            out = np.zeros_like(terms)
+            if i == 4:  # linear in the factor
+                out[lost] = region(fractions(theta))
+            else:
+                up, down = np.array(theta, dtype=float), np.array(theta, dtype=float)
+                up[i] += h
+                down[i] -= h
+                edge = (fractions(up) - fractions(down)) / (2 * h)
+                out[lost] = (theta[4] - 1.0) * region(edge)
+            return out, zero, zero
+
+        matrices.difference = difference
         return matrices
 
     def mirror_images(self, model, theta):

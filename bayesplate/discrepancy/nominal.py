@@ -21,14 +21,21 @@ from .fit import JointProblem, fit
 from .local import local_fits
 from .pencil import candidate_pencil
 
-__all__ = ["N_STARTS", "check_fast", "fit_nominal", "nominal_reduced", "nominal_stage"]
+__all__ = [
+    "N_STARTS",
+    "check_fast",
+    "fit_nominal",
+    "nominal_polisher",
+    "nominal_reduced",
+    "nominal_stage",
+]
 
 log = logging.getLogger(__name__)
 
 #: Random starts of the global stage besides the prior mean.
 N_STARTS = 32
-#: Elastic modes of a polishing basis beyond the highest paired one.
-POLISH_EXTRA_MODES = 20
+#: Elastic modes of a polishing snapshot beyond the highest paired one.
+POLISH_EXTRA_MODES = 4
 
 
 def fit_nominal(problem, rough, rng, n_starts=N_STARTS, workers=1, keep=3):
@@ -70,14 +77,24 @@ def fit_nominal(problem, rough, rng, n_starts=N_STARTS, workers=1, keep=3):
     # seldom reach: on the measured Frederiksen plate the best one is two deviations off)
     first = local_fits(rough, starts, 200, workers)
     starts = [r.x for r in first] + [first[0].x + rng.standard_normal(6) for _ in range(n_starts)]
+    return fit(problem, starts, rough=rough, keep=keep, workers=workers, distinct=True,
+               polish=nominal_polisher(problem), rough_nfev=200, tol=1e-8)  # fmt: skip
+
+
+def nominal_polisher(problem):
+    """``polish(z, earlier=())``: the nominal plate's pencil on the working mesh, exact at z.
+
+    Its basis holds the working mesh's modes at ``z`` (:data:`POLISH_EXTRA_MODES` beyond the
+    highest paired one) and the ``earlier`` snapshots (at the points before: :mod:`.polish`).
+    """
     n = int(problem.modes.max()) + 1 + POLISH_EXTRA_MODES
 
-    def polish(z):  # the working mesh's modes at and around the rough optimum
+    def polish(z, earlier=()):
         b = problem.unpack(z)[0]
-        return problem.on_pencil(candidate_pencil(problem.model, None, b, [], n))
+        return problem.on_pencil(candidate_pencil(problem.model, None, b, [], n,
+                                                  earlier=earlier))  # fmt: skip
 
-    return fit(problem, starts, rough=rough, keep=keep, workers=workers, distinct=True,
-               polish=polish, rough_nfev=200, tol=1e-8)  # fmt: skip
+    return polish
 
 
 def nominal_reduced(coarse, mu_b, V_b, n_modes, rng, n_snapshots=8):

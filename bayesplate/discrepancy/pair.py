@@ -90,7 +90,7 @@ class Pair(Physics):
             extra = ea + eb - e0
         return model.modified(stiffness_terms=terms, mass_data=mass, extra_stiffness_data=extra)
 
-    def ritz(self, model, b, basis):
+    def ritz(self, model, b, basis, near=None):
         """The components' reduced matrices summed, less the nominal ones.
 
         None when either component has no Ritz form (the pair runs on the finite-element
@@ -98,8 +98,9 @@ class Pair(Physics):
         """
         if not (_has_ritz(self.first) and _has_ritz(self.second)):
             return None
-        ma = self.first.ritz(model, b, basis)
-        mb = self.second.ritz(model, b, basis)
+        na, nb = (None, None) if near is None else self.split(model, b, near)
+        ma = self.first.ritz(model, b, basis, na)
+        mb = self.second.ritz(model, b, basis, nb)
         if ma is None or mb is None:
             return None
         nominal = project(model, basis)

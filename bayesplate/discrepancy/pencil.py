@@ -24,10 +24,24 @@ import scipy.linalg
 
 from ..model import ModalResult
 
-__all__ = ["CandidatePencil", "candidate_pencil", "interpolated_ritz", "project", "ritz_basis"]
+__all__ = [
+    "CandidatePencil",
+    "RegionProjection",
+    "candidate_pencil",
+    "interpolated_ritz",
+    "local_ritz",
+    "project",
+    "ritz_basis",
+]
 
-#: Directions whose nominal-mass norm falls below this fraction of the largest are dropped.
-BASIS_TOL = 1e-8
+#: Directions whose squared nominal-mass norm falls below this fraction of the largest are
+#: dropped. Small: a modified plate's modes differ from the nominal ones by local,
+#: high-frequency directions whose mass norm is tiny but whose stiffness is not; at 1e-8 a
+#: pencil built at a point was off there by up to 4e-5 in eigenvalue (a local loss) and 5e-3
+#: in its sensitivities, at 1e-12 by under 1e-10 and 1e-5 (50 x 50 Frederiksen plate; the
+#: eigenvalues and sensitivities of its own snapshot, the exactness its rounds rely on:
+#: :mod:`.polish`).
+BASIS_TOL = 1e-12
 #: Share of a mode's mass on the rigid-body motions above which it counts as rigid.
 RIGID_SHARE = 0.5
 
@@ -77,11 +91,50 @@ def ritz_basis(model, blocks):
     R = R @ np.linalg.inv(np.linalg.cholesky(R.T @ (M @ R))).T
     X = np.hstack(blocks)
     X = X - R @ (R.T @ (M @ X))
+    Q = _orthonormal(X, M, BASIS_TOL)
+    # again: directions kept near the tolerance come out of one pass orthonormal only to
+    # about eps / BASIS_TOL; a second pass on the (well-conditioned) result restores it
+    Q = _orthonormal(Q - R @ (R.T @ (M @ Q)), M, 1e-14)
+    return np.hstack([R, Q])
+
+
+def _orthonormal(X, M, tol):
+    """An ``M``-orthonormal basis of the span of ``X``, directions below ``tol`` dropped."""
     G = X.T @ (M @ X)
     w, U = np.linalg.eigh(0.5 * (G + G.T))
-    keep = w > BASIS_TOL * w.max()
-    Q = X @ (U[:, keep] / np.sqrt(w[keep]))
-    return np.hstack([R, Q])
+    keep = w > tol * w.max()
+    return X @ (U[:, keep] / np.sqrt(w[keep]))
+
+
+def local_ritz(plate_at, V, near, step):
+    """A family's reduced matrices as a quadratic in one parameter around ``near``.
+
+    Exact at ``near`` (a node), its first derivative there to ``O(step^2)``: the form of a
+    round of :mod:`.polish`, whose pencil need only be exact at its snapshot (three plates
+    assembled and projected instead of a whole range's nodes).
+
+    Parameters
+    ----------
+    plate_at : callable
+        ``plate_at(theta) -> PlateModel``, ``theta`` shape (1,).
+    V : numpy.ndarray, shape (n_dofs, r)
+    near : array_like, shape (1,)
+    step : float
+        Distance of the two other nodes.
+
+    Returns
+    -------
+    callable
+        As :func:`interpolated_ritz`'s.
+    """
+    t0 = float(np.atleast_1d(near)[0])
+    nodes = np.array([[t0 - step], [t0], [t0 + step]])
+
+    def features(theta):
+        d = (np.atleast_1d(theta)[0] - t0) / step
+        return np.array([1.0, d, d * d])
+
+    return interpolated_ritz(plate_at, V, nodes, features)
 
 
 def interpolated_ritz(plate_at, V, nodes, features):
@@ -118,6 +171,44 @@ def interpolated_ritz(plate_at, V, nodes, features):
     return matrices
 
 
+class RegionProjection:
+    """``sum_e w_e V_e^T A_t V_e``: element matrices shared by every element, weighted, projected.
+
+    ``V_e`` (32, r) are the rows of the basis at element ``e``'s unknowns and ``A_t`` the
+    element matrices (a damaged patch's lost stiffness terms, a hole's stiffness and mass).
+    Each element's ``V_e^T A_t V_e`` is computed the first time a weighting reaches it and
+    kept, so that a weighting costs a weighted sum over its elements, and a difference of two
+    weightings (the edge of a region that moved) over its few edge elements.
+
+    Parameters
+    ----------
+    model : PlateModel
+    basis : numpy.ndarray, shape (n_dofs, r)
+    element_matrices : numpy.ndarray, shape (T, 32, 32)
+    """
+
+    def __init__(self, model, basis, element_matrices):
+        self.dofs = model.mesh.element_dofs
+        self.basis = basis
+        self.element_matrices = np.asarray(element_matrices, dtype=float)
+        shape = (len(self.dofs), len(self.element_matrices), basis.shape[1], basis.shape[1])
+        self._projected = np.empty(shape)  # filled element by element (pages on first touch)
+        self._done = np.zeros(len(self.dofs), dtype=bool)
+
+    def __call__(self, weights):
+        """The weighted sum, shape (T, r, r); ``weights`` shape (n_elements,)."""
+        weights = np.asarray(weights, dtype=float)
+        inside = np.flatnonzero(weights)
+        new = inside[~self._done[inside]]
+        if new.size:
+            A = self.basis[self.dofs[new]]  # (n, 32, r)
+            At = A.transpose(0, 2, 1)
+            for t, E in enumerate(self.element_matrices):
+                self._projected[new, t] = At @ (E @ A)
+            self._done[new] = True
+        return np.tensordot(weights[inside], self._projected[inside], axes=(0, 0))
+
+
 class CandidatePencil:
     """A candidate's modified plate in a Ritz basis: the forward model of its joint fit.
 
@@ -129,12 +220,17 @@ class CandidatePencil:
         ``theta -> (terms (6, r, r), constant (r, r), mass (r, r))``.
     steps : numpy.ndarray, shape (k,)
         Difference steps of the parameters (their units).
+    snapshot : ModalResult, optional
+        The finite-element solution at the point the pencil was last built at (its
+        eigenvalues are the full model's there: the check of an answer the pencil gave).
     """
 
-    def __init__(self, basis, matrices, steps):
+    def __init__(self, basis, matrices, steps, snapshot=None):
         self.basis = basis
         self.matrices = matrices
         self.steps = np.asarray(steps, dtype=float)
+        self.snapshot = snapshot
+        self.snapshots = []  # mode shapes of the finite-element solves in the basis
 
     def solve(self, b, theta, n_modes):
         """Lowest elastic modes and their derivatives.
@@ -160,32 +256,45 @@ class CandidatePencil:
         rigid = (rigid_share > RIGID_SHARE) | (np.abs(values) <= 1e-8 * np.abs(values).max())
         elastic = np.flatnonzero(~rigid)[:n_modes]
         lam, X = values[elastic], X[:, elastic]
-        sens = np.einsum("ri,jrs,si->ij", X, terms, X)
+        sens = np.sum(X * (terms @ X), axis=1).T  # x_i^T K_j x_i, shape (n, 6)
         d_theta = np.zeros((lam.size, self.steps.size))
         for i, h in enumerate(self.steps):
-            up, down = np.array(theta, dtype=float), np.array(theta, dtype=float)
-            up[i] += h
-            down[i] -= h
-            t_up, c_up, m_up = self.matrices(up)
-            t_dn, c_dn, m_dn = self.matrices(down)
-            dK = (np.tensordot(b, t_up - t_dn, axes=(0, 0)) + c_up - c_dn) / (2 * h)
-            dM = (m_up - m_dn) / (2 * h)
-            d_theta[:, i] = np.einsum("ri,rs,si->i", X, dK, X) - lam * np.einsum(
-                "ri,rs,si->i", X, dM, X
-            )
+            d_terms, d_constant, dM = self.difference(theta, i, h)
+            dK = np.tensordot(b, d_terms, axes=(0, 0)) + d_constant
+            d_theta[:, i] = np.sum(X * (dK @ X), axis=0) - lam * np.sum(X * (dM @ X), axis=0)
         modal = ModalResult(np.asarray(b, dtype=float), lam, X, sens, values[rigid])
         return modal, d_theta
+
+    def difference(self, theta, i, h):
+        """Central difference of the matrices in parameter ``i`` with step ``h``.
+
+        ``(A(theta + h e_i) - A(theta - h e_i)) / 2 h`` for the terms, the constant and the
+        mass; by the candidate's own ``matrices.difference`` when its Ritz form has one (a
+        cheaper path to the same difference: a region's edge elements only), else by two
+        calls of ``matrices``.
+        """
+        own = getattr(self.matrices, "difference", None)
+        if own is not None:
+            return own(theta, i, h)
+        up, down = np.array(theta, dtype=float), np.array(theta, dtype=float)
+        up[i] += h
+        down[i] -= h
+        t_up, c_up, m_up = self.matrices(up)
+        t_dn, c_dn, m_dn = self.matrices(down)
+        return (t_up - t_dn) / (2 * h), (c_up - c_dn) / (2 * h), (m_up - m_dn) / (2 * h)
 
     def eigenvalues(self, b, theta, n_modes):
         """Lowest elastic eigenvalues, rad^2/s^2, shape (n_modes,)."""
         return self.solve(b, theta, n_modes)[0].eigenvalues
 
 
-def candidate_pencil(model, physics, b, thetas, n_modes, nominal_modes=None):
+def candidate_pencil(model, physics, b, thetas, n_modes, nominal_modes=None, earlier=(),
+                     local=False):  # fmt: skip
     """A candidate's :class:`CandidatePencil` on ``model``, or None if it has no Ritz form.
 
     The basis holds the rigid-body motions, the nominal plate's lowest ``n_modes`` modes at
-    ``b`` and the modified plate's at each of ``thetas`` (also at ``b``).
+    ``b``, the modified plate's at each of ``thetas`` (also at ``b``) and the ``earlier``
+    snapshots.
 
     Parameters
     ----------
@@ -201,28 +310,48 @@ def candidate_pencil(model, physics, b, thetas, n_modes, nominal_modes=None):
         Elastic modes of each snapshot.
     nominal_modes : numpy.ndarray, shape (n_dofs, n), optional
         The nominal plate's modes at ``b`` if already solved.
+    earlier : sequence of numpy.ndarray, each shape (n_dofs, n_i)
+        Mode shapes of earlier snapshots to keep (an earlier pencil's
+        :attr:`~CandidatePencil.snapshots`: they stay exact).
+    local : bool
+        The pencil need only be exact at the last of ``thetas`` and accurate around it (a
+        round of :mod:`.polish`): the candidate may build a cheaper local form there
+        (:meth:`~.base.Physics.ritz`'s ``near``).
 
     Returns
     -------
     CandidatePencil or None
+        Its :attr:`~CandidatePencil.snapshot` is the finite-element solution of its last
+        snapshot (the last of ``thetas``; the nominal plate at ``b`` when ``thetas`` is empty
+        and ``nominal_modes`` is not given), or None; its ``snapshots`` the mode shapes of
+        ``earlier`` and of its own snapshots.
     """
     if physics is not None and not _has_ritz(physics):
         return None
-    if nominal_modes is None:
-        nominal_modes = model.solve(b, n_modes).vectors
-    blocks = [nominal_modes]
+    if physics is None:  # the nominal plate's own solve at b is its snapshot
+        solves = [] if nominal_modes is not None else [model.solve(b, n_modes)]
+        blocks = [] if nominal_modes is None else [nominal_modes]
+    else:
+        if nominal_modes is None:
+            nominal_modes = model.solve(b, n_modes).vectors
+        solves = [physics.apply(model, np.asarray(t, dtype=float)).solve(b, n_modes)
+                  for t in thetas]  # fmt: skip
+        blocks = [nominal_modes]
+    snapshots = [*earlier, *(s.vectors for s in solves)]
+    V = ritz_basis(model, blocks + snapshots)
+    last = solves[-1] if solves else None
     if physics is None:  # the nominal plate itself
-        V = ritz_basis(model, blocks)
         projected = project(model, V)
-        return CandidatePencil(V, lambda theta: projected, [])
-    blocks += [physics.apply(model, np.asarray(t, dtype=float)).solve(b, n_modes).vectors
-               for t in thetas]  # fmt: skip
-    V = ritz_basis(model, blocks)
-    matrices = physics.ritz(model, b, V)
-    if matrices is None:
-        return None
-    steps = 1e-4 * np.array([p.sd for p in physics.parameters(model, b)])
-    return CandidatePencil(V, matrices, steps)
+        pencil = CandidatePencil(V, lambda theta: projected, [], last)
+    else:
+        near = np.asarray(thetas[-1], dtype=float) if local and len(thetas) else None
+        matrices = physics.ritz(model, b, V, near)
+        if matrices is None:
+            return None
+        steps = 1e-4 * np.array([p.sd for p in physics.parameters(model, b)])
+        pencil = CandidatePencil(V, matrices, steps, last)
+    pencil.snapshots = snapshots
+    return pencil
 
 
 def _has_ritz(physics):

@@ -58,18 +58,14 @@ class PointMass(Physics):
         added = model.assembler.element_data(element, 1e-3 * mass_g * np.outer(n_w, n_w)[None])
         return model.modified(mass_data=model.mass_data + added)
 
-    def ritz(self, model, b, basis):
-        """Rank one: ``V^T M V + m u u^T`` with ``u`` the basis' ``w`` at ``(x, y)``."""
+    def ritz(self, model, b, basis, near=None):
+        """Rank one: ``V^T M V + m u u^T`` with ``u`` the basis' ``w`` at ``(x, y)``.
+
+        Its differences are exact: ``u u^T`` in the mass, ``m (u' u^T + u u'^T)`` in a
+        coordinate with ``u'`` the basis' slope of ``w`` there.
+        """
         terms, constant, mass = project(model, basis)
-        a_mm, b_mm = 1e3 * model.mesh.a, 1e3 * model.mesh.b
-
-        def matrices(theta):
-            mass_g, x_mm, y_mm = theta
-            point = 1e-3 * np.array([[np.clip(x_mm, 0.0, a_mm), np.clip(y_mm, 0.0, b_mm)]])
-            u = np.asarray(model.interpolation(point) @ basis)  # (1, r)
-            return terms, constant, mass + 1e-3 * mass_g * (u.T @ u)
-
-        return matrices
+        return _rank_one(model, basis, terms, constant, mass, "mass")
 
     def mirror_images(self, model, theta):
         """The same mass at the mirror positions of ``(x, y)``."""
@@ -146,3 +142,53 @@ def point_mass_scan(model, basis, Y, sigma, modes, projector, masses_g, stride=2
         chi2.append(misfit(np.linalg.eigvalsh(A), basis, Y, sigma, modes, projector))
         thetas.append(np.column_stack([np.full(nodes.size, mass_g), xy]))
     return Scan(np.vstack(thetas), np.concatenate(chi2), (1, 2))
+
+
+def _rank_one(model, basis, terms, constant, mass, where):
+    """The Ritz form of ``c u u^T`` added at ``(x, y)`` to the mass or to the stiffness.
+
+    ``theta = (size, x_mm, y_mm)``; ``c`` is ``1e-3 size`` (a mass in g) for ``where =
+    "mass"`` and ``10**size`` (a spring's log10 k in N/m) for ``"stiffness"``. The
+    position is held on the plate. The matrices' differences are the exact derivatives
+    (``u`` and its slopes from the element's Hermite functions), so a difference costs one
+    evaluation of ``w`` and its slopes at the point.
+    """
+    a_mm, b_mm = 1e3 * model.mesh.a, 1e3 * model.mesh.b
+    zero_terms, zero = np.zeros_like(terms), np.zeros_like(mass)
+
+    def point(theta):
+        return 1e-3 * np.array([[np.clip(theta[1], 0.0, a_mm), np.clip(theta[2], 0.0, b_mm)]])
+
+    def scale(size):
+        return 1e-3 * size if where == "mass" else 10.0**size
+
+    def added(rank_one):
+        if where == "mass":
+            return terms, constant, mass + rank_one
+        return terms, constant + rank_one, mass
+
+    last = {}
+
+    def values(theta):  # w and its slopes (per mm) at the point, each (1, r); the last kept
+        p = point(theta)
+        if last.get("point") is None or not np.array_equal(last["point"], p):
+            w, wx, wy = model.point_values(p, basis, ("w", "w_x", "w_y"))
+            last.update(point=p, values=(w, 1e-3 * wx, 1e-3 * wy))
+        return last["values"]
+
+    def matrices(theta):
+        u = values(theta)[0]
+        return added(scale(theta[0]) * (u.T @ u))
+
+    def difference(theta, i, h):
+        u = values(theta)[0]
+        if i == 0:
+            slope = 1e-3 if where == "mass" else np.log(10.0) * scale(theta[0])
+            d = slope * (u.T @ u)
+        else:
+            du = values(theta)[i]
+            d = scale(theta[0]) * (du.T @ u + u.T @ du)
+        return (zero_terms, zero, d) if where == "mass" else (zero_terms, d, zero)
+
+    matrices.difference = difference
+    return matrices

@@ -7,6 +7,7 @@ import numpy as np
 from .base import Parameter, Physics, mirror_positions
 from .locate import effect_map
 from .pencil import RIGID_SHARE, project
+from .point_mass import _rank_one
 from .scan import Scan
 
 __all__ = ["PointSupport", "point_support_map", "point_support_scan", "reference_stiffness"]
@@ -87,18 +88,13 @@ class PointSupport(Physics):
             extra = extra + model.extra_stiffness_data
         return model.modified(extra_stiffness_data=extra)
 
-    def ritz(self, model, b, basis):
-        """Rank one: ``V^T K_0 V + k u u^T`` with ``u`` the basis' ``w`` at ``(x, y)``."""
+    def ritz(self, model, b, basis, near=None):
+        """Rank one: ``V^T K_0 V + k u u^T`` with ``u`` the basis' ``w`` at ``(x, y)``.
+
+        With exact differences (:func:`.point_mass._rank_one`).
+        """
         terms, constant, mass = project(model, basis)
-        a_mm, b_mm = 1e3 * model.mesh.a, 1e3 * model.mesh.b
-
-        def matrices(theta):
-            log_k, x_mm, y_mm = theta
-            point = 1e-3 * np.array([[np.clip(x_mm, 0.0, a_mm), np.clip(y_mm, 0.0, b_mm)]])
-            u = np.asarray(model.interpolation(point) @ basis)  # (1, r)
-            return terms, constant + 10.0**log_k * (u.T @ u), mass
-
-        return matrices
+        return _rank_one(model, basis, terms, constant, mass, "stiffness")
 
     def mirror_images(self, model, theta):
         """The same spring at the mirror positions of ``(x, y)``."""

@@ -1,24 +1,54 @@
-"""Rough optima polished on a reduced model of the working mesh, finished on the mesh itself.
+"""Rough optima settled on reduced models of the working mesh, each answer checked by the full one.
 
-Each rough optimum ``z`` (found on a cheap model) is polished on ``polish(z)``, a reduced
-model of the working mesh made of its modes at ``z`` (exact there), then finished on the
-working mesh by least squares and :func:`.finish.finish`, best polished first; the best
-finished one is reported. A polished optimum whose objective (``chi2 + chi2_prior``)
-exceeds the best finished one by more than :data:`FINISH_MARGIN` plus the largest polish
-error seen so far (``|polished - finished|`` of those finished) cannot win and is not
-finished: it is kept as an alternative at its polished objective.
+A rough optimum ``z`` (found on a cheap model) is settled in rounds. Each round builds the
+fit's reduced model of the working mesh with a snapshot at the current point (``polish(z,
+basis)``: the finite-element plate solved there, its modes added to the basis of the rounds
+before, :func:`.pencil.candidate_pencil`). Such a pencil is exact at its snapshot: its
+eigenvalues are the finite-element ones and so are their first derivatives (Rayleigh
+quotients of vectors in the basis; :data:`.pencil.BASIS_TOL`). At the new point the round
+therefore knows the full model's residuals ``r`` and Jacobian ``J`` (of the whitened
+residuals, prior terms included), and with them the Newton decrement
+
+    delta = r^T J (J^T J)^-1 J^T r,
+
+the decrease of ``chi2 + chi2_prior`` that a Gauss-Newton step on the full model would still
+give. Where ``delta <= DECREMENT_TOL`` the point is the full model's optimum to that precision
+and is the answer; otherwise the pencil (snapshots at every point so far, so that its second
+derivatives improve as the points close in) is fitted tightly from there and the next round
+starts at its optimum. Each round costs one finite-element solve and one projection, where a
+least-squares fit on the finite-element model costs one solve (and, for a candidate, two
+assembled plates per parameter) per evaluation, tens of them.
+
+The answer is reported with its check (:class:`FitCheck`): the objective the reduced model
+gave there, the finite-element objective, their largest eigenvalue difference and the
+decrement. An answer whose decrement is still above the tolerance after
+:data:`MAX_ROUNDS` is logged as an error and flagged (``FitCheck.settled`` False), not
+passed off.
+
+Only optima that can still win are settled: the first round of every rough optimum is its
+*polish* (one build at it and one fit of that pencil, whose optimum's objective is its
+promise); of the polished optima, most promising first, one whose promise exceeds the best
+settled objective by more than :data:`FINISH_MARGIN` plus the largest promise error seen so
+far (``|promise - settled|``) is kept as an alternative and not settled.
+
+Mirror images: a located effect whose images fit equally (the plate's symmetry, exact on its
+symmetric mesh: :meth:`~.base.Physics.mirror_images`) is settled at one canonical image, the
+one with the smallest parameters (in order: a mass's ``x`` then ``y``), so that the answer
+does not depend on which image a path reached.
 """
 
 from __future__ import annotations
 
 import logging
+from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.optimize import OptimizeResult, least_squares
 
-from .finish import finish
-from .local import local_fits, problem_name
+from .local import problem_name
 
-__all__ = ["FINISH_MARGIN", "polish_and_finish"]
+__all__ = ["DECREMENT_TOL", "FINISH_MARGIN", "FitCheck", "MAX_ROUNDS", "STEP_TOL", "Settled",
+           "canonical", "polish_and_finish"]  # fmt: skip
 
 log = logging.getLogger("bayesplate.discrepancy.fit")  # the fits' records, as before
 
@@ -26,60 +56,160 @@ log = logging.getLogger("bayesplate.discrepancy.fit")  # the fits' records, as b
 #: within 0.002 of the finished objective and the second basin 2.55 above the best; a
 #: cutout's polish was off by up to 2.7 (plate 1), which the error term covers.
 FINISH_MARGIN = 2.0
+#: Newton decrement (``chi2 + chi2_prior``) under which a point is the full model's optimum.
+#: Tight: a whitened step of at most its square root (1e-4) is left, so that the answer does
+#: not depend on the path's round-off; the evidence is then exact to 1e-8 nats.
+DECREMENT_TOL = 1e-8
+#: Rounds at most, the polish's included.
+MAX_ROUNDS = 8
+#: Whitened step under which the optimum of the pencil exact at a point is that point.
+STEP_TOL = 1e-4
+#: Snapshots a pencil keeps (the newest): enough for its second derivatives to improve as
+#: the points close in, few enough that a build stays cheap.
+SNAPSHOTS = 3
+#: Trust region of the first round (whitened, largest component: one prior deviation).
+RADIUS = 1.0
+#: Share of the predicted decrease a proposal must achieve on the full model to be taken.
+ACCEPT = 0.1
+#: ``ftol``, ``xtol`` and ``gtol`` of the fits on a pencil (cheap: converged tightly).
+PENCIL_TOL = 1e-12
+#: Evaluation cap of a fit on a pencil.
+PENCIL_NFEV = 200
+#: Whitened distance to a bound under which an unknown is at it.
+AT_BOUND = 1e-6
 
 
-def polish_and_finish(problem, polish, starts, max_nfev, tol):
-    """The rough optima ``starts`` polished and, where they can still win, finished.
+@dataclass(frozen=True)
+class FitCheck:
+    """The full (finite-element) model at the answer a reduced model gave.
+
+    Attributes
+    ----------
+    fast_objective, full_objective : float
+        ``chi2 + chi2_prior`` there by the reduced model that gave the answer and by the
+        finite-element model.
+    max_rel_error : float
+        Largest ``|lambda_fast / lambda_full - 1|`` of the paired eigenvalues there.
+    decrement : float
+        Newton decrement of the finite-element objective there (what a further step would
+        gain, in ``chi2 + chi2_prior``).
+    rounds : int
+        Rounds (finite-element checks), the polish's included.
+    full_solves : int
+        Finite-element solves of the polish and the rounds.
+    settled : bool
+        Whether the answer is the full model's optimum: its decrement under
+        :data:`DECREMENT_TOL`, or the pencil exact there has its optimum there.
+    """
+
+    fast_objective: float
+    full_objective: float
+    max_rel_error: float
+    decrement: float
+    rounds: int
+    full_solves: int
+    settled: bool
+
+
+@dataclass(frozen=True)
+class Settled:
+    """One optimum settled on reduced models: its result, the pencil exact there, its check.
+
+    Attributes
+    ----------
+    result : scipy.optimize.OptimizeResult
+        ``x`` (whitened unknowns, shape (6 + k,)) and ``cost`` (half the finite-element
+        objective).
+    problem : JointProblem
+        On the pencil built at ``result.x`` (exact there).
+    check : FitCheck
+    """
+
+    result: OptimizeResult
+    problem: object
+    check: FitCheck
+
+    @property
+    def snapshot(self):
+        """The finite-element solution at the answer (a ``ModalResult``)."""
+        return self.problem.pencil.snapshot
+
+
+def polish_and_finish(problem, polish, starts, rounds=None):
+    """The rough optima ``starts`` polished and, where they can still win, settled.
 
     Parameters
     ----------
     problem : JointProblem
-        On the working mesh.
+        On the working mesh (its unknowns, bounds and physics).
     polish : callable
-        ``polish(z) -> JointProblem``: a reduced model of ``problem`` accurate near ``z``.
+        ``polish(z, earlier=()) -> JointProblem``: ``problem`` on a pencil of the working
+        mesh with a finite-element snapshot at ``z`` and the ``earlier`` snapshots kept.
     starts : sequence of numpy.ndarray, each shape (6 + k,)
         Rough optima (whitened unknowns).
-    max_nfev : int
-        Evaluation cap of each fit on ``problem``.
-    tol : float
-        ``ftol`` and ``xtol`` of the fits on ``problem``.
+    rounds : int, optional
+        Rounds at most per optimum (default :data:`MAX_ROUNDS`). Fewer give provisional
+        answers: their ``check.settled`` is False unless they settled within them.
 
     Returns
     -------
-    finished : list of scipy.optimize.OptimizeResult
-        On ``problem``, lowest cost first (at least one).
+    settled : list of Settled
+        Best (lowest finite-element objective) first; at least one.
     others : list of (numpy.ndarray, float)
-        The constants ``b`` (Pa) and objective of every other optimum, finished or polished,
-        lowest first.
+        The constants ``b`` (Pa) and objective of every other optimum, settled or only
+        polished (its finite-element objective where it was left), lowest first.
     """
-    polished = [_polished(problem, polish, z) for z in starts]
-    if all(r is None for r in polished):  # no solvable plate: the best one's error
-        _polished(problem, polish, starts[0], strict=True)
-    polished = sorted((r for r in polished if r is not None), key=lambda r: r.cost)
-    finished, far, error = [], [], 0.0
-    for r in polished:
-        if finished and 2.0 * (r.cost - finished[0].cost) > FINISH_MARGIN + error:
-            far.append(r)
+    first = [_first(problem, polish, z) for z in starts]
+    if all(p is None for p in first):  # no solvable plate: the best one's error
+        _first(problem, polish, starts[0], strict=True)
+    # most promising first: the objective at the optimum of the pencil built at each
+    first = sorted((p for p in first if p is not None), key=lambda p: p.promise)
+    settled, far, error = [], [], 0.0
+    for state in first:
+        if settled and state.promise > settled[0].check.full_objective + FINISH_MARGIN + error:
+            far.append(state)
             continue
-        done = _finished(problem, r, max_nfev, tol)
+        done = _settled(problem, polish, state, rounds or MAX_ROUNDS)
         if done is not None:
-            error = max(error, 2.0 * abs(r.cost - done.cost))
-            finished = sorted([*finished, done], key=lambda f: f.cost)
-    if not finished:  # no polished optimum could be finished: the best one's error
-        _finished(problem, polished[0], max_nfev, tol, strict=True)
-    others = sorted(((problem.unpack(r.x)[0], 2.0 * r.cost) for r in finished[1:] + far),
-                    key=lambda pair: pair[1])  # fmt: skip
-    return finished, others
+            error = max(error, abs(state.promise - done.check.full_objective))
+            settled = sorted([*settled, done], key=lambda s: s.check.full_objective)
+    if not settled:  # none could be settled: the best one's error
+        _settled(problem, polish, first[0], rounds or MAX_ROUNDS, strict=True)
+    others = [(s.problem.unpack(s.result.x)[0], s.check.full_objective) for s in settled[1:]]
+    others += [(problem.unpack(p.z)[0], p.objective) for p in far]
+    return settled, sorted(others, key=lambda pair: pair[1])
 
 
-def _polished(problem, polish, z, strict=False):
-    """The rough optimum ``z`` polished on ``polish(z)`` (its ``cost`` on that model).
+@dataclass(frozen=True)
+class _Round:
+    """Where the rounds are: a point, the pencil exact there, what the full model says."""
+
+    problem: object  # the pencil problem, exact at z
+    own: np.ndarray  # the snapshot at z (mode shapes): every later pencil keeps it
+    z: np.ndarray
+    fast: np.ndarray  # residuals at z by the pencil that proposed z (z's own at the start)
+    full: np.ndarray  # residuals at z by the full model
+    decrement: float
+    radius: float  # of the trust region around z (whitened, largest component)
+    rounds: int
+    solves: int
+    promise: float = np.inf  # the objective at the optimum of the first pencil (its polish)
+
+    @property
+    def objective(self):
+        return float(self.full @ self.full)
+
+
+def _first(problem, polish, z, strict=False):
+    """The first round: the pencil built at (the canonical image of) the rough optimum ``z``.
 
     None (unless ``strict``) when the plate at ``z`` cannot be solved (a far rough optimum
     of an inaccurate reduced model: its modified plate is not positive definite).
     """
     try:
-        return local_fits(polish(z), [z], 100)[0]
+        z = canonical(problem, z)
+        state = _built(problem, polish(z), z, None, RADIUS, 0, 0)
+        return replace(state, promise=2.0 * _tight(state.problem, z).cost)
     except (ValueError, np.linalg.LinAlgError) as error:
         if strict:
             raise
@@ -88,20 +218,146 @@ def _polished(problem, polish, z, strict=False):
         return None
 
 
-def _finished(problem, polished, max_nfev, tol, strict=False):
-    """The polished optimum finished on ``problem`` (tightly, at its canonical image).
+def _built(problem, pencil_problem, z, fast, radius, rounds, solves):
+    """The round at ``z`` from the pencil just built there (exact at ``z``)."""
+    full = pencil_problem.residuals(z)
+    fast = full if fast is None else fast
+    decrement = _decrement(full, pencil_problem.jacobian(z), z, *problem.bounds())
+    log.debug("%s: round %d: objective %.8g (reduced %.8g), decrement %.3g",
+              problem_name(problem), rounds + 1, full @ full, fast @ fast, decrement)  # fmt: skip
+    own = pencil_problem.pencil.snapshots[-1]
+    return _Round(pencil_problem, own, z, fast, full, decrement, radius, rounds + 1, solves + 1)
 
-    None (unless ``strict``) when a plate on the way cannot be solved.
+
+def _settled(problem, polish, state, max_rounds, strict=False):
+    """Trust-region rounds from a first round until the full model confirms the answer.
+
+    Each round fits the pencil exact at the current point within the trust region around
+    it, builds the pencil at the proposal (the full model there) and takes the proposal if
+    the full objective fell by at least :data:`ACCEPT` of what the pencil predicted (the
+    region then doubles when the prediction held and the step reached its edge); otherwise
+    the point stays, with the richer pencil, and the region shrinks to half the step. The
+    rounds end when the decrement is under :data:`DECREMENT_TOL`, or when the pencil exact
+    at the point has its optimum there (a step under :data:`STEP_TOL`: at a kink of the
+    objective, a damaged patch's edge on an element's, the decrement of a smooth model need
+    not vanish). None (unless ``strict``) when a plate on the way cannot be solved.
     """
+    step = np.inf
+    lo, hi = problem.bounds()
     try:
-        best = local_fits(problem, [polished.x], max_nfev, 1, tol)[0]
-        best = finish(problem, best, max_nfev)  # tight, at its canonical image
+        while state.decrement > DECREMENT_TOL and state.rounds < max_rounds:
+            box = (np.maximum(lo, state.z - state.radius), np.minimum(hi, state.z + state.radius))
+            fitted = _tight(state.problem, state.z, box)
+            step = float(np.linalg.norm(fitted.x - state.z))
+            if step <= STEP_TOL:
+                break
+            reach = float(np.max(np.abs(fitted.x - state.z)))
+            predicted = state.objective - 2.0 * fitted.cost
+            z = canonical(problem, fitted.x)
+            fast = state.problem.residuals(z)
+            # the point's own snapshot and the newest others: the pencil stays exact at z
+            others = [v for v in state.problem.pencil.snapshots if v is not state.own]
+            earlier = [*others[len(others) - (SNAPSHOTS - 2) :], state.own]
+            trial = _built(problem, polish(z, earlier=earlier), z, fast, state.radius,
+                           state.rounds, state.solves)  # fmt: skip
+            actual = state.objective - trial.objective
+            if predicted > 0 and actual >= ACCEPT * predicted:
+                grow = actual >= 0.75 * predicted and reach >= 0.9 * state.radius
+                state = replace(trial, radius=2.0 * state.radius if grow else state.radius)
+            else:  # the point stays; the pencil with the proposal's snapshot is exact there too
+                state = replace(
+                    state,
+                    problem=trial.problem,
+                    radius=0.5 * reach,
+                    rounds=trial.rounds,
+                    solves=trial.solves,
+                )
     except (ValueError, np.linalg.LinAlgError) as error:
         if strict:
             raise
-        log.warning("%s: polished optimum %s not finished (%s)", problem_name(problem),
-                    np.round(polished.x, 2), error)  # fmt: skip
+        log.warning("%s: polished optimum %s not settled (%s)", problem_name(problem),
+                    np.round(state.z, 2), error)  # fmt: skip
         return None
-    log.info("%s: polished %.6g, finished %.6g", problem_name(problem), 2 * polished.cost,
-             2 * best.cost)  # fmt: skip
-    return best
+    m = problem.Y.size
+    lam_fast = problem.Y - state.fast[:m] * problem.sigma
+    lam_full = problem.Y - state.full[:m] * problem.sigma
+    settled = state.decrement <= DECREMENT_TOL or step <= STEP_TOL
+    check = FitCheck(float(state.fast @ state.fast), state.objective,
+                     float(np.max(np.abs(lam_fast / lam_full - 1.0))), state.decrement,
+                     state.rounds, state.solves, settled)  # fmt: skip
+    name = problem_name(problem)
+    if settled:
+        log.info("%s: settled in %d rounds: objective %.6g (reduced %.6g), decrement %.2g",
+                 name, state.rounds, check.full_objective, check.fast_objective,
+                 state.decrement)  # fmt: skip
+    elif max_rounds < MAX_ROUNDS:
+        log.info("%s: provisional after %d rounds: objective %.6g (reduced %.6g), decrement "
+                 "%.2g", name, state.rounds, check.full_objective, check.fast_objective,
+                 state.decrement)  # fmt: skip
+    else:
+        log.error("%s: not settled in %d rounds: the full model's objective %.6g could still "
+                  "fall by %.2g (reduced model %.6g)", name, state.rounds, check.full_objective,
+                  state.decrement, check.fast_objective)  # fmt: skip
+    result = OptimizeResult(x=state.z, cost=0.5 * check.full_objective, success=settled,
+                            message=f"settled in {state.rounds} rounds" if settled
+                            else f"not settled in {state.rounds} rounds",
+                            n_solves=state.solves)  # fmt: skip
+    return Settled(result, state.problem, check)
+
+
+def _decrement(r, J, z, lo, hi):
+    """Newton decrement ``r^T J (J^T J)^-1 J^T r`` of ``|r|^2`` (Gauss-Newton), in the bounds.
+
+    Unknowns at a bound that the descent direction ``-J^T r`` pushes outward are held there
+    (their columns left out): a mass fitted as zero is an optimum, not a point to move from.
+    """
+    g = J.T @ r
+    tol = AT_BOUND * (1.0 + np.abs(z))
+    held = ((z <= lo + tol) & (g > 0)) | ((z >= hi - tol) & (g < 0))
+    if held.all():
+        return 0.0
+    step = np.linalg.lstsq(J[:, ~held], r, rcond=None)[0]
+    return float(r @ (J[:, ~held] @ step))
+
+
+def _tight(problem, z, bounds=None):
+    """``problem`` fitted tightly from ``z`` (least squares, then Gauss-Newton steps).
+
+    ``bounds``: ``(lo, hi)`` of the whitened unknowns (default: the problem's own).
+    """
+    lo, hi = problem.bounds() if bounds is None else bounds
+    z0 = np.clip(np.asarray(z, dtype=float), lo + 1e-12, hi - 1e-12)
+    res = least_squares(problem.residuals, z0, jac=problem.jacobian, bounds=(lo, hi),
+                        method="trf", x_scale="jac", max_nfev=PENCIL_NFEV, ftol=PENCIL_TOL,
+                        xtol=PENCIL_TOL, gtol=PENCIL_TOL)  # fmt: skip
+    z = res.x
+    r = problem.residuals(z)
+    cost = float(r @ r)
+    for _ in range(4):  # Gauss-Newton steps while they lower the objective
+        dz = np.linalg.lstsq(problem.jacobian(z), -r, rcond=None)[0]
+        trial = np.clip(z + dz, lo, hi)
+        r_trial = problem.residuals(trial)
+        if not float(r_trial @ r_trial) <= cost:
+            break
+        z, r, cost = trial, r_trial, float(r_trial @ r_trial)
+        if np.linalg.norm(dz) <= PENCIL_TOL * (1.0 + np.linalg.norm(z)):
+            break
+    return OptimizeResult(x=z, cost=0.5 * cost, success=res.success, message=res.message)
+
+
+def canonical(problem, z):
+    """The image of ``z`` with the smallest physics parameters (``z`` itself if it has none).
+
+    The images (:meth:`~.base.Physics.mirror_images`) are the plate's exact symmetries: they
+    fit exactly as well, so the choice needs no evaluation.
+    """
+    if problem.physics is None:
+        return np.asarray(z, dtype=float)
+    b, theta = problem.unpack(z)
+    images = problem.physics.mirror_images(problem.model, theta)
+    if not images:
+        return np.asarray(z, dtype=float)
+    chosen = min([np.asarray(theta, dtype=float), *[np.asarray(t, dtype=float) for t in images]],
+                 key=tuple)  # fmt: skip
+    lo, hi = problem.bounds()
+    return np.clip(problem.pack(b, chosen), lo, hi)

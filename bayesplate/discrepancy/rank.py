@@ -14,30 +14,45 @@ nominal model.
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .fit import JointFit, JointProblem, fit
+from .fit import JointFit, JointProblem, fit, rough_fit, settle
+from .nominal import nominal_polisher
 from .parallel import fork_map
 from .pencil import candidate_pencil
+from .store import fit_digest
 
 __all__ = ["CandidateResult", "improved_nominal", "rank"]
 
-#: Evaluation cap of a candidate's refinement on the working mesh, from its reduced optimum.
-REFINE_NFEV = 25
+log = logging.getLogger(__name__)
+
+#: Evaluation cap of each local fit on a candidate's reduced coarse model.
+ROUGH_NFEV = 100
+#: Nats below the best rough gain within which a candidate is refined on the working mesh.
+REFINE_WINDOW = 10.0
 #: Other nominal optima (``nominal.alternatives``, best first) whose constants start the
 #: candidates' reduced fits too.
 OTHER_BASINS = 2
 #: ... within this much of the nominal optimum's ``chi2 + chi2_prior`` (a fit far worse,
 #: or one that left the physical region, is no basin to start from).
 OTHER_BASIN_MARGIN = 20.0
+#: ... with the physics parameters of this many best distinct optima reached from the
+#: nominal optimum's constants.
+OTHER_BASIN_STARTS = 3
 #: Distinct reduced optima of a candidate finished on the working mesh (the best one there
 #: is its fit: a reduced model of a strong taper can misjudge which basin is best).
 FINISHED = 3
 #: Extra starts (prior deviations from the mean) of a one-parameter candidate's reduced fit:
 #: a large effect that reorders modes has local optima on the way from the mean.
 SIZE_GRID = (-8.0, -6.0, -4.0, -3.0, -2.0, 2.0, 3.0, 4.0, 6.0, 8.0)
+#: Rounds of a candidate's provisional fit on reduced models of the working mesh (phase 2
+#: of :func:`rank`); the contenders are then settled (phase 3, :func:`_contenders`).
+PROVISIONAL_ROUNDS = 3
+#: Nats added to a provisional gain when asking whether it could change the verdict.
+CONTENDER_SLACK = 1.0
 
 
 @dataclass(frozen=True)
@@ -72,11 +87,22 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
          stages=None):  # fmt: skip
     """Fit every candidate jointly with the constants; best evidence gain first.
 
-    Every start is fitted on a reduced model of the modified plate on the coarse mesh
-    (:func:`.pencil.candidate_pencil`), corrected by the fine-to-coarse eigenvalue ratio at
-    the nominal fit; candidates that gain at least ``level["margin"]`` there are refined on
-    the working mesh. Only refined candidates can be chosen. Every variant (a taper per
-    direction) is a candidate of its own.
+    In three phases, each over the candidates in parallel (``level["workers"]``):
+
+    1. *rough*: every start fitted on a reduced model of the modified plate on the coarse
+       mesh (:func:`.pencil.candidate_pencil`), corrected by the fine-to-coarse eigenvalue
+       ratio at the nominal fit;
+    2. *provisional*: the candidates that gain at least ``level["margin"]`` there and come
+       within :data:`REFINE_WINDOW` of the best rough gain are refined on the working mesh:
+       their best distinct rough optima polished and moved for :data:`PROVISIONAL_ROUNDS`
+       rounds on reduced models of the working mesh, each checked by the finite-element
+       model (:mod:`.polish`);
+    3. *settled*: the provisional fits that could still change the verdict (within
+       ``level["ambiguity_margin"]`` of the best gain: :func:`_contenders`) are settled, to
+       the full model's optimum.
+
+    Only refined candidates can be chosen. Every variant (a taper per direction) is a
+    candidate of its own.
 
     Parameters
     ----------
@@ -86,7 +112,8 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
         ``margin`` (nats), ``workers`` (int), ``coarse_modes`` (the coarse nominal modes
         at ``nominal.b`` for the Ritz bases, shape (n_dofs, n); optional), ``rough`` (the
         nominal problem on its reduced model; optional), ``modes`` (the nominal modes at
-        ``nominal.b`` on ``model``, shape (n_dofs, n), for the refinement; optional).
+        ``nominal.b`` on ``model``, shape (n_dofs, n), for the refinement),
+        ``ambiguity_margin`` (nats; optional, default 2).
     Y, sigma : numpy.ndarray, shape (m,)
         Measured eigenvalues and their deviations, rad^2/s^2.
     mu_b : numpy.ndarray, shape (6,)
@@ -99,9 +126,10 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
     physics_list : list of Physics
     say : callable
     stages : Stages, optional
-        Where each candidate's result is looked up and stored as soon as it is fitted
-        (:mod:`.store`; a forked worker stores its own), in a context that covers everything
-        above; its key adds the candidate and its variant.
+        Where each phase's result of each candidate is looked up and stored as soon as it
+        is fitted (:mod:`.store`; a forked worker stores its own), in a context that covers
+        everything above; its key adds the phase, the candidate and its variant, and the
+        phase before's result.
 
     Returns
     -------
@@ -111,21 +139,11 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
         candidate's own fit up by it).
     """
 
-    def promising(rough):
-        return rough.log_evidence - nominal.log_evidence > level["margin"]
+    def problem_of(physics):
+        return JointProblem(model, Y, sigma, mu_b, V_b, modes, physics)
 
-    def stored(physics):  # (result, taken from the store)
-        if stages is None:
-            return candidate(physics), False
-        key = stages.key("candidate", physics)
-        found, result = stages.get(key)
-        if not found:
-            result = candidate(physics)
-            stages.put(key, result)
-        return result, found
-
-    def candidate(physics):
-        problem = JointProblem(model, Y, sigma, mu_b, V_b, modes, physics)
+    def rough_stage(physics):  # phase 1
+        problem = problem_of(physics)
         thetas = [problem.theta_mean, *physics.starting_points(model, nominal.b),
                   *_located_starts(physics, model, scans)]  # fmt: skip
         lo, hi = problem.theta_lower, problem.theta_upper
@@ -134,55 +152,177 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
         if rough is not None and problem.k == 1:  # cheap there: a grid of sizes as well
             thetas += [np.clip(problem.theta_mean + s * problem.theta_sd, lo, hi)
                        for s in SIZE_GRID]  # fmt: skip
-        # from the nominal optimum and from the other nominal basins: the constants that
-        # fit best with an effect may lie in another basin than those that fit best without
+        # from the nominal optimum, then the best of those from the other nominal basins:
+        # the constants that fit best with an effect may lie in another basin than those
+        # that fit best without
         top = nominal.chi2 + nominal.chi2_prior + OTHER_BASIN_MARGIN
         others = [b for b, objective in nominal.alternatives if objective < top]
-        bases = [nominal.b, *others[:OTHER_BASINS]]
-        starts = [problem.pack(b, t) for b in bases for t in thetas]
-        # on a reduced model the local fits run to convergence; a reduced model of the
-        # working mesh around the rough optimum polishes it, checked by one full solve
-        polish = None
-        if rough is not None and level.get("modes") is not None:
-            polish = _polisher(problem, physics, model, level["modes"])
-        result = fit(problem, starts, max_nfev=REFINE_NFEV if rough else 25,
-                     coarse=level["coarse"], scale=level["scale"], refine=promising,
-                     rough=rough, rough_nfev=100, polish=polish, keep=FINISHED,
-                     distinct=True)  # fmt: skip
-        gain = result.log_evidence - nominal.log_evidence
-        params = {**physics.settings(), **physics.labelled(model, nominal.b, result.theta)}
-        sds = physics.labelled(model, nominal.b, result.theta_sd)
-        mirrors = [physics.labelled(model, nominal.b, t)
-                   for t in physics.mirror_images(model, result.theta)]  # fmt: skip
-        return CandidateResult(physics.name, result, gain, params, sds, mirrors)
+        others = others[:OTHER_BASINS]
+        if rough is None:  # no reduced form: the coarse mesh, refined here when promising
+            starts = [problem.pack(b, t) for b in [nominal.b, *others] for t in thetas]
+            result = fit(problem, starts, max_nfev=25, coarse=level["coarse"],
+                         scale=level["scale"], keep=FINISHED, distinct=True,
+                         refine=lambda r: r.log_evidence - nominal.log_evidence
+                         > level["margin"])  # fmt: skip
+        else:
+
+            def in_other_basins(optima):
+                best = [problem.unpack(z)[1] for z in optima[:OTHER_BASIN_STARTS]]
+                return [problem.pack(b, t) for b in others for t in best]
+
+            starts = [problem.pack(nominal.b, t) for t in thetas]
+            result = rough_fit(rough, starts, ROUGH_NFEV, FINISHED, more=in_other_basins)
+        return _result(physics, model, nominal, result)
+
+    def provisional(item):  # phase 2
+        physics, rough = item
+        problem = problem_of(physics)
+        polish = _polisher(problem, physics, model, level["modes"])
+        return _result(
+            physics,
+            model,
+            nominal,
+            settle(problem, polish, list(rough.rough_optima), PROVISIONAL_ROUNDS),
+        )
+
+    def settled(item):  # phase 3
+        physics, provisional = item
+        problem = problem_of(physics)
+        polish = _polisher(problem, physics, model, level["modes"])
+        result = settle(problem, polish, [problem.pack(provisional.b, provisional.theta)])
+        return _result(
+            physics, model, nominal, replace(result, alternatives=provisional.alternatives)
+        )
 
     # the candidates with most parameters take longest: they go first to the workers
     order = sorted(range(len(physics_list)),
                    key=lambda i: -len(physics_list[i].parameters(model, nominal.b)))  # fmt: skip
-    fitted = fork_map(stored, [physics_list[i] for i in order], level["workers"])
-    fitted = [fitted[order.index(i)] for i in range(len(physics_list))]
-    results = [replace(r, fit=replace(r.fit, physics=physics))
-               for (r, _), physics in zip(fitted, physics_list, strict=True)]  # fmt: skip
-    if stages is not None and level["workers"] > 1:  # a worker's put may not reach `store`
-        for (r, found), physics in zip(fitted, physics_list, strict=True):
-            if not found:
-                stages.put(stages.key("candidate", physics), r)
-    for r, (_, found), physics in zip(results, fitted, physics_list, strict=True):
+    results = [None] * len(physics_list)
+    hits = [True] * len(physics_list)
+    _phase(stages, "rough", rough_stage, [(i, physics_list[i], None) for i in order],
+           results, hits, level["workers"])  # fmt: skip
+    todo = _to_refine(results, level["margin"])
+    log.debug("rough gains: %s; refined: %s",
+              ", ".join(f"{_label(r)} {r.log_evidence_gain:+.1f}" for r in results),
+              ", ".join(_label(results[i]) for i in todo))  # fmt: skip
+    _phase(stages, "provisional", provisional,
+           [(i, physics_list[i], results[i].fit) for i in todo], results, hits,
+           level["workers"])  # fmt: skip
+    todo = _contenders(results, level.get("ambiguity_margin", 2.0))
+    log.debug("provisional gains: %s; settled: %s",
+              ", ".join(f"{_label(r)} {r.log_evidence_gain:+.1f}" for r in results),
+              ", ".join(_label(results[i]) for i in todo))  # fmt: skip
+    _phase(stages, "settled", settled, [(i, physics_list[i], results[i].fit) for i in todo],
+           results, hits, level["workers"])  # fmt: skip
+    for r, hit, physics in zip(results, hits, physics_list, strict=True):
         where = "" if r.fit.refined else " (coarse mesh, not refined)"
-        where += " (taken from the store)" if found else ""
+        if r.fit.check is not None and not r.fit.check.settled:
+            where += f" (provisional: {r.fit.check.rounds} rounds, cannot change the verdict)"
+        where += " (taken from the store)" if hit else ""
         variant = "".join(f" ({v})" for v in physics.settings().values())
         say(f"{r.name}{variant}: chi2 = {r.fit.chi2:.1f}, evidence gain "
             f"{r.log_evidence_gain:+.1f}{where}")  # fmt: skip
     return sorted(results, key=lambda r: -r.log_evidence_gain)
 
 
+def _label(result):
+    """A candidate's name with its variant (a taper's direction), for the records."""
+    variant = [v for v in result.parameters.values() if isinstance(v, str)]
+    return result.name + "".join(f" ({v})" for v in variant)
+
+
+def _phase(stages, name, compute, items, results, hits, workers):
+    """One phase of :func:`rank`: ``compute((physics, earlier fit))`` for each item, stored.
+
+    ``items`` are ``(index, physics, earlier fit or None)``; each result goes to
+    ``results[index]`` (its ``fit.physics`` the very object given), ``hits[index]`` stays
+    True only if every phase took it from the store.
+    """
+    if not items:
+        return
+
+    def key(physics, earlier):
+        return stages.key(name, physics, *(() if earlier is None else (fit_digest(earlier),)))
+
+    def task(item):
+        _, physics, earlier = item
+        if stages is None:
+            return compute((physics, earlier) if earlier is not None else physics), False
+        found, value = stages.get(key(physics, earlier))
+        if not found:
+            value = compute((physics, earlier) if earlier is not None else physics)
+            stages.put(key(physics, earlier), value)
+        return value, found
+
+    done = fork_map(task, items, workers)
+    for (i, physics, earlier), (value, found) in zip(items, done, strict=True):
+        results[i] = replace(value, fit=replace(value.fit, physics=physics))
+        hits[i] = hits[i] and found
+        if stages is not None and workers > 1 and not found:  # a worker's put may not arrive
+            stages.put(key(physics, earlier), value)
+
+
+def _result(physics, model, nominal, fitted):
+    """The :class:`CandidateResult` of a candidate's joint fit."""
+    gain = fitted.log_evidence - nominal.log_evidence
+    params = {**physics.settings(), **physics.labelled(model, nominal.b, fitted.theta)}
+    sds = physics.labelled(model, nominal.b, fitted.theta_sd)
+    mirrors = []
+    if fitted.refined:  # (a pair's images cost full solves: for the refined fits only)
+        mirrors = [physics.labelled(model, nominal.b, t)
+                   for t in physics.mirror_images(model, fitted.theta)]  # fmt: skip
+    return CandidateResult(physics.name, fitted, gain, params, sds, mirrors)
+
+
+def _to_refine(results, margin):
+    """Indices of the rough fits to refine on the working mesh (phase 2 of :func:`rank`).
+
+    Those that gain more than ``margin`` on their reduced coarse model and come within
+    :data:`REFINE_WINDOW` of the best rough gain: a reduced coarse model misjudges a gain
+    by a few nats, not by more (the rough gains against the refined ones are in
+    reports/benchmark_diagnose.md).
+    """
+    rough = [i for i, r in enumerate(results) if not r.fit.refined and r.fit.rough_optima]
+    gains = {i: results[i].log_evidence_gain for i in rough}
+    best = max(gains.values(), default=-np.inf)
+    return [i for i in rough if gains[i] > margin and gains[i] >= best - REFINE_WINDOW]
+
+
+def _contenders(results, margin):
+    """Indices of the provisional fits that could still change the verdict (phase 3).
+
+    A provisional fit (its rounds stopped before the full model confirmed it) can still gain
+    about half its Newton decrement; it is settled when its gain, so raised and with
+    :data:`CONTENDER_SLACK`, reaches within ``margin`` (the ambiguity margin) of the best
+    refined gain: it could then be the best, or the runner-up that makes the verdict
+    ambiguous. The others are far below the best: their posterior probabilities vanish
+    whatever a settled fit would give.
+    """
+    refined = [i for i, r in enumerate(results) if r.fit.refined]
+    best = max((results[i].log_evidence_gain for i in refined), default=-np.inf)
+    todo = []
+    for i in refined:
+        check = results[i].fit.check
+        if check is None or check.settled:
+            continue
+        raised = results[i].log_evidence_gain + 0.5 * check.decrement + CONTENDER_SLACK
+        if raised >= best - margin:
+            todo.append(i)
+    return todo
+
+
 def _polisher(problem, physics, model, modes):
-    """``polish(z)``: the candidate's pencil on the working mesh with a snapshot at ``z``."""
+    """``polish(z, earlier=())``: the candidate's pencil on the working mesh, exact at ``z``.
+
+    Its basis: the nominal modes at the nominal fit (``modes``), the modified plate's at
+    ``z`` and the ``earlier`` snapshots (:mod:`.polish`).
+    """
     n = int(problem.modes.max()) + 1
 
-    def polish(z):
+    def polish(z, earlier=()):
         b, theta = problem.unpack(z)
-        pencil = candidate_pencil(model, physics, b, [theta], n + 4, nominal_modes=modes)
+        pencil = candidate_pencil(model, physics, b, [theta], n + 4, nominal_modes=modes,
+                                  earlier=earlier, local=True)  # fmt: skip
         return problem.on_pencil(pencil)
 
     return polish
@@ -237,6 +377,7 @@ def improved_nominal(problem, nominal, ranked, level):
                 scale=level["scale"],
                 rough=level.get("rough"),
                 refine=lambda rough, bar=best.log_evidence: rough.log_evidence > bar,
+                polish=nominal_polisher(problem),
             )
             if trial.refined and trial.log_evidence > best.log_evidence:
                 best = trial

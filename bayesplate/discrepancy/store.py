@@ -114,8 +114,13 @@ def _feed(h, obj, depth=0):
             h.update(f"opaque:{_unique()};".encode())
 
 
+#: The layout of what the stages store; a change of it (a field added to a fit) is a change
+#: of every key, so that stages stored by older code are never taken.
+FORMAT = 2
+
+
 def digest(*parts):
-    """SHA-256 (hex) of the content of `parts`, with the package version.
+    """SHA-256 (hex) of the content of `parts`, with the package version and :data:`FORMAT`.
 
     Numbers enter by their exact bits (a float differing in the last bit is another key);
     arrays by dtype, shape and bytes; containers in order (dicts by sorted key); other
@@ -123,7 +128,7 @@ def digest(*parts):
     pickle. What has no stable content (a closure, an unpicklable object) makes a key that
     is never made again: such a stage is computed every time, never wrongly found.
     """
-    h = hashlib.sha256(f"bayesplate {__version__};".encode())
+    h = hashlib.sha256(f"bayesplate {__version__} stages {FORMAT};".encode())
     _feed(h, parts)
     return h.hexdigest()
 

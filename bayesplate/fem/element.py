@@ -78,12 +78,14 @@ class TSDTRectangle:
     order: int = 4
     shear_order: int | None = None
 
-    def fields(self, local):
+    def fields(self, local, names=None):
         """Values and physical derivatives of every field at local points.
 
         Parameters
         ----------
         local : array_like, shape (p, 2)
+        names : collection of str, optional
+            Only these fields (default: all).
 
         Returns
         -------
@@ -95,21 +97,25 @@ class TSDTRectangle:
         xi, eta = local[:, 0], local[:, 1]
         hx, hy = self.dx / 2, self.dy / 2
         p = len(xi)
-        out = {}
-        for name in ("u", "v", "psi_x", "psi_y"):
-            for suffix in ("", "_x", "_y"):
-                out[name + suffix] = np.zeros((p, _N_LOCAL))
-        for name in ("w", "w_x", "w_y", "w_xx", "w_yy", "w_xy"):
-            out[name] = np.zeros((p, _N_LOCAL))
+        if names is None:
+            names = [name + suffix for name in ("u", "v", "psi_x", "psi_y")
+                     for suffix in ("", "_x", "_y")]  # fmt: skip
+            names += ["w", "w_x", "w_y", "w_xx", "w_yy", "w_xy"]
+        out = {name: np.zeros((p, _N_LOCAL)) for name in names}
+        lagrange = any(not name.startswith("w") for name in out)
+        hermite = any(name.startswith("w") for name in out)
         for node, (sx, sy) in enumerate(CORNERS):
             base = DOFS_PER_NODE * node
-            lag = (1 + sx * xi) * (1 + sy * eta) / 4
-            lag_x = sx * (1 + sy * eta) / 4 / hx
-            lag_y = sy * (1 + sx * xi) / 4 / hy
-            for name, k in (("u", _U), ("v", _V), ("psi_x", _PX), ("psi_y", _PY)):
-                out[name][:, base + k] = lag
-                out[name + "_x"][:, base + k] = lag_x
-                out[name + "_y"][:, base + k] = lag_y
+            if lagrange:
+                lag = (1 + sx * xi) * (1 + sy * eta) / 4
+                lag_x = sx * (1 + sy * eta) / 4 / hx
+                lag_y = sy * (1 + sx * xi) / 4 / hy
+                for name, k in (("u", _U), ("v", _V), ("psi_x", _PX), ("psi_y", _PY)):
+                    for suffix, value in (("", lag), ("_x", lag_x), ("_y", lag_y)):
+                        if name + suffix in out:
+                            out[name + suffix][:, base + k] = value
+            if not hermite:
+                continue
             Hx, Hy = _hermite(xi, sx), _hermite(eta, sy)
             # (x function, y function, scale of the unknown in local units)
             for k, ix, iy, scale in (
@@ -120,12 +126,17 @@ class TSDTRectangle:
             ):
                 fx, fy = Hx[ix], Hy[iy]
                 col = base + k
-                out["w"][:, col] = scale * fx[0] * fy[0]
-                out["w_x"][:, col] = scale * fx[1] * fy[0] / hx
-                out["w_y"][:, col] = scale * fx[0] * fy[1] / hy
-                out["w_xx"][:, col] = scale * fx[2] * fy[0] / hx**2
-                out["w_yy"][:, col] = scale * fx[0] * fy[2] / hy**2
-                out["w_xy"][:, col] = scale * fx[1] * fy[1] / (hx * hy)
+                values = {  # (each product in the order it always had: the same bits)
+                    "w": scale * fx[0] * fy[0],
+                    "w_x": scale * fx[1] * fy[0] / hx,
+                    "w_y": scale * fx[0] * fy[1] / hy,
+                    "w_xx": scale * fx[2] * fy[0] / hx**2,
+                    "w_yy": scale * fx[0] * fy[2] / hy**2,
+                    "w_xy": scale * fx[1] * fy[1] / (hx * hy),
+                }
+                for name, value in values.items():
+                    if name in out:
+                        out[name][:, col] = value
         return out
 
     def strain_operator(self, local):
