@@ -44,7 +44,7 @@ __all__ = ["JointFit", "JointProblem", "fit", "rough_fit", "settle"]
 _UNPHYSICAL_RESIDUAL = 1e4  # residual returned outside the lamina's physical region
 #: ``ftol`` and ``xtol`` of the local fits of :func:`rough_fit`: a rough optimum only says
 #: where to refine from (the refinement converges on the working mesh).
-ROUGH_TOL = 1e-6
+ROUGH_TOL = 1e-8
 
 
 @dataclass(frozen=True)

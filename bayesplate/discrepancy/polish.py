@@ -45,7 +45,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
 
-from .local import problem_name
+from .local import DISTINCT, problem_name
 
 __all__ = ["DECREMENT_TOL", "FINISH_MARGIN", "FitCheck", "MAX_ROUNDS", "STEP_TOL", "Settled",
            "canonical", "polish_and_finish"]  # fmt: skip
@@ -56,12 +56,14 @@ log = logging.getLogger("bayesplate.discrepancy.fit")  # the fits' records, as b
 #: within 0.002 of the finished objective and the second basin 2.55 above the best; a
 #: cutout's polish was off by up to 2.7 (plate 1), which the error term covers.
 FINISH_MARGIN = 2.0
-#: Newton decrement (``chi2 + chi2_prior``) under which a point is the full model's optimum.
-#: Tight: a whitened step of at most its square root (1e-4) is left, so that the answer does
-#: not depend on the path's round-off; the evidence is then exact to 1e-8 nats.
-DECREMENT_TOL = 1e-8
+#: Newton decrement (``chi2 + chi2_prior``) under which a point is the full model's optimum
+#: (times the objective where that is above one: :func:`_tolerance`): the objective is then
+#: within about that of its optimum (the evidence within half of it, in nats) and a whitened
+#: step of at most its square root (1e-3 of a prior deviation) is left. The answer does not
+#: depend on the round-off of the path: the rounds from two nearby starts stay together.
+DECREMENT_TOL = 1e-6
 #: Rounds at most, the polish's included.
-MAX_ROUNDS = 8
+MAX_ROUNDS = 6
 #: Whitened step under which the optimum of the pencil exact at a point is that point.
 STEP_TOL = 1e-4
 #: Snapshots a pencil keeps (the newest): enough for its second derivatives to improve as
@@ -169,7 +171,10 @@ def polish_and_finish(problem, polish, starts, rounds=None):
         if settled and state.promise > settled[0].check.full_objective + FINISH_MARGIN + error:
             far.append(state)
             continue
-        done = _settled(problem, polish, state, rounds or MAX_ROUNDS)
+        if any(_same(problem, state.promise_z, s.result.x) for s in settled):
+            continue  # its polish leads to an optimum settled already (or to its image)
+        known = [s.result.x for s in settled]
+        done = _settled(problem, polish, state, rounds or MAX_ROUNDS, known=known)
         if done is not None:
             error = max(error, abs(state.promise - done.check.full_objective))
             settled = sorted([*settled, done], key=lambda s: s.check.full_objective)
@@ -194,6 +199,7 @@ class _Round:
     rounds: int
     solves: int
     promise: float = np.inf  # the objective at the optimum of the first pencil (its polish)
+    promise_z: np.ndarray = None  # ... and that optimum
 
     @property
     def objective(self):
@@ -209,7 +215,8 @@ def _first(problem, polish, z, strict=False):
     try:
         z = canonical(problem, z)
         state = _built(problem, polish(z), z, None, RADIUS, 0, 0)
-        return replace(state, promise=2.0 * _tight(state.problem, z).cost)
+        polished = _tight(state.problem, z)
+        return replace(state, promise=2.0 * polished.cost, promise_z=polished.x)
     except (ValueError, np.linalg.LinAlgError) as error:
         if strict:
             raise
@@ -229,7 +236,7 @@ def _built(problem, pencil_problem, z, fast, radius, rounds, solves):
     return _Round(pencil_problem, own, z, fast, full, decrement, radius, rounds + 1, solves + 1)
 
 
-def _settled(problem, polish, state, max_rounds, strict=False):
+def _settled(problem, polish, state, max_rounds, strict=False, known=()):
     """Trust-region rounds from a first round until the full model confirms the answer.
 
     Each round fits the pencil exact at the current point within the trust region around
@@ -240,12 +247,13 @@ def _settled(problem, polish, state, max_rounds, strict=False):
     rounds end when the decrement is under :data:`DECREMENT_TOL`, or when the pencil exact
     at the point has its optimum there (a step under :data:`STEP_TOL`: at a kink of the
     objective, a damaged patch's edge on an element's, the decrement of a smooth model need
-    not vanish). None (unless ``strict``) when a plate on the way cannot be solved.
+    not vanish). None (unless ``strict``) when a plate on the way cannot be solved, or when
+    the rounds reach one of the optima ``known`` (whitened unknowns) already settled.
     """
     step = np.inf
     lo, hi = problem.bounds()
     try:
-        while state.decrement > DECREMENT_TOL and state.rounds < max_rounds:
+        while state.decrement > _tolerance(state) and state.rounds < max_rounds:
             box = (np.maximum(lo, state.z - state.radius), np.minimum(hi, state.z + state.radius))
             fitted = _tight(state.problem, state.z, box)
             step = float(np.linalg.norm(fitted.x - state.z))
@@ -264,6 +272,8 @@ def _settled(problem, polish, state, max_rounds, strict=False):
             if predicted > 0 and actual >= ACCEPT * predicted:
                 grow = actual >= 0.75 * predicted and reach >= 0.9 * state.radius
                 state = replace(trial, radius=2.0 * state.radius if grow else state.radius)
+                if any(_same(problem, state.z, other) for other in known):
+                    return None  # the same optimum as one settled already
             else:  # the point stays; the pencil with the proposal's snapshot is exact there too
                 state = replace(
                     state,
@@ -281,7 +291,7 @@ def _settled(problem, polish, state, max_rounds, strict=False):
     m = problem.Y.size
     lam_fast = problem.Y - state.fast[:m] * problem.sigma
     lam_full = problem.Y - state.full[:m] * problem.sigma
-    settled = state.decrement <= DECREMENT_TOL or step <= STEP_TOL
+    settled = state.decrement <= _tolerance(state) or step <= STEP_TOL
     check = FitCheck(float(state.fast @ state.fast), state.objective,
                      float(np.max(np.abs(lam_fast / lam_full - 1.0))), state.decrement,
                      state.rounds, state.solves, settled)  # fmt: skip
@@ -303,6 +313,20 @@ def _settled(problem, polish, state, max_rounds, strict=False):
                             else f"not settled in {state.rounds} rounds",
                             n_solves=state.solves)  # fmt: skip
     return Settled(result, state.problem, check)
+
+
+def _same(problem, z, other):
+    """Whether ``z`` is the optimum ``other`` (or its image): whitened distance under DISTINCT."""
+    return bool(np.linalg.norm(canonical(problem, z) - canonical(problem, other)) <= DISTINCT)
+
+
+def _tolerance(state):
+    """The decrement accepted at a round: :data:`DECREMENT_TOL`, relative to a large objective.
+
+    A misfit of thousands (a plate far from the model) leaves a decrement of about 1e-8 of
+    it from the round-off of the derivatives alone.
+    """
+    return DECREMENT_TOL * max(1.0, state.objective)
 
 
 def _decrement(r, J, z, lo, hi):

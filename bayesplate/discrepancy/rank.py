@@ -23,6 +23,7 @@ from .fit import JointFit, JointProblem, fit, rough_fit, settle
 from .nominal import nominal_polisher
 from .parallel import fork_map
 from .pencil import candidate_pencil
+from .polish import polish_and_finish
 from .store import fit_digest
 
 __all__ = ["CandidateResult", "improved_nominal", "rank"]
@@ -31,8 +32,6 @@ log = logging.getLogger(__name__)
 
 #: Evaluation cap of each local fit on a candidate's reduced coarse model.
 ROUGH_NFEV = 100
-#: Nats below the best rough gain within which a candidate is refined on the working mesh.
-REFINE_WINDOW = 10.0
 #: Other nominal optima (``nominal.alternatives``, best first) whose constants start the
 #: candidates' reduced fits too.
 OTHER_BASINS = 2
@@ -45,14 +44,12 @@ OTHER_BASIN_STARTS = 3
 #: Distinct reduced optima of a candidate finished on the working mesh (the best one there
 #: is its fit: a reduced model of a strong taper can misjudge which basin is best).
 FINISHED = 3
+#: Rounds at most of a refinement on the coarse mesh before the working mesh's (cheap ones:
+#: they bring a rough optimum close, where the working mesh's rounds converge fast).
+COARSE_ROUNDS = 4
 #: Extra starts (prior deviations from the mean) of a one-parameter candidate's reduced fit:
 #: a large effect that reorders modes has local optima on the way from the mean.
 SIZE_GRID = (-8.0, -6.0, -4.0, -3.0, -2.0, 2.0, 3.0, 4.0, 6.0, 8.0)
-#: Rounds of a candidate's provisional fit on reduced models of the working mesh (phase 2
-#: of :func:`rank`); the contenders are then settled (phase 3, :func:`_contenders`).
-PROVISIONAL_ROUNDS = 3
-#: Nats added to a provisional gain when asking whether it could change the verdict.
-CONTENDER_SLACK = 1.0
 
 
 @dataclass(frozen=True)
@@ -87,19 +84,15 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
          stages=None):  # fmt: skip
     """Fit every candidate jointly with the constants; best evidence gain first.
 
-    In three phases, each over the candidates in parallel (``level["workers"]``):
+    In two phases, each over the candidates in parallel (``level["workers"]``):
 
     1. *rough*: every start fitted on a reduced model of the modified plate on the coarse
        mesh (:func:`.pencil.candidate_pencil`), corrected by the fine-to-coarse eigenvalue
        ratio at the nominal fit;
-    2. *provisional*: the candidates that gain at least ``level["margin"]`` there and come
-       within :data:`REFINE_WINDOW` of the best rough gain are refined on the working mesh:
-       their best distinct rough optima polished and moved for :data:`PROVISIONAL_ROUNDS`
-       rounds on reduced models of the working mesh, each checked by the finite-element
-       model (:mod:`.polish`);
-    3. *settled*: the provisional fits that could still change the verdict (within
-       ``level["ambiguity_margin"]`` of the best gain: :func:`_contenders`) are settled, to
-       the full model's optimum.
+    2. *settled*: every candidate that gains more than ``level["margin"]`` there is refined
+       to its own optimum on the working mesh: its best distinct rough optima polished and
+       settled in rounds of reduced models of the working mesh, each checked by the
+       finite-element model (:mod:`.polish`).
 
     Only refined candidates can be chosen. Every variant (a taper per direction) is a
     candidate of its own.
@@ -174,25 +167,18 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
             result = rough_fit(rough, starts, ROUGH_NFEV, FINISHED, more=in_other_basins)
         return _result(physics, model, nominal, result)
 
-    def provisional(item):  # phase 2
+    def settled(item):  # phase 2
         physics, rough = item
         problem = problem_of(physics)
+        starts = list(rough.rough_optima)
+        if level.get("coarse_modes") is not None:  # the first rounds on the coarse mesh
+            coarse = problem.on(level["coarse"], level["scale"])
+            polish = _polisher(coarse, physics, level["coarse"], level["coarse_modes"],
+                               level["scale"])  # fmt: skip
+            settled, _ = polish_and_finish(coarse, polish, starts, COARSE_ROUNDS)
+            starts = [s.result.x for s in settled]
         polish = _polisher(problem, physics, model, level["modes"])
-        return _result(
-            physics,
-            model,
-            nominal,
-            settle(problem, polish, list(rough.rough_optima), PROVISIONAL_ROUNDS),
-        )
-
-    def settled(item):  # phase 3
-        physics, provisional = item
-        problem = problem_of(physics)
-        polish = _polisher(problem, physics, model, level["modes"])
-        result = settle(problem, polish, [problem.pack(provisional.b, provisional.theta)])
-        return _result(
-            physics, model, nominal, replace(result, alternatives=provisional.alternatives)
-        )
+        return _result(physics, model, nominal, settle(problem, polish, starts))
 
     # the candidates with most parameters take longest: they go first to the workers
     order = sorted(range(len(physics_list)),
@@ -205,19 +191,12 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
     log.debug("rough gains: %s; refined: %s",
               ", ".join(f"{_label(r)} {r.log_evidence_gain:+.1f}" for r in results),
               ", ".join(_label(results[i]) for i in todo))  # fmt: skip
-    _phase(stages, "provisional", provisional,
-           [(i, physics_list[i], results[i].fit) for i in todo], results, hits,
-           level["workers"])  # fmt: skip
-    todo = _contenders(results, level.get("ambiguity_margin", 2.0))
-    log.debug("provisional gains: %s; settled: %s",
-              ", ".join(f"{_label(r)} {r.log_evidence_gain:+.1f}" for r in results),
-              ", ".join(_label(results[i]) for i in todo))  # fmt: skip
     _phase(stages, "settled", settled, [(i, physics_list[i], results[i].fit) for i in todo],
            results, hits, level["workers"])  # fmt: skip
     for r, hit, physics in zip(results, hits, physics_list, strict=True):
         where = "" if r.fit.refined else " (coarse mesh, not refined)"
         if r.fit.check is not None and not r.fit.check.settled:
-            where += f" (provisional: {r.fit.check.rounds} rounds, cannot change the verdict)"
+            where += f" (not settled in {r.fit.check.rounds} rounds: see the notes)"
         where += " (taken from the store)" if hit else ""
         variant = "".join(f" ({v})" for v in physics.settings().values())
         say(f"{r.name}{variant}: chi2 = {r.fit.chi2:.1f}, evidence gain "
@@ -277,45 +256,21 @@ def _result(physics, model, nominal, fitted):
 def _to_refine(results, margin):
     """Indices of the rough fits to refine on the working mesh (phase 2 of :func:`rank`).
 
-    Those that gain more than ``margin`` on their reduced coarse model and come within
-    :data:`REFINE_WINDOW` of the best rough gain: a reduced coarse model misjudges a gain
-    by a few nats, not by more (the rough gains against the refined ones are in
-    reports/benchmark_diagnose.md).
+    Those that gain more than ``margin`` on their reduced coarse model. Not fewer: a reduced
+    coarse model misjudges a gain by ten nats and more either way (a taper's +17 on it was
+    +2.6 on the working mesh, a point mass's +116 was +126), and its optima move with the
+    round-off of its many starts; the refined fits do not.
     """
     rough = [i for i, r in enumerate(results) if not r.fit.refined and r.fit.rough_optima]
-    gains = {i: results[i].log_evidence_gain for i in rough}
-    best = max(gains.values(), default=-np.inf)
-    return [i for i in rough if gains[i] > margin and gains[i] >= best - REFINE_WINDOW]
+    return [i for i in rough if results[i].log_evidence_gain > margin]
 
 
-def _contenders(results, margin):
-    """Indices of the provisional fits that could still change the verdict (phase 3).
-
-    A provisional fit (its rounds stopped before the full model confirmed it) can still gain
-    about half its Newton decrement; it is settled when its gain, so raised and with
-    :data:`CONTENDER_SLACK`, reaches within ``margin`` (the ambiguity margin) of the best
-    refined gain: it could then be the best, or the runner-up that makes the verdict
-    ambiguous. The others are far below the best: their posterior probabilities vanish
-    whatever a settled fit would give.
-    """
-    refined = [i for i, r in enumerate(results) if r.fit.refined]
-    best = max((results[i].log_evidence_gain for i in refined), default=-np.inf)
-    todo = []
-    for i in refined:
-        check = results[i].fit.check
-        if check is None or check.settled:
-            continue
-        raised = results[i].log_evidence_gain + 0.5 * check.decrement + CONTENDER_SLACK
-        if raised >= best - margin:
-            todo.append(i)
-    return todo
-
-
-def _polisher(problem, physics, model, modes):
-    """``polish(z, earlier=())``: the candidate's pencil on the working mesh, exact at ``z``.
+def _polisher(problem, physics, model, modes, scale=None):
+    """``polish(z, earlier=())``: the candidate's pencil on ``model``, exact at ``z``.
 
     Its basis: the nominal modes at the nominal fit (``modes``), the modified plate's at
-    ``z`` and the ``earlier`` snapshots (:mod:`.polish`).
+    ``z`` and the ``earlier`` snapshots (:mod:`.polish`). ``scale`` corrects the pencil's
+    eigenvalues to the working mesh (``model`` a coarser mesh: :meth:`.fit.JointProblem.on`).
     """
     n = int(problem.modes.max()) + 1
 
@@ -323,7 +278,7 @@ def _polisher(problem, physics, model, modes):
         b, theta = problem.unpack(z)
         pencil = candidate_pencil(model, physics, b, [theta], n + 4, nominal_modes=modes,
                                   earlier=earlier, local=True)  # fmt: skip
-        return problem.on_pencil(pencil)
+        return problem.on_pencil(pencil, scale)
 
     return polish
 
