@@ -9,7 +9,8 @@ read with the case's deviations. Write the independent readings as ``q = q0 + D 
     ``Y = lambda(b) + B z + e``,   ``B = J_p A``,   ``e ~ N(0, V_Y)``,   ``z ~ N(0, I)``,
 
 with ``V_Y`` the declared eigenvalue covariance and ``J_p = d lambda / d p``
-(:func:`bayesplate.inputs.input_jacobian`, held fixed where the sampler's setup evaluated it).
+(:func:`bayesplate.inputs.input_jacobian`, held fixed where the sampler's setup evaluated it:
+the marginal MAP).
 
 Collapsed (Rao-Blackwellised) sampling
     The joint posterior factorises, ``f(b, z | Y) = f(b | Y) f(z | b, Y)``. Under the linear
@@ -126,6 +127,8 @@ class InputConditional:
         ``C B^T V_Y^-1``: ``E[z | b, Y] = gain (Y - lambda(b))``.
     covariance : numpy.ndarray, shape (4, 4)
         ``C = (I + B^T V_Y^-1 B)^-1`` (at ``s = 1``).
+    at : numpy.ndarray, shape (6,), or None
+        The stiffness coefficients where ``J_p`` was evaluated, Pa (when given).
     """
 
     names: tuple
@@ -134,6 +137,7 @@ class InputConditional:
     B: np.ndarray = field(repr=False)
     gain: np.ndarray = field(repr=False)
     covariance: np.ndarray
+    at: np.ndarray | None = None
 
     @property
     def declared(self):
@@ -141,7 +145,7 @@ class InputConditional:
         return np.flatnonzero(self.sd > 0)
 
 
-def input_conditional(J, A, V_Y, names, value, sd) -> InputConditional:
+def input_conditional(J, A, V_Y, names, value, sd, at=None) -> InputConditional:
     """The conditional of the standardised readings ``z`` given ``b`` and the data.
 
     Parameters
@@ -156,6 +160,8 @@ def input_conditional(J, A, V_Y, names, value, sd) -> InputConditional:
     names : tuple of str
     value, sd : array_like, shape (4,)
         The readings and their deviations, SI (:func:`declared_readings`).
+    at : array_like, shape (6,), optional
+        Where `J` was evaluated, Pa (kept in the result).
 
     Returns
     -------
@@ -165,8 +171,9 @@ def input_conditional(J, A, V_Y, names, value, sd) -> InputConditional:
     WB = np.linalg.solve(np.asarray(V_Y, dtype=float), B)  # V_Y^-1 B, (m, 4)
     C = np.linalg.inv(np.eye(B.shape[1]) + B.T @ WB)
     C = 0.5 * (C + C.T)  # symmetric to round-off, for the Cholesky factor
+    at = None if at is None else np.asarray(at, dtype=float)
     return InputConditional(tuple(names), np.asarray(value, dtype=float),
-                            np.asarray(sd, dtype=float), B, C @ WB.T, C)  # fmt: skip
+                            np.asarray(sd, dtype=float), B, C @ WB.T, C, at)  # fmt: skip
 
 
 def draw_inputs(conditional, residuals, rng, s=None):
