@@ -237,9 +237,11 @@ def test_cli_sample_shows_the_inputs(tmp_path, capsys):
     from bayesplate.cli import main
 
     text = bundled_case_path("plate1").read_text()
-    text = text.replace("density_kg_m3 = 1000\n",
-                        "density_kg_m3 = 1000\nthickness_sd_mm = 0.132\ndensity_sd_kg_m3 = 10\n")
-    assert "thickness_sd_mm" in text  # fmt: skip
+    text = text.replace(
+        "density_kg_m3 = 1000\n",
+        "density_kg_m3 = 1000\nthickness_sd_mm = 0.132\ndensity_sd_kg_m3 = 10\n",
+    )
+    assert "thickness_sd_mm" in text
     path = tmp_path / "plate1_inputs.toml"
     path.write_text(text)
     js = tmp_path / "posterior.json"
@@ -259,3 +261,22 @@ def test_cli_sample_shows_the_inputs(tmp_path, capsys):
     assert h["hdi_3%"] < h["mean"] < h["hdi_97%"] and 0 < h["sd"]
     assert doc["input_certificate"]["passed"] and doc["input_certificate"]["status"] == "ok"
     assert set(doc["input_certificate"]["relative"]) == {"thickness", "density"}
+
+
+def test_report_posterior_section_shows_the_inputs():
+    from bayesplate.report.markdown import _sample_lines
+
+    result = {"hdi": np.ones((2, 6)) * 1e9, "mean": np.ones(6) * 1e9, "sd": np.ones(6) * 1e8,
+              "ess_bulk": np.ones(6) * 500, "rhat": np.ones(6), "timings": {"total": 1.0},
+              "n_walkers": 32, "n_steps": 400, "n_burn": 100, "acceptance": 0.5,
+              "message": "converged", "certificate": None, "n_full": 0, "inputs": "marginal",
+              "inputs_given": "thickness 0.132 mm"}  # fmt: skip
+    row = {"declared": 6.6, "declared_sd": 0.132, "mean": 6.65, "sd": 0.065, "hdi_3%": 6.53,
+           "hdi_97%": 6.77}  # fmt: skip
+    result["inputs_posterior"] = {"thickness_mm": row}
+    result["input_certificate"] = {"text": "linear input model ... ok", "passed": True}
+    lines = _sample_lines(result)
+    assert "| thickness_mm | 6.600 ± 0.13 | 6.650 ± 0.065 | 6.530 to 6.770 |" in lines
+    assert "linear input model ... ok." in lines
+    result["inputs_posterior"], result["input_certificate"] = None, None
+    assert not any("thickness_mm" in line for line in _sample_lines(result))
