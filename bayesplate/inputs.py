@@ -62,6 +62,7 @@ __all__ = [
     "INPUT_NAMES",
     "INPUT_UNITS",
     "InputJacobian",
+    "READING_UNITS",
     "VarianceBudget",
     "input_sd",
     "input_sources",
@@ -120,8 +121,9 @@ def input_sources(plate):
     return ("thickness", "mass", "length", "width"), D * sd[None, :]
 
 
-_CASE_UNITS = {"thickness": (1e3, "mm"), "length": (1e3, "mm"), "width": (1e3, "mm"),
-               "density": (1.0, "kg/m^3"), "mass": (1e3, "g")}  # fmt: skip
+#: Each reading's multiplier from SI to case units and the unit (the case keys' units).
+READING_UNITS = {"thickness": (1e3, "mm"), "length": (1e3, "mm"), "width": (1e3, "mm"),
+                 "density": (1.0, "kg/m^3"), "mass": (1e3, "g")}  # fmt: skip
 
 
 def describe_inputs(plate) -> str:
@@ -130,7 +132,7 @@ def describe_inputs(plate) -> str:
     sd = input_sd(plate)
     if plate.mass is not None:
         sd[1] = plate.mass_sd
-    parts = [f"{name} {value * _CASE_UNITS[name][0]:.3g} {_CASE_UNITS[name][1]}"
+    parts = [f"{name} {value * READING_UNITS[name][0]:.3g} {READING_UNITS[name][1]}"
              for name, value in zip(names, sd, strict=True) if value > 0]  # fmt: skip
     return ", ".join(parts) or "none"
 

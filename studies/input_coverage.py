@@ -19,8 +19,12 @@ covering replicates has a binomial deviation ``sqrt(p (1 - p) / n)``; its 95 % b
 0.94 is printed with each row (Wilson interval of the observed share beside it).
 
 The sampler (emcee on the certified fast model, :func:`bayesplate.sampling.sample`, 94 % HDI)
-runs on the first replicates for as long as ``--sampler-minutes`` allows (both treatments per
-replicate); the report says how many.
+then runs on every replicate (both treatments); with the inputs marginal it also draws the
+thickness and density (:mod:`bayesplate.inputs_posterior`), and a replicate's input interval
+covers when it holds the plate's true thickness (density). ``--sampler-minutes`` caps one
+session; the report says how many replicates were sampled. Every finished row (B's, the
+sampler's) is stored as it comes in ``out_dir/.cache/input_coverage.json`` (atomic writes),
+so an interrupted run resumes where it stopped.
 
 Writes ``input_coverage.md`` to ``out_dir``. Run:
 ``python studies/input_coverage.py [--quick] [--replicates N] [--sampler-minutes M] [--out DIR]``
@@ -31,11 +35,13 @@ Writes ``input_coverage.md`` to ``out_dir``. Run:
 import argparse
 import dataclasses
 import datetime
+import json
 import logging
 import os
 import pathlib
 import sys
 import time
+import traceback
 import warnings
 
 import numpy as np
@@ -64,6 +70,10 @@ MESH = (12, 8)
 Z94 = 1.8807936081512509  # normal quantile of 0.97: a two-sided 94 % interval
 NOMINAL = 0.94
 TREATMENTS = ("marginal", "exact")
+INPUTS = ("thickness", "density")
+#: The sampler's settings on every replicate: 400 effective draws per constant set the HDI's
+#: ends to about 0.1 posterior sd; 3000 steps cap a chain that would not mix.
+SAMPLER = {"min_ess": 400, "max_steps": 3000}
 
 
 def nominal_case(frequency_Hz, prior_mean, input_sd=True, prior_sd=None):
@@ -112,45 +122,150 @@ def fit_b(case, model, inputs, method="B", tol=1e-6):
     return result.constants - Z94 * result.sd, result.constants + Z94 * result.sd
 
 
+def sample_replicate(case, model, inputs, rng, **settings):
+    """The sampler's result on one replicate (:func:`bayesplate.sampling.sample`).
+
+    `settings`: keywords of :func:`bayesplate.sampling.sample` (default ``SAMPLER``).
+    """
+    from bayesplate.sampling import sample
+
+    settings = {**SAMPLER, **settings}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # full-model fallbacks are counted in the result
+        # the replicates are every low mode, sorted: pairing by order (named, issue 16)
+        return sample(case, rng=rng, model=model, inputs=inputs, progress=False,
+                      **{"pairing": "order", **settings})  # fmt: skip
+
+
 def fit_sampler(case, model, inputs, rng, **settings):
     """The sampler's 94 % HDI (shape (2, 6)), or None when its stopping rule was not met.
 
     `settings`: keywords of :func:`bayesplate.sampling.sample` (default ``min_ess=400,
     max_steps=3000``).
     """
-    from bayesplate.sampling import sample
-
-    settings = {"min_ess": 400, "max_steps": 3000, **settings}
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # full-model fallbacks are counted in the result
-        # the replicates are every low mode, sorted: pairing by order (named, issue 16)
-        result = sample(case, rng=rng, model=model, inputs=inputs, progress=False,
-                        **{"pairing": "order", **settings})  # fmt: skip
+    result = sample_replicate(case, model, inputs, rng, **settings)
     return (result.hdi[0], result.hdi[1]) if result.converged else None
 
 
-def run(n_replicates=200, sampler_minutes=10.0, seed=SEED):
-    """Coverage records: ``{(method, treatment): list of (6,) bool or None}``."""
+def _b_row(case, model):
+    """B's coverage of the six constants with the inputs marginal and exact."""
+    started = time.perf_counter()
+    row = {}
+    for t in TREATMENTS:
+        interval = fit_b(case, model, t)
+        row[t] = None if interval is None else covers(interval).tolist()
+    return {"covers": row, "seconds": time.perf_counter() - started}
+
+
+def _sampler_row(case, model, index, h, rho):
+    """The sampler's coverage of the constants (both treatments) and of the inputs (marginal).
+
+    The inputs' row: whether the true thickness and density lie in the 94 % HDI of their
+    draws (one per kept draw of the constants, :mod:`bayesplate.inputs_posterior`).
+    """
+    started = time.perf_counter()
+    row = {"covers": {}, "converged": {}, "load": os.getloadavg()[0]}
+    for t in TREATMENTS:
+        try:
+            r = sample_replicate(case, model, t, 1000 + index)
+        except Exception:  # noqa: BLE001 - one replicate must not end a 200-replicate run
+            row["covers"][t] = None
+            row.setdefault("errors", {})[t] = traceback.format_exc(limit=2).splitlines()[-1]
+            continue
+        row["converged"][t] = bool(r.converged)
+        row["covers"][t] = covers((r.hdi[0], r.hdi[1])).tolist() if r.converged else None
+        if t != "marginal":
+            continue
+        post, cert = r.input_posterior, r.input_certificate
+        truth = {"thickness": h, "density": rho}
+        hdi = {name: post.hdi[:, j].tolist() for j, name in enumerate(post.names)}
+        row["inputs_hdi"] = hdi
+        row["inputs_covers"] = (
+            None if not r.converged else [bool(hdi[n][0] <= truth[n] <= hdi[n][1]) for n in INPUTS]
+        )
+        row["certificate_in_sd"] = cert.max_in_sd
+        row["certificate_passed"] = bool(cert.passed)
+    row["seconds"] = time.perf_counter() - started
+    return row
+
+
+def _cache_path(out_dir, quick):
+    return pathlib.Path(out_dir) / ".cache" / f"input_coverage{'-quick' if quick else ''}.json"
+
+
+def _settings():
+    return {"seed": SEED, "sampler": SAMPLER, "rows": 2}
+
+
+def load_rows(out_dir, quick):
+    """The finished rows in the cache, ``{"B/3": row, "sampler/3": row}`` (none if stale)."""
+    path = _cache_path(out_dir, quick)
+    if not path.exists():
+        return {}
+    stored = json.loads(path.read_text())
+    return stored["rows"] if stored.get("settings") == _settings() else {}
+
+
+def run(out_dir, n_replicates=200, sampler_minutes=None, quick=False, seed=SEED):
+    """Run what the cache lacks; return the rows, the drawn errors and this session's seconds.
+
+    B on every replicate first (both treatments), then the sampler, replicate by replicate
+    (each row stored as it comes: an interrupted run resumes), until `sampler_minutes` of
+    this session (None: no cap).
+    """
+    rows = load_rows(out_dir, quick)
     rng = np.random.default_rng(seed)
     streams = rng.spawn(n_replicates)
     model = PlateModel.from_case(nominal_case(np.ones(N_FREQ), E_TRUE), mesh=MESH)
-    records = {(m, t): [] for m in ("B", "sampler") for t in TREATMENTS}
-    draws, cases = [], []
-    for stream in streams:
-        case, h, rho = draw(stream)
-        draws.append((h / THICKNESS - 1, rho / DENSITY - 1))
-        cases.append(case)
-        for t in TREATMENTS:
-            interval = fit_b(case, model, t)
-            records[("B", t)].append(None if interval is None else covers(interval))
+    drawn = [draw(stream) for stream in streams]
+    errors = np.array([(h / THICKNESS - 1, rho / DENSITY - 1) for _, h, rho in drawn])
+
+    def keep(key, row):
+        rows[key] = row
+        stored = {"settings": _settings(), "rows": rows}
+        atomic_write_text(_cache_path(out_dir, quick), json.dumps(stored))
+
+    for i, (case, _, _) in enumerate(drawn):
+        if f"B/{i}" not in rows:
+            keep(f"B/{i}", _b_row(case, model))
     started = time.perf_counter()
-    for i, case in enumerate(cases):
-        if time.perf_counter() - started >= 60 * sampler_minutes:
+    for i, (case, h, rho) in enumerate(drawn):
+        if sampler_minutes is not None and time.perf_counter() - started >= 60 * sampler_minutes:
             break
-        for t in TREATMENTS:
-            interval = fit_sampler(case, model, t, 1000 + i)
-            records[("sampler", t)].append(None if interval is None else covers(interval))
-    return records, np.array(draws), time.perf_counter() - started
+        if f"sampler/{i}" in rows:
+            continue
+        row = _sampler_row(case, model, i, h, rho)
+        keep(f"sampler/{i}", row)
+        done = sum(k.startswith("sampler/") for k in rows)
+        print(f"sampler {i:3d}: covers (of 6) " + ", ".join(
+            f"{t} {'-' if c is None else sum(c)}" for t, c in row["covers"].items())
+            + f"; inputs {row.get('inputs_covers')}; certificate "
+            f"{row.get('certificate_in_sd', float('nan')):.2f} sd; {row['seconds']:.1f} s, "
+            f"load {row['load']:.1f} ({done}/{n_replicates} done, "
+            f"{time.perf_counter() - started:.0f} s)", flush=True)  # fmt: skip
+    return rows, errors, time.perf_counter() - started
+
+
+def records_of(rows, n):
+    """Coverage records from the rows of replicates 0..n-1 that ran.
+
+    ``{(method, treatment): list of (6,) bool or None}`` and ``{"inputs": list of (2,) bool or
+    None}``.
+    """
+    records = {(m, t): [] for m in ("B", "sampler") for t in TREATMENTS}
+    records["inputs"] = []
+    for method in ("B", "sampler"):
+        for i in range(n):
+            row = rows.get(f"{method}/{i}")
+            if row is None:
+                continue
+            for t in TREATMENTS:
+                c = row["covers"][t]
+                records[(method, t)].append(None if c is None else np.array(c, dtype=bool))
+            if method == "sampler":
+                c = row.get("inputs_covers")
+                records["inputs"].append(None if c is None else np.array(c, dtype=bool))
+    return records
 
 
 def covers(interval):
@@ -178,42 +293,102 @@ def nominal_band(n):
     return NOMINAL - half, NOMINAL + half
 
 
-def report(records, draws, seconds, sampler_seconds, command):
-    """The Markdown report."""
-    load = os.getloadavg()[0]
+def _load_text(rows):
+    """The 1-minute load averages seen at the sampler's replicates: min, median, max."""
+    loads = [r["load"] for k, r in rows.items() if k.startswith("sampler/") and "load" in r]
+    if not loads:
+        return f"load {os.getloadavg()[0]:.1f} at the end"
+    lo, med, hi = np.percentile(loads, [0, 50, 100])
+    return f"load (1-minute average, sampler replicates) {lo:.1f} to {hi:.1f}, median {med:.1f}"
+
+
+def _row_cells(n, failed, p, wilson):
+    lo, hi = nominal_band(n)
+    cells = [f"{n} ({failed})", f"{lo:.3f} to {hi:.3f}"]
+    return cells + [f"{p[j]:.3f} ({wilson[0, j]:.2f}-{wilson[1, j]:.2f})" for j in range(len(p))]
+
+
+def _table(records, method):
+    """One method's table: a row per treatment; the sampler's with the inputs' columns."""
+    inputs = method == "sampler"
+    head = ["inputs", "replicates (failed)", "band at 0.94", *ENGINEERING_KEYS]
+    head += [f"{n} (input)" for n in INPUTS] if inputs else []
+    out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for t in TREATMENTS:
+        n, failed, p, wilson = summary(records[(method, t)])
+        if n == 0:
+            out.append(f"| {t} | 0 ({failed}) | - |" + " - |" * (len(head) - 3))
+            continue
+        cells = [t, *_row_cells(n, failed, p, wilson)]
+        if inputs and t == "marginal":
+            ni, _, pi, wi = summary(records["inputs"])
+            cells += [f"{pi[j]:.3f} ({wi[0, j]:.2f}-{wi[1, j]:.2f})" for j in range(2)]
+            cells[1] += "" if ni == n else f", inputs {ni}"
+        elif inputs:
+            cells += ["-", "-"]
+        out.append("| " + " | ".join(cells) + " |")
+    return out
+
+
+def _certificate_lines(rows):
+    sizes = [r["certificate_in_sd"] for k, r in rows.items()
+             if k.startswith("sampler/") and "certificate_in_sd" in r]  # fmt: skip
+    if not sizes:
+        return []
+    failed = sum(not r["certificate_passed"] for k, r in rows.items()
+                 if k.startswith("sampler/") and "certificate_passed" in r)  # fmt: skip
+    med, hi = np.median(sizes), np.max(sizes)
+    return [
+        "",
+        f"Linear input model (`bayesplate.inputs_posterior.linear_input_certificate`, at "
+        "each MAP: full solves at +-2 sd of thickness and density against the linear "
+        f"prediction): largest error {hi:.3f} of a frequency's declared deviation (median "
+        f"{med:.3f}) over the {len(sizes)} replicates; {failed} above the pass mark 0.25.",
+    ]
+
+
+def report(rows, n, errors, seconds, command):
+    """The Markdown report from the cached rows of replicates 0..n-1."""
+    records = records_of(rows, n)
+    n_sampler = sum(f"sampler/{i}" in rows for i in range(n))
+    sampled = [rows[f"sampler/{i}"]["seconds"] for i in range(n) if f"sampler/{i}" in rows]
+    b_seconds = sum(rows[f"B/{i}"]["seconds"] for i in range(n) if f"B/{i}" in rows)
     out = [
         "# Coverage of the 94 % intervals with uncertain thickness and density",
         "",
         f"Made by `{command}` on {datetime.date.today()}, {cpu()}, {os.cpu_count()} cores, "
-        f"load {load:.1f}, {seconds:.0f} s in all ({sampler_seconds:.0f} s of sampling). "
+        f"{_load_text(rows)}; {seconds:.0f} s in the last session, {b_seconds:.0f} s of B fits "
+        f"and {sum(sampled):.0f} s of sampling over all sessions (the rows are cached in "
+        f"`.cache/`, {np.mean(sampled) if sampled else float('nan'):.1f} s a replicate for "
+        f"both treatments). "
         f"Synthetic plate {LENGTH * 1e3:.0f} x {WIDTH * 1e3:.0f} x {THICKNESS * 1e3:.0f} mm, "
         f"one orthotropic ply, density {DENSITY:.0f} kg/m^3, mesh {MESH[0]} x {MESH[1]}, "
         f"{N_FREQ} frequencies with {100 * SIGMA_REL:.1f} % noise (as declared). Declared "
         f"input deviations: thickness {100 * SD_H_REL:.0f} %, density {100 * SD_RHO_REL:.0f} %;"
         f" each replicate's true thickness and density drawn from them (drawn: thickness "
-        f"sd {100 * draws[:, 0].std():.2f} %, max |error| {100 * np.abs(draws[:, 0]).max():.1f} "
-        f"%; density sd {100 * draws[:, 1].std():.2f} %), the prior mean drawn from the prior "
+        f"sd {100 * errors[:, 0].std():.2f} %, max |error| {100 * np.abs(errors[:, 0]).max():.1f} "
+        f"%; density sd {100 * errors[:, 1].std():.2f} %), the prior mean drawn from the prior "
         f"(sd {100 * PRIOR_REL:.0f} %), seed {SEED}. Fitted with the nominal thickness and "
         "density. A cell is the share of replicates whose 94 % interval holds the true "
         "constant, with its Wilson 95 % interval; a share outside the band printed for its "
         "number of replicates (95 % band around 0.94 of a binomial share) is off nominal.",
-    ]
-    for method in ("B", "sampler"):
-        title = ("B, linearised interval (estimate +- 1.881 sd)" if method == "B" else
-                 "Sampler (emcee on the certified fast model), 94 % HDI")  # fmt: skip
-        out += ["", f"## {title}", ""]
-        head = ["inputs", "replicates (failed)", "band at 0.94", *ENGINEERING_KEYS]
-        out += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-        for t in TREATMENTS:
-            n, failed, p, wilson = summary(records[(method, t)])
-            if n == 0:
-                out.append(f"| {t} | 0 ({failed}) | - |" + " - |" * 6)
-                continue
-            lo, hi = nominal_band(n)
-            cells = [t, f"{n} ({failed})", f"{lo:.3f} to {hi:.3f}"]
-            cells += [f"{p[j]:.3f} ({wilson[0, j]:.2f}-{wilson[1, j]:.2f})" for j in range(6)]
-            out.append("| " + " | ".join(cells) + " |")
-    out += [
+        "",
+        "## B, linearised interval (estimate +- 1.881 sd)",
+        "",
+        *_table(records, "B"),
+        "",
+        "## Sampler (emcee on the certified fast model), 94 % HDI",
+        "",
+        f"{n_sampler} of {n} replicates sampled, both treatments each (seed 1000 + replicate, "
+        f"min_ess {SAMPLER['min_ess']}, max_steps {SAMPLER['max_steps']}). With the inputs "
+        "marginal, thickness and density are also drawn, one draw per kept draw of the "
+        "constants from their Gaussian conditional (`bayesplate.inputs_posterior`: exact "
+        "joint draws under the linear input model); the input columns are the share of "
+        "replicates whose 94 % HDI of the drawn thickness (density) holds the plate's true "
+        "one.",
+        "",
+        *_table(records, "sampler"),
+        *_certificate_lines(rows),
         "",
         'Reading: with `inputs="exact"` the intervals of the bending-determined moduli (E1, '
         "E2, G12) leave out the thickness and density errors (which move them by about "
@@ -221,23 +396,26 @@ def report(records, draws, seconds, sampler_seconds, command):
         'deviation of about 1 %) and fall short; with `inputs="marginal"` they include '
         "them. nu12, G13 and G23 are little affected by a common scaling of the eigenvalues. "
         '"Failed": B did not converge (it left the physical region from a prior mean drawn '
-        "far from the truth, e.g. E2 at 0.37 of its true value, 2.5 prior deviations), "
-        "counted out of the shares. B's linearised interval carries its own shortfall when "
-        "priors are drawn this far (nu12, which the inputs barely touch, shows it in both "
-        "treatments); the marginal moduli sit at that level.",
+        "far from the truth), or the sampler's stopping rule was not met within its step "
+        "cap; counted out of the shares. B's linearised interval carries its own shortfall "
+        "when priors are drawn this far (nu12, which the inputs barely touch, shows it in "
+        "both treatments).",
     ]
     return "\n".join(out) + "\n"
 
 
 def main(out_dir, quick=False, replicates=None, sampler_minutes=None):
-    """Run and write the report; return its path."""
+    """Run what the cache lacks and write the report; return its path.
+
+    `sampler_minutes`: a cap on this session's sampling (default none; quick: 0, no sampler).
+    """
     logging.getLogger("bayesplate").setLevel(logging.ERROR)
     n = replicates or (6 if quick else 200)
-    minutes = sampler_minutes if sampler_minutes is not None else (0.0 if quick else 10.0)
+    minutes = sampler_minutes if sampler_minutes is not None else (0.0 if quick else None)
     start = time.perf_counter()
-    records, draws, sampler_seconds = run(n, minutes)
+    rows, errors, _ = run(out_dir, n, minutes, quick)
     command = "python studies/input_coverage.py" + (" --quick" if quick else "")
-    text = report(records, draws, time.perf_counter() - start, sampler_seconds, command)
+    text = report(rows, n, errors, time.perf_counter() - start, command)
     path = pathlib.Path(out_dir) / REPORT
     atomic_write_text(path, text)
     return path
@@ -247,7 +425,8 @@ if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="6 replicates, no sampler")
     parser.add_argument("--replicates", type=int, default=None, help="default 200")
-    parser.add_argument("--sampler-minutes", type=float, default=None, help="default 10")
+    parser.add_argument("--sampler-minutes", type=float, default=None,
+                        help="cap on this session's sampling (default: none)")  # fmt: skip
     parser.add_argument("--out", default=pathlib.Path(__file__).resolve().parents[1] / "reports")
     args = parser.parse_args()
     print(main(args.out, args.quick, args.replicates, args.sampler_minutes))

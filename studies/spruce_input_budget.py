@@ -17,7 +17,10 @@ Two readings of the density's uncertainty:
 
 The posterior with the inputs: the sampler on the case with the mass
 (``inputs="marginal"``, ``J_p A A^T J_p^T`` added to ``V_Y``, pairing by likelihood as in
-``studies/spruce_badiane.py``), beside the same sampler with the inputs exact.
+``studies/spruce_badiane.py``), beside the same sampler with the inputs exact; the inputs
+drawn with the constants (:mod:`bayesplate.inputs_posterior`), each input's share of the
+posterior variance of E1, E2 and G12 from those joint draws, and the linear input model's
+certificate.
 
 Writes ``spruce_input_budget.md`` to ``out_dir``. Run:
 ``python studies/spruce_input_budget.py [--quick] [--out DIR]`` (quick: B only, no sampler).
@@ -37,6 +40,7 @@ import numpy as np
 from bayesplate.estimators import estimate
 from bayesplate.inputs import estimate_budget, input_jacobian
 from bayesplate.io import atomic_write_text, bundled_case_path, load_case
+from bayesplate.laminate import engineering_from_stiffness
 from bayesplate.model import PlateModel
 from bayesplate.quantities import ENGINEERING_KEYS, to_case_units
 
@@ -123,6 +127,8 @@ def _posterior_lines(posteriors, mass_budget):
             out.append(f"| {inputs} | {ENGINEERING_KEYS[j]} | {mean[j]:.4g} | {sd[j]:.3g} "
                        f"({100 * sd[j] / abs(mean[j]):.1f} %) | {hdi[0, j]:.4g} to "
                        f"{hdi[1, j]:.4g} | {budget_sd[j]:.3g} |")  # fmt: skip
+    if "marginal" in posteriors:
+        out += _sampled_inputs_lines(posteriors, mass_budget)
     if len(posteriors) == 2:
         shift = posteriors["marginal"][0].mean / posteriors["exact"][0].mean - 1
         out += ["", "The marginal posterior's means lie "
@@ -138,6 +144,57 @@ def _posterior_lines(posteriors, mass_budget):
                           f"{r.n_full} full solves while sampling, {s:.0f} s"
                           for k, (r, s) in posteriors.items()) + "."]  # fmt: skip
     return out
+
+
+def input_shares(result):
+    """Each drawn input's share of each constant's posterior variance, shape (k, 6).
+
+    The squared correlation of the constant with the input over the joint draws (one draw of
+    the inputs per kept draw of the constants, :mod:`bayesplate.inputs_posterior`): the
+    fraction of its posterior variance the input explains linearly (a first-order Sobol
+    index). The inputs are correlated a posteriori, so the shares need not add up.
+    """
+    post = result.input_posterior
+    e = engineering_from_stiffness(result.samples_b[post.rows])
+    return np.array([[np.corrcoef(post.draws[:, k], e[:, j])[0, 1] ** 2 for j in range(6)]
+                     for k in range(len(post.names))])  # fmt: skip
+
+
+def _sampled_inputs_lines(posteriors, mass_budget):
+    """The inputs' posterior, their shares of E1, E2, G12, the certificate."""
+    r = posteriors["marginal"][0]
+    post, cert = r.input_posterior, r.input_certificate
+    lines = [
+        "",
+        "The inputs drawn with the constants (one draw per kept draw, from their "
+        "Gaussian conditional: exact joint draws under the linear input model), case "
+        "units; the declared value and sd are the prior:",
+        "",
+        "| input | declared ± sd | posterior mean ± sd | 94 % HDI |",
+        "|---|---|---|---|",
+    ]
+    for key, row in post.table().items():
+        lines.append(f"| {key} | {row['declared']:.4g} ± {row['declared_sd']:.2g} | "
+                     f"{row['mean']:.4g} ± {row['sd']:.2g} | {row['hdi_3%']:.4g} to "
+                     f"{row['hdi_97%']:.4g} |")  # fmt: skip
+    shares = input_shares(r)
+    lines += ["", "Share of each constant's posterior variance: all inputs together, 1 - "
+              "(sd exact / sd marginal)^2 from the two chains; each input alone, its squared "
+              "correlation with the constant over the joint draws (`input_shares`); beside "
+              "B's linearised share of the same input (budget above, mass reading).", "",
+              "| constant | all inputs (sampled) | "
+              + " | ".join(f"{n} (sampled / B)" for n in post.names) + " |",
+              "|---|---|" + "---|" * len(post.names)]  # fmt: skip
+    sources = list(mass_budget.sources)
+    exact = posteriors.get("exact")
+    for j in SHOWN:
+        total = "-" if exact is None else f"{100 * (1 - (exact[0].sd[j] / r.sd[j]) ** 2):.0f} %"
+        cells = [f"{100 * shares[k, j]:.0f} % / "
+                 f"{100 * mass_budget.share[sources.index(n), j]:.0f} %"
+                 for k, n in enumerate(post.names)]  # fmt: skip
+        lines.append(f"| {ENGINEERING_KEYS[j]} | {total} | " + " | ".join(cells) + " |")
+    lines += ["", f"{cert}."]
+    return lines
 
 
 def _table(result, budget):

@@ -129,13 +129,15 @@ def test_prepare_marginalises_the_inputs_the_case_gives(plate1_thickness):
     assert np.array_equal(marginal.problem.pairing.modes, exact.problem.pairing.modes)
     added = marginal.problem.V_Y - exact.problem.V_Y
     modes = exact.problem.pairing.modes
-    expected = input_covariance(case, marginal.pilot.b, modes, mesh=(8, 4))
+    at = marginal.input_model.at  # the first marginal MAP (J_p again there: setup docstring)
+    assert np.linalg.norm(at - marginal.estimate.b) < 1e-3 * np.linalg.norm(at)
+    expected = input_covariance(case, at, modes, mesh=(8, 4))
     # (the subtraction leaves round-off of the largest V_Y entry, ~1e-16 relative)
     np.testing.assert_allclose(added, expected, rtol=1e-12,
                                atol=1e-14 * np.abs(marginal.problem.V_Y).max())  # fmt: skip
     # rank one (thickness only): J_h J_h^T sd_h^2 with d ln lambda / d ln h about 2 in
     # bending (1.5-1.95 on this thick plate's modes)
-    rel = input_jacobian(case, marginal.pilot.b, modes, mesh=(8, 4)).relative[:, 0]
+    rel = input_jacobian(case, at, modes, mesh=(8, 4)).relative[:, 0]
     assert np.all(rel[:12] > 1.4) and np.all(rel[:12] < 2.0)
     assert np.linalg.matrix_rank(added, tol=1e-9 * np.abs(added).max()) == 1
     # the MAP's deviations widen (E1, E2, G12: the thickness-bound ones)

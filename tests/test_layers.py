@@ -24,6 +24,7 @@ NUMERICS = (
     "posterior",
     "error_scale",
     "inputs",
+    "inputs_posterior",
     "estimators",
     "reduced",
     "sampling",

@@ -54,7 +54,29 @@ def sample_text(case, result):
             f"{mean[i]:#10.4g} {sd[i]:#9.3g} {hdi[0, i]:#9.4g} "
             f"{hdi[1, i]:#9.4g} {result.ess_bulk[i]:6.0f} {result.rhat[i]:6.3f}"
         )
-    return "\n".join(lines)
+    return "\n".join(lines + _input_rows(result))
+
+
+def _input_rows(result):
+    """The declared inputs' posterior beside their declared value and sd, and the certificate.
+
+    None of it when the inputs were exact (or none was declared).
+    """
+    lines = []
+    posterior = result.input_posterior
+    if posterior is not None:
+        lines.append(f"{'input':>13} {'declared':>10} {'decl. sd':>9} {'post mean':>10} "
+                     f"{'post sd':>9} {'hdi 3%':>9} {'hdi 97%':>9}  "
+                     f"({len(posterior.rows)} draws, one per kept draw)")  # fmt: skip
+        for key, row in posterior.table().items():
+            lines.append(f"{key:>13} {row['declared']:#10.4g} {row['declared_sd']:#9.3g} "
+                         f"{row['mean']:#10.4g} {row['sd']:#9.3g} {row['hdi_3%']:#9.4g} "
+                         f"{row['hdi_97%']:#9.4g}")  # fmt: skip
+    certificate = result.input_certificate
+    if certificate is not None:
+        warning = "" if certificate.passed else "WARNING: "
+        lines.append(f"{warning}{certificate}")
+    return lines
 
 
 def _inputs_line(case, inputs):
@@ -139,7 +161,8 @@ def _run_one(args):
         print(sample_text(case, result))
         if scale is not None:
             print(f"{scale} (one draw of s per kept draw of the constants)")
-    return 0 if result.converged else 1
+    certified = result.input_certificate is None or result.input_certificate.passed
+    return 0 if result.converged and certified else 1
 
 
 def _walker_pool(args):
@@ -169,9 +192,10 @@ def register(sub):
         "certified reduced-basis model around the B estimate (full-model fallback). Stops "
         "when the chain is longer than 50 autocorrelation times and every constant has "
         "--min-ess effective samples, or at --max-steps. The exit status is 1 when the "
-        "stopping rule was not met. Progress goes to standard error. Several case files: "
-        "plates of one material (one prior, the first case's, stated by every case), the six "
-        "constants shared; each plate is checked against the others (flagged at 1 %%).",
+        "stopping rule was not met, or when the linear input model (with input deviations "
+        "in the case) fails its certificate. Progress goes to standard error. Several case "
+        "files: plates of one material (one prior, the first case's, stated by every case), "
+        "the six constants shared; each plate is checked against the others (flagged at 1 %%).",
     )
     p.add_argument("case", nargs="+",
                    help="case file (TOML) or the name of a bundled case; several: plates of "

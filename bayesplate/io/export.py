@@ -28,6 +28,8 @@ __all__ = [
     "diagnosis_to_dict",
     "error_scale_to_dict",
     "estimate_to_dict",
+    "input_certificate_to_dict",
+    "input_posterior_to_dict",
     "jsonable",
     "sampling_to_dict",
     "save_figure",
@@ -317,7 +319,48 @@ def sampling_to_dict(result, case, mve=None, scale=None):
     }
     if scale is not None:
         out["error_scale"] = error_scale_to_dict(scale)
+    if result.input_posterior is not None:
+        out["inputs_posterior"] = input_posterior_to_dict(result.input_posterior)
+    if result.input_certificate is not None:
+        out["input_certificate"] = input_certificate_to_dict(result.input_certificate)
     return out
+
+
+def input_posterior_to_dict(posterior):
+    """The declared inputs' posterior in case units (mm, g, kg/m^3).
+
+    ``{"thickness_mm": {"declared", "declared_sd", "mean", "sd", "hdi_3%", "hdi_97%"}, ...,
+    "n_draws": n}``: the case's value and deviation (the prior) beside the posterior.
+    """
+    return {**posterior.table(), "n_draws": int(len(posterior.rows))}
+
+
+def input_certificate_to_dict(certificate):
+    """The linear input model's certificate (:class:`bayesplate.inputs_posterior.InputCertificate`).
+
+    The largest error relative to an eigenvalue and in units of a mode's declared deviation,
+    the pass mark, ``passed`` and ``status`` (``"ok"`` or ``"nonlinear"``), where the largest
+    error sits, and every error: ``relative[reading]["+"|"-"]``, one per paired mode.
+    """
+    worst = certificate.worst
+    if worst is not None:
+        worst = {"input": worst[0], "sign": worst[1], "position": worst[2]}
+    relative = {
+        name: {"+": certificate.relative[k, 0].tolist(), "-": certificate.relative[k, 1].tolist()}
+        for k, name in enumerate(certificate.names)
+    }
+    return {
+        "max_relative_error": certificate.max_relative,
+        "max_error_in_sd": certificate.max_in_sd,
+        "fraction": certificate.fraction,
+        "n_sd": certificate.n_sd,
+        "passed": bool(certificate.passed),
+        "status": certificate.status,
+        "worst": worst,
+        "n_solves": certificate.n_solves,
+        "relative": relative,
+        "text": str(certificate),
+    }
 
 
 def _fit_summary(fit_, dof, p_value):

@@ -274,7 +274,30 @@ def _sample_lines(result):
         "",
         *_table(["constant", "mean ± sd", "94 % HDI", "ESS (bulk)", "R-hat"], rows),
         "",
+        *_input_rows(result),
     ]
+
+
+def _input_rows(result):
+    """The declared inputs' posterior beside the case's values, and the linear model's check."""
+    rows = [[key, f"{r['declared']:#.4g} ± {r['declared_sd']:#.2g}",
+             f"{r['mean']:#.4g} ± {r['sd']:#.2g}", f"{r['hdi_3%']:#.4g} to {r['hdi_97%']:#.4g}"]
+            for key, r in (result.get("inputs_posterior") or {}).items()]  # fmt: skip
+    lines = []
+    if rows:
+        lines += [
+            "The measured inputs, drawn once per kept draw of the constants from their "
+            "Gaussian conditional given them (exact joint draws under the linear input "
+            "model; case units):",
+            "",
+            *_table(["input", "declared ± sd", "posterior mean ± sd", "94 % HDI"], rows),
+            "",
+        ]
+    certificate = result.get("input_certificate")
+    if certificate:
+        mark = "" if certificate["passed"] else "**Warning:** "
+        lines += [f"{mark}{certificate['text']}.", ""]
+    return lines
 
 
 def _scale_lines(result):

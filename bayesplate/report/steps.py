@@ -213,4 +213,13 @@ def sample_step(case, model, pairing, options, fast=None):
         "inputs": inputs,
         "inputs_given": describe_inputs(case.plate),
         "error_scale": scale,
+        "inputs_posterior": None if r.input_posterior is None else r.input_posterior.table(),
+        "input_certificate": _certificate_data(r.input_certificate),
     }
+
+
+def _certificate_data(certificate):
+    """The linear input model's certificate as plain data (None when none was made)."""
+    if certificate is None:
+        return None
+    return {"text": str(certificate), "passed": bool(certificate.passed)}

@@ -30,7 +30,10 @@ Uncertain inputs
     (:mod:`bayesplate.inputs`), a constant matrix: the fast model needs no new parameters,
     only a box placed with the marginal ``P``. ``V_Y`` is then full: the pointwise terms are
     leave-one-out conditionals and the Ritz screen bounds the misfit on the sub-block of the
-    eigenvalues it constrains.
+    eigenvalues it constrains. After the chain, the declared inputs are drawn once per kept
+    draw from their Gaussian conditional given ``b`` (:mod:`bayesplate.inputs_posterior`):
+    exact draws of the joint posterior under the linear input model (collapsed sampling),
+    whose certificate at the MAP (full solves at +- 2 sd of each input) the result carries.
 
 Parameterisation and moves
     Walkers move in whitened log coordinates (:class:`WhitenedLogPosterior`): the

@@ -11,6 +11,7 @@ from __future__ import annotations
 import time
 from dataclasses import replace
 
+from ..inputs_posterior import inputs_from_chain
 from .chain import sample_problem
 from .seeding import resolve_rng, streams
 from .setup import prepare
@@ -76,14 +77,18 @@ fast, fast_options
     inputs : {"auto", "exact", "marginal"}
         Of :func:`prepare`: the plate's measured inputs exact, or their deviations
         marginalised (``"auto"``: marginal when the case gives any). The result's
-        ``settings["inputs"]`` says which was used.
+        ``settings["inputs"]`` says which was used. Marginalised, the declared readings are
+        then drawn once per kept draw of the constants (at most 4000, a seeded subset) from
+        their Gaussian conditional (:mod:`bayesplate.inputs_posterior`; the third stream of
+        `rng`): exact joint draws under the linear input model, whose certificate at the MAP
+        the result carries (``input_certificate``).
 
     Returns
     -------
     SamplingResult
     """
     started = time.perf_counter()
-    entropy, build_rng, walk_rng = streams(resolve_rng(rng, seed, "sample"))
+    entropy, build_rng, walk_rng, inputs_rng = streams(resolve_rng(rng, seed, "sample"), 3)
     given = setup is not None
     if setup is None:
         setup = prepare(
@@ -123,11 +128,19 @@ fast, fast_options
         forward=setup.sampling_forward(),
         box=setup.box,
     )
+    input_posterior, drawn = None, time.perf_counter()
+    if setup.input_model is not None:  # one draw of the readings per kept draw of b
+        input_posterior = inputs_from_chain(setup.problem, result.samples_b,
+                                            setup.sampling_forward(), setup.input_model,
+                                            inputs_rng)  # fmt: skip
+    drawn = time.perf_counter() - drawn
     fallbacks = {}
     if certified is not None:
         fallbacks = {k: certified.fallbacks[k] - fallbacks0.get(k, 0) for k in certified.fallbacks}
     n_full = result.n_forward if certified is None else sum(fallbacks.values())
     timings = {**setup.timings, "sampling": result.wall_time}
+    if input_posterior is not None:
+        timings["inputs"] = drawn
     # total: the setup's time too when it was prepared beforehand
     timings["total"] = time.perf_counter() - started + (sum(setup.timings.values()) if given else 0)
     settings = {**result.settings, "seed_entropy": entropy, "case": case.name,
@@ -136,6 +149,8 @@ fast, fast_options
                 "full_solves_setup": setup.n_full_solves, "inputs": setup.inputs}  # fmt: skip
     return replace(
         result,
+        input_posterior=input_posterior,
+        input_certificate=setup.input_certificate,
         n_full=n_full,
         fallbacks=fallbacks,
         certificate=setup.certificate,

@@ -91,9 +91,15 @@ class SamplingResult:
         The B estimate (the MAP and its linearised covariance ``P``) on the same problem.
     timings : dict
         Seconds: ``pilot``, ``build`` (fast model, certification included), ``map``,
-        ``sampling``, ``total`` (the setup included, also when prepared beforehand).
+        ``sampling``, ``total`` (the setup included, also when prepared beforehand); with
+        the inputs drawn, ``input_certificate`` and ``inputs`` (their draws).
     settings : dict
         Seed entropy, walkers, moves, box, stopping settings.
+    input_posterior : bayesplate.inputs_posterior.InputPosterior or None
+        The declared inputs' posterior (inputs marginalised; one conditional draw per kept
+        draw of ``b``); None with the inputs exact or none declared.
+    input_certificate : bayesplate.inputs_posterior.InputCertificate or None
+        The linear input model against full solves at the MAP.
     """
 
     idata: object = field(repr=False)
@@ -131,6 +137,8 @@ class SamplingResult:
     estimate: object = field(default=None, repr=False)
     timings: dict = field(default_factory=dict)
     settings: dict = field(default_factory=dict, repr=False)
+    input_posterior: object = field(default=None, repr=False)
+    input_certificate: object = None
 
     @property
     def ess_per_second(self):

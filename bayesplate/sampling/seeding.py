@@ -40,17 +40,18 @@ def resolve_rng(rng, seed, caller):
     return seed
 
 
-def streams(rng):
-    """``(entropy or None, build, walk)``: the two generators a sampler run draws from.
+def streams(rng, n=2):
+    """``(entropy or None, build, walk[, inputs])``: the generators a sampler run draws from.
 
     ``build`` seeds :func:`~bayesplate.sampling.setup.prepare` (the fast model's designs),
     ``walk`` the chain; :func:`~bayesplate.sampling.pipeline.sample` splits its ``rng`` so,
     and a caller that prepares the setup itself (to keep it) gets the same chain by seeding
-    ``prepare`` with ``build``.
+    ``prepare`` with ``build``. With ``n=3`` a third, ``inputs``, draws the measured inputs
+    after the chain (:mod:`bayesplate.inputs_posterior`); the first two are the same
+    whatever ``n`` (numpy's spawned children are numbered in order).
     """
     entropy, g = generator(rng)
-    build, walk = g.spawn(2)
-    return entropy, build, walk
+    return (entropy, *g.spawn(n))
 
 
 def generator(rng):
