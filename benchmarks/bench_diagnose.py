@@ -1,13 +1,15 @@
 """Benchmark of `diagnose` over the concealment study's recordings (issue 12: fast everywhere).
 
 Each recording of ``studies/concealment.py`` (its scenarios, recordings and seeds; the
-Frederiksen plate, 14 frequencies, 50 x 50 mesh) is diagnosed in a fresh process, one at a
-time: wall time, verdict and chosen candidate. With ``--base TREE`` the same recordings are
-also diagnosed by the code of another checkout (``PYTHONPATH=TREE``; e.g. ``git worktree add
-/tmp/diag-base 9f5ebd1``) for the ratio.
+Frederiksen plate, 14 frequencies, its 50 x 50 mesh) is diagnosed in a fresh process, one at
+a time, with the command line's two workers (``--workers``): wall time, processor time,
+verdict and chosen candidate. With ``--base TREE`` some recordings are also diagnosed by the
+code of another checkout (``PYTHONPATH=TREE``; e.g. ``git worktree add /tmp/diag-base
+fb3cd20``), in the same run, for the ratio. The scaling rows time one recording on three
+meshes and with three numbers of frequencies.
 
 Writes ``benchmark_diagnose.md`` to ``out_dir``. Run:
-``python benchmarks/bench_diagnose.py [--runs 0 3 ...] [--base TREE [--base-runs 0 3]]``.
+``python benchmarks/bench_diagnose.py [--runs 0 3 ...] [--base TREE --base-runs 0 2]``.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import datetime
 import json
 import os
 import pathlib
+import resource
 import statistics
 import subprocess
 import sys
@@ -28,13 +31,16 @@ import _machine  # noqa: E402  (this folder's shared helper)
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 REPORT = "benchmark_diagnose.md"
 TARGET_MEDIAN_S, TARGET_WORST_S = 30.0, 90.0
+#: The recording, meshes and frequency counts of the scaling rows.
+SCALING_RUN, SCALING_MESHES, SCALING_FREQUENCIES = 2, ((24, 24), (36, 36), (50, 50)), (8, 11, 14)
 
 
-def one(index, quick=False):
+def one(index, workers, quick=False, mesh=None, frequencies=None):
     """Diagnose scenario ``index`` of the concealment study; a JSON line on stdout.
 
     ``quick``: on the concealment study's quick mesh (12 x 6; recordings on 24 x 12), a
-    regression run of this script, not a measurement.
+    regression run of this script, not a measurement. ``mesh`` and ``frequencies``: another
+    working mesh, or only the lowest ``frequencies`` recorded (the scaling rows).
     """
     import numpy as np
 
@@ -46,97 +52,150 @@ def one(index, quick=False):
 
     label, physics, size, theta = scenarios()[index]
     case = load_case(bundled_case_path("frederiksen_t300"))
-    mesh = (12, 6) if quick else case.mesh
+    mesh = (12, 6) if quick else tuple(mesh or case.mesh)
     model = PlateModel.from_case(case, mesh=mesh)
     fine = PlateModel.from_case(case, mesh=(2 * mesh[0], 2 * mesh[1]))
     rng = np.random.default_rng(np.random.SeedSequence(SEED).spawn(index + 1)[index])
     f = recordings(case, fine, physics, theta, rng)
+    if frequencies:
+        f = f[:frequencies]
     blind = case.with_measured(frequency_Hz=f, sigma_Hz=NOISE * f)
     load = os.getloadavg()[0]
-    start = time.perf_counter()
-    d = diagnose(blind, model=model, rng=SEED)
-    seconds = time.perf_counter() - start
+    start, cpu = time.perf_counter(), _cpu()
+    d = diagnose(blind, model=model, rng=SEED, pairing="order", workers=workers)
+    seconds, cpu = time.perf_counter() - start, _cpu() - cpu
     chosen = None
     if d.chosen is not None:
         chosen = d.chosen.name + "".join(f" ({v})" for v in d.chosen.parameters.values()
                                          if isinstance(v, str))  # fmt: skip
+    refined = sum(c.fit.refined for c in d.candidates)
     print(json.dumps({"index": index, "effect": label, "size": size, "seconds": seconds,
-                      "verdict": d.verdict, "chosen": chosen, "p_value": d.p_value,
+                      "cpu": cpu, "verdict": d.verdict, "chosen": chosen,
+                      "p_value": d.p_value, "refined": refined, "mesh": list(mesh),
+                      "frequencies": int(f.size), "workers": workers,
                       "load": [load, os.getloadavg()[0]]}))  # fmt: skip
 
 
-def run(index, tree, quick=False):
+def _cpu():
+    """Processor seconds of this process and its finished children (forked workers)."""
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
+def run(index, tree, workers, quick=False, mesh=None, frequencies=None):
     """Scenario ``index`` in a fresh process on the code of ``tree``; its result dict."""
     env = {**os.environ, "PYTHONPATH": str(tree)}
-    command = [sys.executable, __file__, "--one", str(index), *(["--quick"] if quick else [])]
+    command = [sys.executable, __file__, "--one", str(index), "--workers", str(workers),
+               *(["--quick"] if quick else []),
+               *(["--mesh", f"{mesh[0]}x{mesh[1]}"] if mesh else []),
+               *(["--frequencies", str(frequencies)] if frequencies else [])]  # fmt: skip
     out = subprocess.run(command, env=env, check=True, capture_output=True,
                          text=True).stdout  # fmt: skip
     return json.loads(out.strip().splitlines()[-1])
 
 
-def write_report(rows, base_rows, info, out_dir, base_label):
+def write_report(rows, base_rows, scaling, info, out_dir, base_label, started):
     seconds = [r["seconds"] for r in rows]
     med, worst = statistics.median(seconds), max(seconds)
+    workers = rows[0]["workers"]
     lines = [
-        f"Made by `python benchmarks/bench_diagnose.py` on {datetime.date.today().isoformat()}.",
+        f"Made by `python benchmarks/bench_diagnose.py` on {started}.",
         "",
         "# diagnose: time over the concealment study's recordings",
         "",
         f"Machine: {info['cpu']}, {info['nproc']} processors; {info['platform']}; Python "
-        f"{info['python']}, numpy {info['numpy']}, scipy {info['scipy']}. One worker; each "
-        "run in a fresh process; load = 1-minute load average before / after (the machine "
-        "was shared).",
+        f"{info['python']}, numpy {info['numpy']}, scipy {info['scipy']}. {workers} worker(s) "
+        "(the command line's default), each run in a fresh process, one at a time; wall "
+        "time and processor time (the process and its workers); load = 1-minute load average "
+        "before / after.",
         "",
         f"Targets: median under {TARGET_MEDIAN_S:.0f} s, worst under {TARGET_WORST_S:.0f} s. "
-        f"Here: median {med:.0f} s, worst {worst:.0f} s over {len(rows)} recordings.",
+        f"Here: median {med:.0f} s, worst {worst:.0f} s over {len(rows)} recordings: "
+        + ("met." if med < TARGET_MEDIAN_S and worst < TARGET_WORST_S else "NOT met."),
         "",
-        "| # | effect | size | verdict | chosen | time (s) | load | before (s) | before: verdict |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| # | effect | size | verdict | chosen | refined | wall (s) | CPU (s) | load | "
+        "base wall (s) | base CPU (s) | base verdict | base / now |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     base = {r["index"]: r for r in base_rows}
     for r in rows:
         b = base.get(r["index"])
-        before = ("-", "-") if b is None else (
-            f"{b['seconds']:.0f}", f"{b['verdict']} {b['chosen'] or ''}".strip())  # fmt: skip
+        cells = ["-"] * 4
+        if b is not None:
+            cells = [f"{b['seconds']:.0f}", f"{b['cpu']:.0f}",
+                     f"{b['verdict']} {b['chosen'] or ''}".strip(),
+                     f"{b['seconds'] / r['seconds']:.1f}x"]  # fmt: skip
         lines.append(
             f"| {r['index']} | {r['effect']} | {r['size']} | {r['verdict']} | "
-            f"{r['chosen'] or '-'} | {r['seconds']:.0f} | {r['load'][0]:.1f} / "
-            f"{r['load'][1]:.1f} | {before[0]} | {before[1]} |"
+            f"{r['chosen'] or '-'} | {r['refined']} | {r['seconds']:.0f} | {r['cpu']:.0f} | "
+            f"{r['load'][0]:.1f} / {r['load'][1]:.1f} | " + " | ".join(cells) + " |"
         )
     pairs = [(base[r["index"]]["seconds"], r["seconds"]) for r in rows if r["index"] in base]
     if pairs:
         ratios = [b / n for b, n in pairs]
-        lines += ["", f"Before ({base_label}) / now, same recordings: "
+        lines += ["", f"Base ({base_label}) / now, wall time on the same recordings in this run: "
                   + ", ".join(f"{x:.1f}x" for x in ratios)
                   + f" (median {statistics.median(ratios):.1f}x)."]  # fmt: skip
+    if scaling:
+        lines += ["", "## How the cost grows", "",
+                  f"Recording {SCALING_RUN} ({rows[0]['effect'] if rows else ''}), diagnose on "
+                  "other meshes (recordings on twice as fine a mesh each way) and with only "
+                  "its lowest frequencies:", "",
+                  "| mesh | frequencies | unknowns | wall (s) | CPU (s) | verdict |",
+                  "|---|---|---|---|---|---|"]  # fmt: skip
+        for r in scaling:
+            nx, ny = r["mesh"]
+            lines.append(f"| {nx} x {ny} | {r['frequencies']} | {8 * (nx + 1) * (ny + 1)} | "
+                         f"{r['seconds']:.0f} | {r['cpu']:.0f} | {r['verdict']} "
+                         f"{r['chosen'] or ''} |")  # fmt: skip
     path = pathlib.Path(out_dir) / REPORT
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines) + "\n")
     return path
 
 
-def main(out_dir, runs, base=None, base_runs=(), quick=False):
-    rows, base_rows = [], []
+def main(out_dir, runs, workers, base=None, base_runs=(), quick=False, scaling=False):
+    started = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    rows, base_rows, scale_rows = [], [], []
+    info = _machine.machine()
     for i in runs:
-        rows.append(run(i, ROOT, quick))
+        rows.append(run(i, ROOT, workers, quick))
         print(json.dumps(rows[-1]), flush=True)
         if base is not None and i in base_runs:
-            base_rows.append(run(i, base))
+            base_rows.append(run(i, base, workers))
             print("base", json.dumps(base_rows[-1]), flush=True)
-        write_report(rows, base_rows, _machine.machine(), out_dir, str(base))
-    return rows, base_rows
+        write_report(rows, base_rows, scale_rows, info, out_dir, str(base), started)
+    if scaling:
+        for mesh in SCALING_MESHES:
+            for frequencies in SCALING_FREQUENCIES if mesh == SCALING_MESHES[-1] else (14,):
+                scale_rows.append(run(SCALING_RUN, ROOT, workers, mesh=mesh,
+                                      frequencies=frequencies))  # fmt: skip
+                print("scaling", json.dumps(scale_rows[-1]), flush=True)
+                write_report(rows, base_rows, scale_rows, info, out_dir, str(base), started)
+    return rows, base_rows, scale_rows
 
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--one", type=int, help=argparse.SUPPRESS)
-    parser.add_argument("--runs", type=int, nargs="*", default=list(range(12)))
+    parser.add_argument("--mesh", help=argparse.SUPPRESS)
+    parser.add_argument("--frequencies", type=int, help=argparse.SUPPRESS)
+    parser.add_argument("--runs", type=int, nargs="*", default=None)
+    parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--base", help="another checkout to compare with")
-    parser.add_argument("--base-runs", type=int, nargs="*", default=[0, 3])
+    parser.add_argument("--base-runs", type=int, nargs="*", default=[0, 2])
+    parser.add_argument("--scaling", action="store_true", help="the mesh and frequency rows")
     parser.add_argument("--out", default=ROOT / "reports")
     parser.add_argument("--quick", action="store_true", help="12 x 6 mesh: a regression run")
     args = parser.parse_args()
     if args.one is not None:
-        one(args.one, args.quick)
+        mesh = tuple(int(v) for v in args.mesh.split("x")) if args.mesh else None
+        one(args.one, args.workers, args.quick, mesh, args.frequencies)
     else:
-        main(args.out, args.runs, args.base, args.base_runs, args.quick)
+        sys.path.insert(0, str(ROOT / "studies"))
+        from concealment import scenarios
+
+        runs = args.runs if args.runs is not None else list(range(len(scenarios())))
+        main(args.out, runs, args.workers, args.base, args.base_runs, args.quick,
+             args.scaling)  # fmt: skip

@@ -98,9 +98,10 @@ def test_benchmark_diagnose_quick(tmp_path):
     # a control recording of the concealment study on the quick mesh lands in the table with
     # its verdict (nothing concealed: consistent) and the time is written with its target
     bench = load_study(ROOT / "benchmarks" / "bench_diagnose.py")
-    rows, base_rows = bench.main(tmp_path, [0], quick=True)
-    assert [r["index"] for r in rows] == [0] and base_rows == []
+    rows, base_rows, scaling = bench.main(tmp_path, [0], 2, quick=True)
+    assert [r["index"] for r in rows] == [0] and base_rows == [] and scaling == []
     assert rows[0]["verdict"] == "consistent" and rows[0]["chosen"] is None
+    assert rows[0]["workers"] == 2 and rows[0]["cpu"] > 0
     text = (tmp_path / bench.REPORT).read_text()
     assert text.startswith("Made by `python benchmarks/bench_diagnose.py`")
     assert "| 0 | control | - | consistent | - |" in text

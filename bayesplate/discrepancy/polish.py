@@ -58,10 +58,11 @@ log = logging.getLogger("bayesplate.discrepancy.fit")  # the fits' records, as b
 FINISH_MARGIN = 2.0
 #: Newton decrement (``chi2 + chi2_prior``) under which a point is the full model's optimum
 #: (times the objective where that is above one: :func:`_tolerance`): the objective is then
-#: within about that of its optimum (the evidence within half of it, in nats) and a whitened
-#: step of at most its square root (1e-3 of a prior deviation) is left. The answer does not
-#: depend on the round-off of the path: the rounds from two nearby starts stay together.
-DECREMENT_TOL = 1e-6
+#: within about that of its optimum (the evidence within half of it, in nats: far below what
+#: a verdict turns on) and a whitened step of at most its square root (a hundredth of a
+#: prior deviation) is left. The answer does not depend on the round-off of the path: the
+#: rounds from two nearby starts stay together.
+DECREMENT_TOL = 1e-4
 #: Rounds at most, the polish's included.
 MAX_ROUNDS = 6
 #: Whitened step under which the optimum of the pencil exact at a point is that point.
@@ -74,9 +75,11 @@ RADIUS = 1.0
 #: Share of the predicted decrease a proposal must achieve on the full model to be taken.
 ACCEPT = 0.1
 #: ``ftol``, ``xtol`` and ``gtol`` of the fits on a pencil (cheap: converged tightly).
-PENCIL_TOL = 1e-12
-#: Evaluation cap of a fit on a pencil.
-PENCIL_NFEV = 200
+PENCIL_TOL = 1e-10
+#: Evaluation cap of a fit on a pencil: a smooth one converges in 10 to 50; where the
+#: objective has kinks (a hole's or a patch's edge crossing an element's) more buy nothing,
+#: the next round's pencil is better.
+PENCIL_NFEV = 60
 #: Whitened distance to a bound under which an unknown is at it.
 AT_BOUND = 1e-6
 
@@ -137,7 +140,7 @@ class Settled:
         return self.problem.pencil.snapshot
 
 
-def polish_and_finish(problem, polish, starts, rounds=None):
+def polish_and_finish(problem, polish, starts, rounds=None, prune=True):
     """The rough optima ``starts`` polished and, where they can still win, settled.
 
     Parameters
@@ -152,6 +155,8 @@ def polish_and_finish(problem, polish, starts, rounds=None):
     rounds : int, optional
         Rounds at most per optimum (default :data:`MAX_ROUNDS`). Fewer give provisional
         answers: their ``check.settled`` is False unless they settled within them.
+    prune : bool
+        Leave out the optima whose promise cannot win (False: settle every distinct one).
 
     Returns
     -------
@@ -168,7 +173,8 @@ def polish_and_finish(problem, polish, starts, rounds=None):
     first = sorted((p for p in first if p is not None), key=lambda p: p.promise)
     settled, far, error = [], [], 0.0
     for state in first:
-        if settled and state.promise > settled[0].check.full_objective + FINISH_MARGIN + error:
+        if prune and settled and state.promise > settled[0].check.full_objective \
+                + FINISH_MARGIN + error:  # fmt: skip
             far.append(state)
             continue
         if any(_same(problem, state.promise_z, s.result.x) for s in settled):

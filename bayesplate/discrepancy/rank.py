@@ -20,6 +20,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .fit import JointFit, JointProblem, fit, rough_fit, settle
+from .local import DISTINCT
 from .nominal import nominal_polisher
 from .parallel import fork_map
 from .pencil import candidate_pencil
@@ -44,6 +45,11 @@ OTHER_BASIN_STARTS = 3
 #: Distinct reduced optima of a candidate finished on the working mesh (the best one there
 #: is its fit: a reduced model of a strong taper can misjudge which basin is best).
 FINISHED = 3
+#: Nats below the best refined gain within which a fit that did not settle is settled further
+#: (twice the ambiguity margin of :func:`.diagnose.diagnose`: the chosen one and its rivals).
+LEADERS = 4.0
+#: Nats a nominal refit from a candidate's constants must gain to replace the nominal fit.
+IMPROVEMENT = 1e-3
 #: Rounds at most of a refinement on the coarse mesh before the working mesh's (cheap ones:
 #: they bring a rough optimum close, where the working mesh's rounds converge fast).
 COARSE_ROUNDS = 4
@@ -90,9 +96,11 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
        mesh (:func:`.pencil.candidate_pencil`), corrected by the fine-to-coarse eigenvalue
        ratio at the nominal fit;
     2. *settled*: every candidate that gains more than ``level["margin"]`` there is refined
-       to its own optimum on the working mesh: its best distinct rough optima polished and
-       settled in rounds of reduced models of the working mesh, each checked by the
-       finite-element model (:mod:`.polish`).
+       to its own optimum on the working mesh: its best distinct rough optima settled in
+       rounds on the coarse mesh, then in rounds of reduced models of the working mesh, each
+       checked by the finite-element model (:mod:`.polish`);
+    3. *again*: a refined fit near the top whose rounds stopped before it settled goes on
+       (:func:`_unsettled_leaders`).
 
     Only refined candidates can be chosen. Every variant (a taper per direction) is a
     candidate of its own.
@@ -175,10 +183,19 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
             coarse = problem.on(level["coarse"], level["scale"])
             polish = _polisher(coarse, physics, level["coarse"], level["coarse_modes"],
                                level["scale"])  # fmt: skip
-            settled, _ = polish_and_finish(coarse, polish, starts, COARSE_ROUNDS)
+            # every distinct rough optimum: the coarse rounds, not a first pencil's promise,
+            # say which basin is best (a pencil built far from a basin misjudges it)
+            settled, _ = polish_and_finish(coarse, polish, starts, COARSE_ROUNDS, prune=False)
             starts = [s.result.x for s in settled]
         polish = _polisher(problem, physics, model, level["modes"])
         return _result(physics, model, nominal, settle(problem, polish, starts))
+
+    def again(item):  # phase 3: a leader's rounds continued from its answer
+        physics, fitted = item
+        problem = problem_of(physics)
+        polish = _polisher(problem, physics, model, level["modes"])
+        result = settle(problem, polish, [problem.pack(fitted.b, fitted.theta)])
+        return _result(physics, model, nominal, replace(result, alternatives=fitted.alternatives))
 
     # the candidates with most parameters take longest: they go first to the workers
     order = sorted(range(len(physics_list)),
@@ -192,6 +209,9 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
               ", ".join(f"{_label(r)} {r.log_evidence_gain:+.1f}" for r in results),
               ", ".join(_label(results[i]) for i in todo))  # fmt: skip
     _phase(stages, "settled", settled, [(i, physics_list[i], results[i].fit) for i in todo],
+           results, hits, level["workers"])  # fmt: skip
+    todo = _unsettled_leaders(results)
+    _phase(stages, "again", again, [(i, physics_list[i], results[i].fit) for i in todo],
            results, hits, level["workers"])  # fmt: skip
     for r, hit, physics in zip(results, hits, physics_list, strict=True):
         where = "" if r.fit.refined else " (coarse mesh, not refined)"
@@ -239,6 +259,20 @@ def _phase(stages, name, compute, items, results, hits, workers):
         hits[i] = hits[i] and found
         if stages is not None and workers > 1 and not found:  # a worker's put may not arrive
             stages.put(key(physics, earlier), value)
+
+
+def _unsettled_leaders(results):
+    """Indices of the refined fits near the top whose rounds stopped before they settled.
+
+    Those within :data:`LEADERS` nats of the best refined gain: the verdict names them (the
+    chosen one, a rival that makes it ambiguous), so their rounds go on (phase 3 of
+    :func:`rank`); the others are reported as they stopped, flagged.
+    """
+    refined = [i for i, r in enumerate(results) if r.fit.refined]
+    best = max((results[i].log_evidence_gain for i in refined), default=-np.inf)
+    return [i for i in refined if results[i].fit.check is not None
+            and not results[i].fit.check.settled
+            and results[i].log_evidence_gain >= best - LEADERS]  # fmt: skip
 
 
 def _result(physics, model, nominal, fitted):
@@ -313,8 +347,10 @@ def improved_nominal(problem, nominal, ranked, level):
     A candidate's fit starts from the nominal constants and may walk into a better basin of
     the constants alone; its gain would then be credited to the physics. Re-fitting the
     nominal model from there keeps the gains honest. Each re-fit runs on the nominal
-    reduced model (``level["rough"]``; else the corrected coarse mesh) first and is refined
-    only when it beats the nominal evidence there.
+    reduced model (``level["rough"]``; else the corrected coarse mesh) first; it is settled
+    on the working mesh only when it reaches another optimum than the nominal one (whitened
+    distance above ``DISTINCT``) that beats the nominal evidence there, and taken only when
+    it beats it by more than :data:`IMPROVEMENT` on the working mesh.
 
     Returns
     -------
@@ -322,18 +358,17 @@ def improved_nominal(problem, nominal, ranked, level):
         None when no candidate leads to a better nominal fit.
     """
     total = nominal.chi2 + nominal.chi2_prior
+    rough = level.get("rough") or problem.on(level["coarse"], level["scale"])
+    here = problem.pack(nominal.b)
     best = nominal
     for c in ranked:
-        if c.fit.refined and c.fit.chi2 + c.fit.chi2_prior < total - 0.5:
-            trial = fit(
-                problem,
-                [problem.pack(c.fit.b)],
-                coarse=level["coarse"],
-                scale=level["scale"],
-                rough=level.get("rough"),
-                refine=lambda rough, bar=best.log_evidence: rough.log_evidence > bar,
-                polish=nominal_polisher(problem),
-            )
-            if trial.refined and trial.log_evidence > best.log_evidence:
-                best = trial
+        if not (c.fit.refined and c.fit.chi2 + c.fit.chi2_prior < total - 0.5):
+            continue
+        start = rough_fit(rough, [problem.pack(c.fit.b)], 200, 1)
+        z = start.rough_optima[0]
+        if np.linalg.norm(z - here) <= DISTINCT or start.log_evidence <= best.log_evidence:
+            continue  # the nominal optimum again, or no better on the reduced model
+        trial = settle(problem, nominal_polisher(problem), [z])
+        if trial.log_evidence > best.log_evidence + IMPROVEMENT:
+            best = trial
     return None if best is nominal else best
