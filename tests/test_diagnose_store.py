@@ -132,8 +132,10 @@ def test_a_store_changes_no_number_and_a_full_store_computes_nothing(setting, re
     again, _ = _run(setting, store, say=said.append)
     assert again == reference
     assert store.hits == stages and store.puts == stages
-    # announced once per result: the nominal fit, the refit, each candidate and the pair
+    # each stage used announced, on its result's line: the nominal fit, the refit, each
+    # candidate and the pair (5 lines, 8 stages)
     assert sum("taken from the store" in line for line in said) == 5
+    assert sum(line.count("taken from the store") for line in said) == stages
 
 
 def test_workers_with_a_directory_store_and_a_resume_from_part_of_it(setting, reference,

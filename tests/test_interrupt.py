@@ -262,7 +262,7 @@ def test_report_killed_again_and_again_resumes_to_the_same_numbers(tmp_path, rep
 # ----------------------------------------------------------------------------- diagnose
 
 _DIAGNOSE = ["diagnose", CASE, "--mesh", 4, 2, "--seed", 1, "--workers", 2, "--json", "out.json"]
-_STORED = "taken from the store"  # the progress line of a stage found in the store
+_STORED = "taken from the store"  # said once for each stage found in the store
 
 
 def _run_out(args, cwd):

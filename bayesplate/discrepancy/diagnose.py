@@ -396,6 +396,7 @@ def diagnose(
     if outcome != "consistent" and region is not None and mirrors:
         notes.append("the plate's symmetry makes the mirror images of the located region fit "
                      "equally well from frequencies alone")  # fmt: skip
+    notes += _unsettled_notes(nominal, [c for c in (chosen, rival) if c is not None])
     say(f"verdict: {outcome}" + (f" ({chosen.name})" if chosen else "")
         + (f" or {rival.name}" if rival else ""))  # fmt: skip
     return Diagnosis(
@@ -403,6 +404,20 @@ def diagnose(
         chosen, refit_dof, refit_p, loose, sigma_Hz, err, measured.frequency_Hz, notes, scans,
         probabilities, rival, separation,
     )  # fmt: skip
+
+
+def _unsettled_notes(nominal, named):
+    """A note for each fit the verdict rests on whose full-model check did not settle."""
+    notes = []
+    for label, fit_ in [("the nominal fit", nominal), *((c.name, c.fit) for c in named)]:
+        check = fit_.check
+        if check is not None and not check.settled:
+            notes.append(
+                f"{label}: the full model's objective {check.full_objective:.4g} could still "
+                f"fall by {check.decrement:.2g} (a Newton step) after {check.rounds} rounds on "
+                "reduced models; its numbers are those of the last round"
+            )
+    return notes
 
 
 def _paired(fit_, modes):

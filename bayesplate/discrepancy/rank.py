@@ -201,7 +201,7 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
     order = sorted(range(len(physics_list)),
                    key=lambda i: -len(physics_list[i].parameters(model, nominal.b)))  # fmt: skip
     results = [None] * len(physics_list)
-    hits = [True] * len(physics_list)
+    hits = [[] for _ in physics_list]  # the phases of each taken from the store
     _phase(stages, "rough", rough_stage, [(i, physics_list[i], None) for i in order],
            results, hits, level["workers"])  # fmt: skip
     todo = _to_refine(results, level["margin"])
@@ -217,7 +217,7 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
         where = "" if r.fit.refined else " (coarse mesh, not refined)"
         if r.fit.check is not None and not r.fit.check.settled:
             where += f" (not settled in {r.fit.check.rounds} rounds: see the notes)"
-        where += " (taken from the store)" if hit else ""
+        where += "".join(f" ({phase} fit taken from the store)" for phase in hit)
         variant = "".join(f" ({v})" for v in physics.settings().values())
         say(f"{r.name}{variant}: chi2 = {r.fit.chi2:.1f}, evidence gain "
             f"{r.log_evidence_gain:+.1f}{where}")  # fmt: skip
@@ -234,8 +234,9 @@ def _phase(stages, name, compute, items, results, hits, workers):
     """One phase of :func:`rank`: ``compute((physics, earlier fit))`` for each item, stored.
 
     ``items`` are ``(index, physics, earlier fit or None)``; each result goes to
-    ``results[index]`` (its ``fit.physics`` the very object given), ``hits[index]`` stays
-    True only if every phase took it from the store.
+    ``results[index]`` (its ``fit.physics`` the very object given); the phase's name is
+    appended to ``hits[index]`` when it came from the store (each stage used is announced:
+    a rerun after an interruption shows what it took).
     """
     if not items:
         return
@@ -256,7 +257,8 @@ def _phase(stages, name, compute, items, results, hits, workers):
     done = fork_map(task, items, workers)
     for (i, physics, earlier), (value, found) in zip(items, done, strict=True):
         results[i] = replace(value, fit=replace(value.fit, physics=physics))
-        hits[i] = hits[i] and found
+        if found:
+            hits[i].append(name)
         if stages is not None and workers > 1 and not found:  # a worker's put may not arrive
             stages.put(key(physics, earlier), value)
 

@@ -372,7 +372,19 @@ def _fit_summary(fit_, dof, p_value):
         "residual_sigma": fit_.residual_sigma,
         "frequency_Hz": fit_.frequency_Hz,
         "constants": constants_json(fit_.constants, fit_.constants_sd),
+        "check": _check(fit_),
     }
+
+
+def _check(fit_):
+    """The full model at the answer a reduced model gave (:class:`FitCheck`), or None."""
+    check = getattr(fit_, "check", None)
+    if check is None:
+        return None
+    return {"settled": check.settled, "objective_full": check.full_objective,
+            "objective_fast": check.fast_objective, "max_rel_error": check.max_rel_error,
+            "decrement": check.decrement, "rounds": check.rounds,
+            "full_solves": check.full_solves}  # fmt: skip
 
 
 def _rival(d):
@@ -425,6 +437,8 @@ def diagnosis_to_dict(d):
                 "chi2": c.fit.chi2,
                 "parameters": c.parameters,
                 "parameters_sd": c.parameters_sd,
+                "refined": c.fit.refined,
+                "check": _check(c.fit),
             }
             for c in d.candidates
         ],  # fmt: skip
