@@ -147,7 +147,7 @@ def test_workers_with_a_directory_store_and_a_resume_from_part_of_it(setting, re
     assert two == reference
     files = sorted((tmp_path / "all").glob("*.pkl"), key=lambda p: p.stat().st_mtime_ns)
     assert len(files) == 8 and not list((tmp_path / "all").glob(".*.tmp"))
-    # as a kill would leave it: the last stage (the pair) not stored, a candidate's file cut
+    # as a kill would leave it: the last stage (the pair's) not stored, a candidate's file cut
     # short (the nominal fit, first, stays)
     part = tmp_path / "part"
     shutil.copytree(tmp_path / "all", part)
