@@ -50,7 +50,7 @@ from .nominal import N_STARTS, check_fast, fit_nominal, nominal_reduced, nominal
 from .pair import pairs_with
 from .parallel import fork_map
 from .probabilities import model_probabilities
-from .rank import CandidateResult, improved_nominal, rank
+from .rank import CandidateResult, improved_nominal, rank, searched_anew
 from .scan import RitzBasis
 from .separate import Separation, separate
 from .store import Stages, digest, fit_digest, plate_digest
@@ -356,6 +356,24 @@ def diagnose(
     if warranted:
         refit_dof = max(m - best.fit.effective_parameters, 1.0)
         refit_p = float(chi2_dist.sf(best.fit.chi2, refit_dof))
+    if warranted and refit_p < alpha:  # rejected: its constants searched again, globally
+        anew = stages.run(
+            f"{best.name}: constants searched again",
+            stages.key("anew", fit_digest(best.fit)),
+            lambda: searched_anew(model, level, Y, sigma, mu_b, V_b, modes, nominal, best),
+        )
+        if anew is not None:
+            anew = replace(anew, fit=replace(anew.fit, physics=best.fit.physics))
+            stages = stages.then("anew", fit_digest(anew.fit))
+            say(
+                f"{best.name}: refit rejected (p = {refit_p:.2g}); from its constants searched "
+                f"again: chi2 = {anew.fit.chi2:.1f}, evidence gain {anew.log_evidence_gain:+.1f}"
+            )
+            ranked = sorted([anew if c is best else c for c in ranked],
+                            key=lambda r: -r.log_evidence_gain)  # fmt: skip
+            best = anew
+            refit_dof = max(m - best.fit.effective_parameters, 1.0)
+            refit_p = float(chi2_dist.sf(best.fit.chi2, refit_dof))
     if warranted and refit_p < alpha and pairs:  # two effects at once
         two = pairs_with(best, physics, ranked, model, scans)
         two = rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, two, say, stages)

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from .anew import constants_anew
 from .fit import JointFit, JointProblem, fit, rough_fit, settle
 from .local import DISTINCT
 from .nominal import nominal_polisher
@@ -27,7 +28,7 @@ from .pencil import candidate_pencil
 from .polish import polish_and_finish
 from .store import fit_digest
 
-__all__ = ["CandidateResult", "improved_nominal", "rank"]
+__all__ = ["CandidateResult", "improved_nominal", "rank", "searched_anew"]
 
 log = logging.getLogger(__name__)
 
@@ -341,6 +342,20 @@ def _located_starts(physics, model, scans, n=3):
     """Starting parameters of a located effect: the best distinct places of its scan."""
     scan = scans.get(physics.name)
     return [] if scan is None else scan.best(model, n)
+
+
+def searched_anew(model, level, Y, sigma, mu_b, V_b, modes, nominal, best):
+    """``best`` fitted again from its constants searched globally (:mod:`.anew`), or None.
+
+    Parameters as for :func:`rank`; ``best`` is the refined :class:`CandidateResult` whose
+    refit the chi-square rejected. Returns its :class:`CandidateResult` when the new fit's
+    evidence is higher, else None.
+    """
+    physics = best.fit.physics
+    problem = JointProblem(model, Y, sigma, mu_b, V_b, modes, physics)
+    polish = _polisher(problem, physics, model, level["modes"])
+    again = constants_anew(problem, best.fit, level["coarse"], polish, level["workers"])
+    return None if again is None else _result(physics, model, nominal, again)
 
 
 def improved_nominal(problem, nominal, ranked, level):
