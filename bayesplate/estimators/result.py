@@ -14,6 +14,7 @@ STATUSES = (
     "converged",
     "oscillating",
     "iteration_cap",
+    "unidentified",
     "unphysical",
     "linalg_failed",
     "solve_failed",
