@@ -36,7 +36,7 @@ _STALL_WINDOW = 40  # iterations over which a lack of progress is judged
 #: Consecutive iterations in which the same peaks change mode (MAC) before a pairing by
 #: order or index is called cycling and frozen.
 PAIRING_CYCLE = 4
-#: Consecutive MVE iterations held only by directions the data barely determine (each
+#: Consecutive MVE iterations drifting along directions the data determine ever less (each
 #: predicted to need more iterations than remain) before the run stops as "unidentified".
 DRIFT_WINDOW = 5
 #: The engineering constant each stiffness coefficient mostly carries, for messages.
@@ -117,38 +117,59 @@ def _slow_directions(b, S, V_Y, V, step, tol):
 
 
 def _drift(problem, state, V, step, tol, k, max_iter):
-    """A message if only directions the data barely determine keep the MVE run going, else "".
+    """A message if the MVE run drifts along directions the data barely determine, else "".
 
-    Such a direction holds the run when its part of the last step exceeds `tol` and the
-    linearised iteration (:func:`_slow_directions`) needs more iterations than remain under
-    the cap to bring it below `tol`; the run stops after :data:`DRIFT_WINDOW` consecutive
-    iterations held only by such directions (every other direction settled). The message
-    names the coefficients that carry the slowest one.
+    A direction holds the run when its part of the last step exceeds `tol`; the run drifts
+    when every direction holding it needs more iterations than remain under the cap to
+    settle (by the linearised iteration, :func:`_slow_directions`), its steps shrink (as the
+    linearisation has them do: a growing step is a path still leaving a plateau) and the
+    slowest one contracts no faster at each iterate than at the one before: the data
+    determine it no better the further it goes, so the linearisation's count is not
+    pessimistic (a direction that contracts faster as it goes is approaching a point the
+    data determine better, and is left to converge: the paper's Plate 2 runs along nu12).
+    The run stops after :data:`DRIFT_WINDOW` consecutive such iterations; the message names
+    the coefficients that carry the slowest direction, and ``state.drifted`` keeps the
+    numbers.
     """
+    h = np.asarray(state.history[state.since :])
+    sizes = np.max(np.abs(np.diff(h[-3:], axis=0)) / np.abs(h[-3:-1]), axis=1)
     try:
         n, c, parts = _slow_directions(state.b, state.prediction.S, problem.V_Y, V, step, tol)
     except np.linalg.LinAlgError:
-        state.drifting = 0
+        state.drift = []
         return ""
     moving = np.flatnonzero(n > 0)
-    remaining = max_iter - k
-    if moving.size == 0 or np.any(n[moving] <= remaining):
-        state.drifting = 0
+    if len(sizes) < 2 or sizes[-1] >= sizes[-2] or moving.size == 0:
+        state.drift = []
         return ""
-    state.drifting += 1
-    if state.drifting < DRIFT_WINDOW:
+    if np.any(n[moving] <= max_iter - k):
+        state.drift = []
         return ""
     i = moving[np.argmax(n[moving])]
+    if state.drift and c[i] < state.drift[-1]:
+        state.drift = []
+    state.drift.append(c[i])
+    if len(state.drift) < DRIFT_WINDOW:
+        return ""
     part = np.abs(parts[i])
     named = [j for j in np.argsort(-part) if part[j] >= 0.5 * part.max()]
     names = ", ".join(f"{STIFFNESS_NAMES[j]} ({_CARRIES[j]})" for j in named)
     more = f"~{n[i]:.0f}" if np.isfinite(n[i]) else "infinitely many"
+    state.drifted = {
+        "coefficients": [STIFFNESS_NAMES[j] for j in named],
+        "constants": [_CARRIES[j] for j in named],
+        "information": [1.0 / c_ - 1.0 for c_ in state.drift[-DRIFT_WINDOW:]],
+        "contraction": float(c[i]),
+        "relative_change": float(part.max()),
+        "predicted_iterations": float(n[i]),
+    }
     return (
-        f"unidentified: the data barely determine {names}: the MVE iteration contracts along "
-        f"it by {c[i]:.4f} per iteration (data information {1 / c[i] - 1:.2g} of the step "
-        f"covariance's), its relative change {part.max():.2g} per iteration would fall below "
-        f"TOL {tol:g} after {more} more iterations (cap {max_iter}); the other directions "
-        f"settled"
+        f"unidentified: the data barely determine {names}, and no better along the path: "
+        f"they carry {1 / state.drift[-DRIFT_WINDOW] - 1:.2g} to {1 / c[i] - 1:.2g} of the "
+        f"step covariance's information along it over the last {DRIFT_WINDOW} iterations "
+        f"(the MVE iteration contracts by {c[i]:.4f} per iteration); its relative change "
+        f"{part.max():.2g} per iteration would need {more} more iterations to fall below TOL "
+        f"{tol:g} (cap {max_iter}); the other directions settled"
     )
 
 
@@ -167,7 +188,8 @@ class _State:
     since: int = 0  # first iterate of the current regime (after a frozen pairing)
     note: str = ""  # what the run changed on the way (a frozen pairing), for the message
     frozen: dict = field(default_factory=dict)
-    drifting: int = 0  # consecutive iterations held only by barely determined directions
+    drift: list = field(default_factory=list)  # contractions of a drift, iterate by iterate
+    drifted: dict = field(default_factory=dict)  # what an "unidentified" stop found
 
 
 def _track(state, new, k, tracking, weight):
@@ -190,14 +212,15 @@ def _track(state, new, k, tracking, weight):
     return new, moved
 
 
-def _pairing_cycle(swaps, k, window=PAIRING_CYCLE):
+def _pairing_cycle(swaps, k, window=None):
     """The measured indices (0-based) that changed mode in each of the last `window` iterations.
 
     A pairing by order or index re-applied at every iterate names another physical mode
     whenever two computed modes cross; when the same peaks do so in `window` consecutive
     iterations the iterates straddle the crossing and the pairing flips back and forth.
-    Empty when they do not.
+    Empty when they do not. `window` defaults to :data:`PAIRING_CYCLE`.
     """
+    window = PAIRING_CYCLE if window is None else window
     if k < window:
         return []
     peaks = [{s[1] for s in swaps if s[0] == j} for j in range(k - window + 1, k + 1)]
@@ -277,7 +300,7 @@ def _iterate(problem, method, tol, max_iter, conventions, tracking, weight, star
         if peaks:
             new, note = _freeze(problem, state, new, moved, peaks, k)
             tracking, state.since, state.note = "follow", k, state.note + note
-            state.drifting = 0
+            state.drift = []
             state.frozen = {"iteration": k, "peaks": [i + 1 for i in peaks],
                             "modes": (np.asarray(new.modes) + 1).tolist()}  # fmt: skip
             log.info("%s iteration %d: pairing frozen%s", method, k, note)
@@ -428,6 +451,8 @@ def run(
     state.message += state.note + _swap_note(state.swaps)
     if state.frozen:
         settings["frozen_pairing"] = state.frozen
+    if state.drifted:
+        settings["unidentified"] = state.drifted
     settings["solve_seconds"] = problem.solve_seconds - seconds0
     return _result(
         problem, method, state, conventions, settings, problem.n_solves - solves0, started
