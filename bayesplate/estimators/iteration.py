@@ -228,7 +228,7 @@ def _pairing_cycle(swaps, k, window=None):
     return sorted(common) if all(p == common for p in peaks) else []
 
 
-def _freeze(problem, state, new, moved, peaks, k):
+def _freeze(problem, new, moved, peaks, k):
     """Freeze a cycling pairing on the candidate with the smaller ``chi^2`` at the iterate.
 
     The candidates are the pairing re-applied at the iterate (`new`) and the modes MAC
@@ -239,12 +239,16 @@ def _freeze(problem, state, new, moved, peaks, k):
     tracked = Prediction(modal.eigenvalues[moved], modal.sensitivities[moved], modal, moved)
     chi2 = problem.chi2(new.g), problem.chi2(tracked.g)
     kept = new if chi2[0] <= chi2[1] else tracked
-    pairs = ", ".join(f"peak {i + 1} with mode {kept.modes[i] + 1}" for i in peaks)
+    measured = problem.pairing.measured
+    peak = [int(i if measured is None else measured[i]) + 1 for i in peaks]  # 1-based
+    pairs = ", ".join(
+        f"peak {p} with mode {kept.modes[i] + 1}" for p, i in zip(peak, peaks, strict=True)
+    )
     note = (
         f"; the pairing by {problem.pairing.how} flipped {PAIRING_CYCLE} iterations running "
-        f"(peaks {', '.join(str(i + 1) for i in peaks)}): frozen at iteration {k} on the "
-        f"pairing with the smaller chi2 ({pairs}: chi2 {min(chi2):.3g} against "
-        f"{max(chi2):.3g}), followed by MAC from there"
+        f"(peak{'s' if len(peaks) > 1 else ''} {', '.join(map(str, peak))}): frozen at "
+        f"iteration {k} on the pairing with the smaller chi2 ({pairs}: chi2 {min(chi2):.3g} "
+        f"against {max(chi2):.3g}), followed by MAC from there"
     )
     return kept, note
 
@@ -298,10 +302,10 @@ def _iterate(problem, method, tol, max_iter, conventions, tracking, weight, star
             return state
         peaks = _pairing_cycle(state.swaps, k) if tracking == "report" else []
         if peaks:
-            new, note = _freeze(problem, state, new, moved, peaks, k)
+            new, note = _freeze(problem, new, moved, peaks, k)
             tracking, state.since, state.note = "follow", k, state.note + note
             state.drift = []
-            state.frozen = {"iteration": k, "peaks": [i + 1 for i in peaks],
+            state.frozen = {"iteration": k, "peaks": [i + 1 for i in peaks],  # 0-based + 1
                             "modes": (np.asarray(new.modes) + 1).tolist()}  # fmt: skip
             log.info("%s iteration %d: pairing frozen%s", method, k, note)
         change = _change(b_next, state.b, conventions)
