@@ -26,7 +26,9 @@ def spruce():
 
 def _converged_or_said_why(result):
     assert result.status in ("converged", "unidentified"), result.message
-    assert result.iterations < EARLY, result.message
+    # the cap is per run (per stage of MVE-mod), and so is "early"
+    for run in result.stages or (result,):
+        assert run.iterations < EARLY, result.message
     assert "\n" not in result.message
     if result.status == "unidentified":
         assert set(result.settings["unidentified"]["constants"]) <= UNDETERMINED
@@ -43,7 +45,6 @@ def test_by_order_mve_and_mve_mod_converge_or_say_why_early(spruce):
     _converged_or_said_why(mod)
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("method", ["MVE", "MVE-mod"])
 def test_by_likelihood_mve_and_mve_mod_converge_or_say_why_early(spruce, method):
     case, model = spruce
