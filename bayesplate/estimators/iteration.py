@@ -4,7 +4,10 @@
 by MAC between iterates, stops on the relative change of ``b`` (or of the engineering
 constants), and ends a run that cycles, stalls, leaves the physical region, fails to solve or
 reaches its cap with ``converged=False``, a :attr:`~EstimateResult.status` and a message; it
-never raises.
+never raises. Two rules keep a run from cycling silently to the cap: a pairing by order or
+index that flips between two crossing modes is frozen (:func:`_freeze`), and an MVE run that
+drifts along directions the data barely determine stops as ``"unidentified"``
+(:func:`_drift`).
 """
 
 from __future__ import annotations
@@ -36,8 +39,9 @@ _STALL_WINDOW = 40  # iterations over which a lack of progress is judged
 #: Consecutive iterations in which the same peaks change mode (MAC) before a pairing by
 #: order or index is called cycling and frozen.
 PAIRING_CYCLE = 4
-#: Consecutive MVE iterations drifting along directions the data determine ever less (each
-#: predicted to need more iterations than remain) before the run stops as "unidentified".
+#: Consecutive MVE iterations drifting along directions the data determine no better as it
+#: goes (each predicted to need more iterations than remain) before the run stops as
+#: "unidentified" (:func:`_drift`).
 DRIFT_WINDOW = 5
 #: The engineering constant each stiffness coefficient mostly carries, for messages.
 _CARRIES = ("E1", "E2", "nu12", "G12", "G23", "G13")
@@ -232,13 +236,17 @@ def _freeze(problem, new, moved, peaks, k):
     """Freeze a cycling pairing on the candidate with the smaller ``chi^2`` at the iterate.
 
     The candidates are the pairing re-applied at the iterate (`new`) and the modes MAC
-    tracking followed from the previous iterate (`moved`); both are evaluated on the same
-    solve. Returns the prediction to go on with (followed by MAC from here) and a note.
+    tracking followed from the previous iterate (`moved`, when it matched every one); both
+    are evaluated on the same solve. Returns the prediction to go on with (followed by MAC
+    from here), a note for the message and the frozen peaks (1-based measured indices).
     """
     modal = new.modal
-    tracked = Prediction(modal.eigenvalues[moved], modal.sensitivities[moved], modal, moved)
-    chi2 = problem.chi2(new.g), problem.chi2(tracked.g)
-    kept = new if chi2[0] <= chi2[1] else tracked
+    chi2 = problem.chi2(new.g), np.inf
+    kept = new
+    if np.all(moved >= 0):
+        tracked = Prediction(modal.eigenvalues[moved], modal.sensitivities[moved], modal, moved)
+        chi2 = chi2[0], problem.chi2(tracked.g)
+        kept = new if chi2[0] <= chi2[1] else tracked
     measured = problem.pairing.measured
     peak = [int(i if measured is None else measured[i]) + 1 for i in peaks]  # 1-based
     pairs = ", ".join(
@@ -250,7 +258,7 @@ def _freeze(problem, new, moved, peaks, k):
         f"iteration {k} on the pairing with the smaller chi2 ({pairs}: chi2 {min(chi2):.3g} "
         f"against {max(chi2):.3g}), followed by MAC from there"
     )
-    return kept, note
+    return kept, note, peak
 
 
 def _shapes(old, new, weight):
@@ -302,10 +310,10 @@ def _iterate(problem, method, tol, max_iter, conventions, tracking, weight, star
             return state
         peaks = _pairing_cycle(state.swaps, k) if tracking == "report" else []
         if peaks:
-            new, note = _freeze(problem, new, moved, peaks, k)
+            new, note, frozen = _freeze(problem, new, moved, peaks, k)
             tracking, state.since, state.note = "follow", k, state.note + note
             state.drift = []
-            state.frozen = {"iteration": k, "peaks": [i + 1 for i in peaks],  # 0-based + 1
+            state.frozen = {"iteration": k, "peaks": frozen,
                             "modes": (np.asarray(new.modes) + 1).tolist()}  # fmt: skip
             log.info("%s iteration %d: pairing frozen%s", method, k, note)
         change = _change(b_next, state.b, conventions)
@@ -413,8 +421,10 @@ def run(
         Only ``covariance`` and ``stop_on`` matter here; default ``CONVENTIONS["paper"]``.
     tracking : {"auto", "report", "follow", "off"}
         MAC tracking of the paired modes between iterates: report swaps only (pairing by
-        order or index is re-applied at every iterate, as the paper does), re-pair along the
-        tracked modes, or skip. ``"auto"``: follow when the modes were paired by shape
+        order or index is re-applied at every iterate, as the paper does, until the same
+        peaks change mode :data:`PAIRING_CYCLE` iterations running: then the pairing is
+        frozen and followed, ``settings["frozen_pairing"]``), re-pair along the tracked
+        modes, or skip. ``"auto"``: follow when the modes were paired by shape
         (MAC pairing names physical modes, whose order changes as the iterate moves),
         report otherwise (an assignment by frequency names modes by their order at the
         point where it was made: following them from a prior far off would follow modes
