@@ -133,7 +133,8 @@ def _drift(problem, state, V, step, tol, k, max_iter):
     data determine better, and is left to converge: the paper's Plate 2 runs along nu12).
     The run stops after :data:`DRIFT_WINDOW` consecutive such iterations; the message names
     the coefficients that carry the slowest direction, and ``state.drifted`` keeps the
-    numbers.
+    numbers. Only with a fixed step covariance (the paper's convention): an updated ``V``
+    shrinks at every iteration, re-using the data, and slows every direction by itself.
     """
     h = np.asarray(state.history[state.since :])
     sizes = np.max(np.abs(np.diff(h[-3:], axis=0)) / np.abs(h[-3:-1]), axis=1)
@@ -330,7 +331,7 @@ def _iterate(problem, method, tol, max_iter, conventions, tracking, weight, star
         if state.message:
             state.status = "oscillating"
             return state
-        if method == "MVE":
+        if method == "MVE" and conventions.covariance == "fixed":
             state.message = _drift(problem, state, V, step, tol, k, max_iter)
             if state.message:
                 state.status = "unidentified"
