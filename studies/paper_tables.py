@@ -627,7 +627,7 @@ def compute(quick=False, log=print):
             f"Table {spec.table} {spec.source} {spec.test or ''} {spec.label}: "
             f"{result.iterations} it, {time.perf_counter() - start:.1f} s"
         )
-        if not quick and spec.paper() == "diverged" and "cap" in result.message:
+        if not quick and spec.paper() == "diverged" and result.status == "iteration_cap":
             lines[-1].note += f"; {beyond_cap(spec, models)}"
     conventions = convention_rows(paper_specs(quick), models, log)
     fast = fast_rows(paper_specs(quick), models, lines, log)

@@ -17,8 +17,8 @@ no posterior, no diagnosis).
 
 # no `from __future__ import annotations`: loaded by tests with spec_from_file_location
 import argparse
+import os
 import pathlib
-import platform
 import sys
 import time
 
@@ -28,6 +28,11 @@ from bayesplate.estimators import METHODS, estimate
 from bayesplate.io import atomic_write_text, bundled_case_path, load_case
 from bayesplate.model import PlateModel
 from bayesplate.quantities import ENGINEERING_NAMES, ENGINEERING_UNITS, to_case_units
+
+_HERE = pathlib.Path(__file__).resolve().parent
+if str(_HERE) not in sys.path:
+    sys.path.insert(0, str(_HERE))
+from _study_host import cpu  # noqa: E402  (this folder's helper, not a package)
 
 REPORT = "spruce_badiane.md"
 CASE = "badiane_spruce_5R"
@@ -89,8 +94,8 @@ def report(case, model, rows, diagnosed, quick):
     reference, factor = rescaled_reference(case)
     lines = [
         f"Made by `python studies/spruce_badiane.py{' --quick' if quick else ''}` "
-        f"on {time.strftime('%Y-%m-%d')} ({platform.processor() or platform.machine()}, "
-        f"{_cores()} cores).",
+        f"on {time.strftime('%Y-%m-%d')} ({cpu()}, {os.cpu_count()} cores, load "
+        f"{' '.join(f'{x:.2f}' for x in os.getloadavg())} at writing).",
         "",
         "# The measured spruce plate 5R (Badiane et al. 2023)",
         "",
@@ -100,11 +105,11 @@ def report(case, model, rows, diagnosed, quick):
         f"constants are rescaled by {factor:.3f} (E and G; nu12 as it is) to this case's "
         "thickness and density (see the case file's comments).",
         "",
-        "| estimate | status | " + " | ".join(
+        "| estimate | status | iterations | " + " | ".join(
             f"{n} ({u})" for n, u in zip(ENGINEERING_NAMES, ENGINEERING_UNITS, strict=True)
         ) + " | E1, E2, G12 vs source | time (s) |",
-        "|---|---|" + "---|" * 6 + "---|---|",
-        "| source, rescaled | - | " + " | ".join(
+        "|---|---|---|" + "---|" * 6 + "---|---|",
+        "| source, rescaled | - | - | " + " | ".join(
             f"{v:.4g}" for v in to_case_units(reference)) + " | - | - |",
     ]  # fmt: skip
     for row in rows:
@@ -114,7 +119,7 @@ def report(case, model, rows, diagnosed, quick):
         cells = " | ".join(f"{v:.4g} +- {s:.2g}" for v, s in zip(e, sd, strict=True))
         devs = ", ".join(f"{dev[i]:+.1f} %" for i in IN_PLANE)
         lines.append(
-            f"| {row['what']} | {row['status']} | {cells} | {devs} "
+            f"| {row['what']} | {row['status']} | {_dash(row['iterations'])} | {cells} | {devs} "
             f"({'within' if within else 'NOT within'} 3 %) | {row['seconds']:.0f} |"
         )
     lines += ["", "Messages:", ""]
@@ -130,10 +135,8 @@ def report(case, model, rows, diagnosed, quick):
     return "\n".join(lines) + "\n"
 
 
-def _cores():
-    import os
-
-    return os.cpu_count()
+def _dash(value):
+    return "-" if value is None else str(value)
 
 
 def main(out_dir="reports", quick=False):

@@ -11,6 +11,7 @@ import pytest
 from bayesplate import laminate
 from bayesplate.cli import main as cli_main
 from bayesplate.estimators import CONVENTIONS, b_step, estimate, mve_step, run
+from bayesplate.estimators.iteration import DEFAULT_MAX_ITER
 from bayesplate.io import bundled_case_path, load_case
 from bayesplate.model import PlateModel
 from bayesplate.pairing import Pairing
@@ -338,6 +339,97 @@ def test_a_run_without_progress_is_called_oscillating():
     assert _oscillation(history[:60], 1e-3) == ""
     converging = [b0 * (1 + 0.5**k) for k in range(81)]
     assert _oscillation(converging, 1e-3) == ""
+
+
+
+def _crossing_problem():
+    """Seven linear modes, sorted by frequency (pairing by order); six peaks, mode 5 unseen.
+
+    Mode 6's sensitivities are mode 5's reversed, scaled to cross it 1 % from the truth:
+    by order the fifth and sixth peaks go with whichever of the two is lower at the iterate.
+    """
+    rng = np.random.default_rng(3)
+    e0 = np.array([150e9, 10e9, 0.25, 3e9, 3e9, 2e9])
+    mu, V_b = prior_in_stiffness(e0, e0 / 6, "full")
+    A = rng.uniform(0.2, 2.0, size=(7, 6)) * 1e7 / mu[None, :]
+    b_true = mu * rng.uniform(0.9, 1.1, 6)
+    A = A[np.argsort(A @ b_true)]
+    A[6] = A[5][::-1] * (A[5] @ b_true) / (A[5][::-1] @ b_true) * 0.99
+    Y = np.delete(A @ b_true, 5)
+
+    def forward(b, n_modes):
+        g = A @ b
+        order = np.argsort(g)
+        return _Linear(b, g[order], A[order], np.eye(7)[:, order])
+
+    V_Y = np.diag((1e-3 * Y) ** 2)
+    pairing = Pairing(np.arange(6), how="order", extra=1)
+    return GaussianProblem(Y, V_Y, mu, V_b, forward, pairing), A, Y
+
+
+def test_a_pairing_by_order_that_flips_between_crossing_modes_is_frozen(monkeypatch):
+    # Re-paired by order at every iterate, the peaks flip between the two crossing modes and
+    # MVE cycles; frozen, the paired modes are followed and the run is linear with exact
+    # data: it must land on the solution of the frozen pairing's 6 x 6 system (closed form).
+    from bayesplate.estimators import iteration
+
+    problem, A, Y = _crossing_problem()
+    frozen = run(problem, "MVE", tol=1e-9)
+    assert frozen.status == "converged", frozen.message
+    assert frozen.settings["frozen_pairing"]["iteration"] == iteration.PAIRING_CYCLE
+    assert "\n" not in frozen.message and "frozen at iteration" in frozen.message
+    rows = np.argsort(A @ frozen.b)[frozen.modes - 1]  # the physical modes paired at the end
+    np.testing.assert_allclose(frozen.b, np.linalg.solve(A[rows], Y), rtol=1e-6)
+    assert frozen.iterations < 20
+
+    monkeypatch.setattr(iteration, "PAIRING_CYCLE", 10**6)  # the paper's re-pairing only
+    flipping = run(problem.with_prior(problem.mu_b, problem.V_b), "MVE", tol=1e-9)
+    assert flipping.status == "oscillating"
+    assert {s[0] for s in flipping.mode_swaps} == set(range(1, flipping.iterations + 1))
+
+
+def _flat_problem():
+    """Ten linear frequencies that barely see C44 (its column 1 % of the others), C44 far off.
+
+    MVE's steps along C44 shrink by 1 / (1 + lambda) per iteration, lambda the small
+    generalised eigenvalue of (F, V_x^-1): far more iterations than the cap allows.
+    """
+    rng = np.random.default_rng(7)
+    e0 = np.array([150e9, 10e9, 0.25, 3e9, 3e9, 2e9])
+    mu, _ = prior_in_stiffness(e0, e0 / 6, "full")
+    V_b = np.diag((0.2 * mu) ** 2)
+    A = rng.uniform(0.2, 2.0, size=(10, 6)) * 1e7 / mu[None, :]
+    A[:, 4] *= 1e-2
+    b_true = mu * np.array([1.05, 0.95, 1.1, 1.02, 6.0, 0.97])
+    Y = A @ b_true
+    V_Y = np.diag((0.01 * Y) ** 2)
+    return _linear_problem(A, Y, V_Y, mu, V_b), A
+
+
+def test_mve_drifting_where_the_data_barely_see_stops_unidentified(monkeypatch):
+    import scipy.linalg
+
+    from bayesplate.estimators import iteration
+
+    problem, A = _flat_problem()
+    result = run(problem, "MVE")
+    assert result.status == "unidentified" and not result.converged
+    assert result.iterations < 60 and "\n" not in result.message
+    drift = result.settings["unidentified"]
+    assert drift["coefficients"] == ["C44"] and drift["constants"] == ["G23"]
+    # the information the data carry along the drift, by a generalised eigenproblem
+    x = np.abs(result.b)
+    Sx, Vx = A * x[None, :], problem.V_b / np.outer(x, x)
+    F = Sx.T @ np.linalg.solve(problem.V_Y, Sx)
+    lam = scipy.linalg.eigh(F, np.linalg.inv(Vx), eigvals_only=True)[0]
+    assert drift["information"][-1] == pytest.approx(lam, rel=1e-6)
+    assert drift["predicted_iterations"] > DEFAULT_MAX_ITER - result.iterations
+    # and the prediction holds: without the rule the run meets the cap, still moving
+    monkeypatch.setattr(iteration, "DRIFT_WINDOW", 10**6)
+    capped = run(problem, "MVE")
+    assert capped.status == "iteration_cap"
+    # B on the same data converges: its prior holds the direction the data do not
+    assert run(problem, "B").converged
 
 
 @pytest.mark.filterwarnings("ignore::bayesplate.pairing.UnpairedModeWarning")

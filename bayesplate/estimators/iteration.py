@@ -4,7 +4,10 @@
 by MAC between iterates, stops on the relative change of ``b`` (or of the engineering
 constants), and ends a run that cycles, stalls, leaves the physical region, fails to solve or
 reaches its cap with ``converged=False``, a :attr:`~EstimateResult.status` and a message; it
-never raises.
+never raises. Two rules keep a run from cycling silently to the cap: a pairing by order or
+index that flips between two crossing modes is frozen (:func:`_freeze`), and an MVE run that
+drifts along directions the data barely determine stops as ``"unidentified"``
+(:func:`_drift`).
 """
 
 from __future__ import annotations
@@ -18,7 +21,7 @@ import numpy as np
 from .. import laminate
 from ..pairing import track
 from ..posterior import Prediction
-from ..quantities import engineering_covariance, hz_from_eigenvalue
+from ..quantities import STIFFNESS_NAMES, engineering_covariance, hz_from_eigenvalue
 from ..reduced.model import ReducedModalResult
 from .conventions import CONVENTIONS
 from .result import EstimateResult
@@ -33,6 +36,15 @@ TRACKING = ("auto", "report", "follow", "off")
 DEFAULT_MAX_ITER = 200
 _CYCLE_WINDOW = 8  # iterations over which a cycle is judged
 _STALL_WINDOW = 40  # iterations over which a lack of progress is judged
+#: Consecutive iterations in which the same peaks change mode (MAC) before a pairing by
+#: order or index is called cycling and frozen.
+PAIRING_CYCLE = 4
+#: Consecutive MVE iterations drifting along directions the data determine no better as it
+#: goes (each predicted to need more iterations than remain) before the run stops as
+#: "unidentified" (:func:`_drift`).
+DRIFT_WINDOW = 5
+#: The engineering constant each stiffness coefficient mostly carries, for messages.
+_CARRIES = ("E1", "E2", "nu12", "G12", "G23", "G13")
 
 
 def _relative_change(new, old):
@@ -59,6 +71,113 @@ def _oscillation(history, tol, window=_CYCLE_WINDOW, stall=_STALL_WINDOW):
     return ""
 
 
+def _slow_directions(b, S, V_Y, V, step, tol):
+    """The MVE iteration linearised at `b`: how long each direction of `step` takes to settle.
+
+    With fixed sensitivities the MVE step (eq. 12) maps the error ``x - x*`` (``x = b / |b|``)
+    to ``(I + V F)^-1 (x - x*)``, ``F = S^T V_Y^-1 S`` the data's information: along the
+    ``V``-scaled eigenvectors ``u_i`` of ``V F`` (eigenvalues ``lambda_i``, the information
+    the data carry there relative to ``V``'s) the steps shrink by ``c_i = 1 / (1 + lambda_i)``
+    per iteration. A step part ``p_i`` (largest relative entry) falls below `tol` after
+    ``ln(p_i / tol) / -ln(c_i)`` more iterations.
+
+    Parameters
+    ----------
+    b : numpy.ndarray, shape (6,)
+        Iterate, Pa.
+    S : numpy.ndarray, shape (m, 6)
+        Sensitivities at `b`, rad^2/s^2 per Pa.
+    V_Y : numpy.ndarray, shape (m, m)
+        Observation covariance, (rad^2/s^2)^2.
+    V : numpy.ndarray, shape (6, 6)
+        Covariance of the next MVE step, Pa^2.
+    step : numpy.ndarray, shape (6,)
+        The last step relative to `b` (dimensionless).
+    tol : float
+        TOL of section 2.4.
+
+    Returns
+    -------
+    n : numpy.ndarray, shape (6,)
+        Predicted iterations until each direction's part of the step is below `tol` (0 for
+        parts already below it; inf where ``lambda_i = 0``).
+    c : numpy.ndarray, shape (6,)
+        Contraction per iteration along each direction.
+    parts : numpy.ndarray, shape (6, 6)
+        Row ``i``: the step's part along direction ``i``, relative, per coefficient.
+    """
+    scale = np.abs(b)
+    Sx, Vx = S * scale[None, :], V / np.outer(scale, scale)
+    F = Sx.T @ np.linalg.solve(V_Y, Sx)
+    L = np.linalg.cholesky(Vx)
+    lam, Q = np.linalg.eigh(L.T @ F @ L)
+    U = L @ Q
+    parts = (np.linalg.solve(U, step)[:, None] * U.T)
+    size = np.max(np.abs(parts), axis=1)
+    c = 1.0 / (1.0 + np.maximum(lam, 0.0))
+    with np.errstate(divide="ignore"):
+        n = np.where(size > tol, np.log(size / tol) / -np.log(c), 0.0)
+    return n, c, parts
+
+
+def _drift(problem, state, V, step, tol, k, max_iter):
+    """A message if the MVE run drifts along directions the data barely determine, else "".
+
+    A direction holds the run when its part of the last step exceeds `tol`; the run drifts
+    when every direction holding it needs more iterations than remain under the cap to
+    settle (by the linearised iteration, :func:`_slow_directions`), its steps shrink (as the
+    linearisation has them do: a growing step is a path still leaving a plateau) and the
+    slowest one contracts no faster at each iterate than at the one before: the data
+    determine it no better the further it goes, so the linearisation's count is not
+    pessimistic (a direction that contracts faster as it goes is approaching a point the
+    data determine better, and is left to converge: the paper's Plate 2 runs along nu12).
+    The run stops after :data:`DRIFT_WINDOW` consecutive such iterations; the message names
+    the coefficients that carry the slowest direction, and ``state.drifted`` keeps the
+    numbers. Only with a fixed step covariance (the paper's convention): an updated ``V``
+    shrinks at every iteration, re-using the data, and slows every direction by itself.
+    """
+    h = np.asarray(state.history[state.since :])
+    sizes = np.max(np.abs(np.diff(h[-3:], axis=0)) / np.abs(h[-3:-1]), axis=1)
+    try:
+        n, c, parts = _slow_directions(state.b, state.prediction.S, problem.V_Y, V, step, tol)
+    except np.linalg.LinAlgError:
+        state.drift = []
+        return ""
+    moving = np.flatnonzero(n > 0)
+    if len(sizes) < 2 or sizes[-1] >= sizes[-2] or moving.size == 0:
+        state.drift = []
+        return ""
+    if np.any(n[moving] <= max_iter - k):
+        state.drift = []
+        return ""
+    i = moving[np.argmax(n[moving])]
+    if state.drift and c[i] < state.drift[-1]:
+        state.drift = []
+    state.drift.append(c[i])
+    if len(state.drift) < DRIFT_WINDOW:
+        return ""
+    part = np.abs(parts[i])
+    named = [j for j in np.argsort(-part) if part[j] >= 0.5 * part.max()]
+    names = ", ".join(f"{STIFFNESS_NAMES[j]} ({_CARRIES[j]})" for j in named)
+    more = f"~{n[i]:.0f}" if np.isfinite(n[i]) else "infinitely many"
+    state.drifted = {
+        "coefficients": [STIFFNESS_NAMES[j] for j in named],
+        "constants": [_CARRIES[j] for j in named],
+        "information": [1.0 / c_ - 1.0 for c_ in state.drift[-DRIFT_WINDOW:]],
+        "contraction": float(c[i]),
+        "relative_change": float(part.max()),
+        "predicted_iterations": float(n[i]),
+    }
+    return (
+        f"unidentified: the data barely determine {names}, and no better along the path: "
+        f"they carry {1 / state.drift[-DRIFT_WINDOW] - 1:.2g} to {1 / c[i] - 1:.2g} of the "
+        f"step covariance's information along it over the last {DRIFT_WINDOW} iterations "
+        f"(the MVE iteration contracts by {c[i]:.4f} per iteration); its relative change "
+        f"{part.max():.2g} per iteration would need {more} more iterations to fall below TOL "
+        f"{tol:g} (cap {max_iter}); the other directions settled"
+    )
+
+
 @dataclass
 class _State:
     """Mutable bookkeeping of one run."""
@@ -71,12 +190,21 @@ class _State:
     message: str = ""
     converged: bool = False
     status: str = ""
+    since: int = 0  # first iterate of the current regime (after a frozen pairing)
+    note: str = ""  # what the run changed on the way (a frozen pairing), for the message
+    frozen: dict = field(default_factory=dict)
+    drift: list = field(default_factory=list)  # contractions of a drift, iterate by iterate
+    drifted: dict = field(default_factory=dict)  # what an "unidentified" stop found
 
 
 def _track(state, new, k, tracking, weight):
-    """Follow the paired modes by MAC; record swaps; re-pair if ``tracking == "follow"``."""
+    """Follow the paired modes by MAC; record swaps; re-pair if ``tracking == "follow"``.
+
+    Returns the prediction to go on with and the tracked modes (0-based, shape (m,); None
+    when ``tracking == "off"``).
+    """
     if tracking == "off":
-        return new
+        return new, None
     modes = state.prediction.modes
     old_shapes, new_shapes, weight = _shapes(state.prediction.modal, new.modal, weight)
     moved, _ = track(old_shapes, new_shapes, modes, weight)
@@ -85,8 +213,53 @@ def _track(state, new, k, tracking, weight):
         log.debug("iteration %d: computed mode %d became mode %d", k, modes[i] + 1, moved[i] + 1)
     if tracking == "follow" and np.any(moved != modes) and np.all(moved >= 0):
         modal = new.modal
-        return Prediction(modal.eigenvalues[moved], modal.sensitivities[moved], modal, moved)
-    return new
+        return Prediction(modal.eigenvalues[moved], modal.sensitivities[moved], modal, moved), moved
+    return new, moved
+
+
+def _pairing_cycle(swaps, k, window=None):
+    """The measured indices (0-based) that changed mode in each of the last `window` iterations.
+
+    A pairing by order or index re-applied at every iterate names another physical mode
+    whenever two computed modes cross; when the same peaks do so in `window` consecutive
+    iterations the iterates straddle the crossing and the pairing flips back and forth.
+    Empty when they do not. `window` defaults to :data:`PAIRING_CYCLE`.
+    """
+    window = PAIRING_CYCLE if window is None else window
+    if k < window:
+        return []
+    peaks = [{s[1] for s in swaps if s[0] == j} for j in range(k - window + 1, k + 1)]
+    common = set.intersection(*peaks)
+    return sorted(common) if all(p == common for p in peaks) else []
+
+
+def _freeze(problem, new, moved, peaks, k):
+    """Freeze a cycling pairing on the candidate with the smaller ``chi^2`` at the iterate.
+
+    The candidates are the pairing re-applied at the iterate (`new`) and the modes MAC
+    tracking followed from the previous iterate (`moved`, when it matched every one); both
+    are evaluated on the same solve. Returns the prediction to go on with (followed by MAC
+    from here), a note for the message and the frozen peaks (1-based measured indices).
+    """
+    modal = new.modal
+    chi2 = problem.chi2(new.g), np.inf
+    kept = new
+    if np.all(moved >= 0):
+        tracked = Prediction(modal.eigenvalues[moved], modal.sensitivities[moved], modal, moved)
+        chi2 = chi2[0], problem.chi2(tracked.g)
+        kept = new if chi2[0] <= chi2[1] else tracked
+    measured = problem.pairing.measured
+    peak = [int(i if measured is None else measured[i]) + 1 for i in peaks]  # 1-based
+    pairs = ", ".join(
+        f"peak {p} with mode {kept.modes[i] + 1}" for p, i in zip(peak, peaks, strict=True)
+    )
+    note = (
+        f"; the pairing by {problem.pairing.how} flipped {PAIRING_CYCLE} iterations running "
+        f"(peak{'s' if len(peaks) > 1 else ''} {', '.join(map(str, peak))}): frozen at "
+        f"iteration {k} on the pairing with the smaller chi2 ({pairs}: chi2 {min(chi2):.3g} "
+        f"against {max(chi2):.3g}), followed by MAC from there"
+    )
+    return kept, note, peak
 
 
 def _shapes(old, new, weight):
@@ -131,12 +304,21 @@ def _iterate(problem, method, tol, max_iter, conventions, tracking, weight, star
         modes = state.prediction.modes if tracking == "follow" else None
         try:
             new = problem.predict(b_next, modes)
-            new = _track(state, new, k, tracking, weight)
+            new, moved = _track(state, new, k, tracking, weight)
         except Exception as err:  # noqa: BLE001 - a failed solve ends the run, never raises
             state.message = f"forward solve failed at iteration {k}: {err}"
             state.status = "solve_failed"
             return state
+        peaks = _pairing_cycle(state.swaps, k) if tracking == "report" else []
+        if peaks:
+            new, note, frozen = _freeze(problem, new, moved, peaks, k)
+            tracking, state.since, state.note = "follow", k, state.note + note
+            state.drift = []
+            state.frozen = {"iteration": k, "peaks": frozen,
+                            "modes": (np.asarray(new.modes) + 1).tolist()}  # fmt: skip
+            log.info("%s iteration %d: pairing frozen%s", method, k, note)
         change = _change(b_next, state.b, conventions)
+        step = (b_next - state.b) / np.abs(state.b)
         state.b, state.prediction, state.cov = b_next, new, cov
         state.history.append(b_next)
         log.info("%s iteration %d: largest relative change %.3g", method, k, np.max(change))
@@ -145,10 +327,15 @@ def _iterate(problem, method, tol, max_iter, conventions, tracking, weight, star
             state.status = "converged"
             state.message = f"converged: relative change {np.max(change):.2g} <= TOL {tol:g}"
             return state
-        state.message = _oscillation(_space(state.history, conventions), tol)
+        state.message = _oscillation(_space(state.history[state.since :], conventions), tol)
         if state.message:
             state.status = "oscillating"
             return state
+        if method == "MVE" and conventions.covariance == "fixed":
+            state.message = _drift(problem, state, V, step, tol, k, max_iter)
+            if state.message:
+                state.status = "unidentified"
+                return state
     state.message = f"iteration cap reached: {max_iter} iterations, TOL {tol:g} not met"
     state.status = "iteration_cap"
     return state
@@ -235,8 +422,10 @@ def run(
         Only ``covariance`` and ``stop_on`` matter here; default ``CONVENTIONS["paper"]``.
     tracking : {"auto", "report", "follow", "off"}
         MAC tracking of the paired modes between iterates: report swaps only (pairing by
-        order or index is re-applied at every iterate, as the paper does), re-pair along the
-        tracked modes, or skip. ``"auto"``: follow when the modes were paired by shape
+        order or index is re-applied at every iterate, as the paper does, until the same
+        peaks change mode :data:`PAIRING_CYCLE` iterations running: then the pairing is
+        frozen and followed, ``settings["frozen_pairing"]``), re-pair along the tracked
+        modes, or skip. ``"auto"``: follow when the modes were paired by shape
         (MAC pairing names physical modes, whose order changes as the iterate moves),
         report otherwise (an assignment by frequency names modes by their order at the
         point where it was made: following them from a prior far off would follow modes
@@ -274,7 +463,11 @@ def run(
             b, None, problem.V_b, [b], message=f"forward solve failed: {err}", status="solve_failed"
         )
         return _failed_result(problem, method, state, settings, started)
-    state.message += _swap_note(state.swaps)
+    state.message += state.note + _swap_note(state.swaps)
+    if state.frozen:
+        settings["frozen_pairing"] = state.frozen
+    if state.drifted:
+        settings["unidentified"] = state.drifted
     settings["solve_seconds"] = problem.solve_seconds - seconds0
     return _result(
         problem, method, state, conventions, settings, problem.n_solves - solves0, started

@@ -10,10 +10,12 @@ __all__ = ["METHODS", "STATUSES", "EstimateResult", "FullModelCheck"]
 
 METHODS = ("B", "MVE", "MVE-mod")
 #: How a run ended (:attr:`EstimateResult.status`); only the first is a success.
+#: "unidentified": MVE stopped drifting along directions the data barely determine.
 STATUSES = (
     "converged",
     "oscillating",
     "iteration_cap",
+    "unidentified",
     "unphysical",
     "linalg_failed",
     "solve_failed",
@@ -123,7 +125,12 @@ class EstimateResult:
     wall_time : float
         Seconds.
     settings : dict
-        Tolerance, iteration cap, conventions, pairing.
+        Tolerance, iteration cap, conventions, pairing; ``"frozen_pairing"`` when a pairing
+        by order or index flipped and was frozen (iteration, 1-based peaks and modes);
+        ``"unidentified"`` when status is ``"unidentified"`` (coefficients and constants
+        named, the data's information along the drift relative to the step covariance's over
+        the last iterations, contraction per iteration, relative change, predicted
+        iterations).
     status : str
         How the run ended, one of :data:`STATUSES`: test this, never the message's text.
     pairing : bayesplate.pairing.Pairing or None
