@@ -409,7 +409,7 @@ def _flat_problem():
 def test_mve_drifting_where_the_data_barely_see_stops_unidentified(monkeypatch):
     import scipy.linalg
 
-    from bayesplate.estimators import iteration
+    from bayesplate.estimators import drift as drift_rule
 
     problem, A = _flat_problem()
     result = run(problem, "MVE")
@@ -425,7 +425,7 @@ def test_mve_drifting_where_the_data_barely_see_stops_unidentified(monkeypatch):
     assert drift["information"][-1] == pytest.approx(lam, rel=1e-6)
     assert drift["predicted_iterations"] > DEFAULT_MAX_ITER - result.iterations
     # and the prediction holds: without the rule the run meets the cap, still moving
-    monkeypatch.setattr(iteration, "DRIFT_WINDOW", 10**6)
+    monkeypatch.setattr(drift_rule, "DRIFT_WINDOW", 10**6)
     capped = run(problem, "MVE")
     assert capped.status == "iteration_cap"
     # B on the same data converges: its prior holds the direction the data do not
