@@ -9,8 +9,9 @@ better basin reliably (a bounded trust-region fit from the prior mean stopped at
 
 With the physics parameters held at the candidate's answer ``theta``, the problem in the
 constants alone is the nominal problem of the plate *with* the effect, and the nominal fit's
-global stage (:func:`.nominal.fit_nominal`: a reduced model over the prior's box, the prior
-mean and random draws as starts) applies to it unchanged. Its best distinct optima, joined
+global stage applies to it unchanged: a reduced model over the prior's box
+(:func:`.nominal.nominal_reduced`) and its first round (:func:`.nominal.first_round`: the
+prior mean and random draws as starts). Its best distinct optima, joined
 to ``theta``, start the candidate's joint fit again (:func:`.fit.settle`). Used by
 :func:`.diagnose.diagnose` only when the best candidate's refit is rejected, before pairs
 of effects are tried.
@@ -24,8 +25,8 @@ from dataclasses import replace
 import numpy as np
 
 from .fit import JointProblem, settle
-from .local import distinct, local_fits
-from .nominal import nominal_reduced
+from .local import distinct
+from .nominal import first_round, nominal_reduced
 
 __all__ = ["ANEW_SEED", "ANEW_STARTS", "constants_anew"]
 
@@ -71,8 +72,7 @@ def constants_anew(problem, fitted, coarse, polish, workers=1):
     reduced = replace(reduced, full_model=coarse_plate)
     constants = JointProblem(plate, problem.Y, problem.sigma, problem.mu_b, V_b, problem.modes)
     rough = constants.on(reduced, correction)
-    starts = [np.zeros(6)] + [rng.standard_normal(6) for _ in range(ANEW_STARTS)]
-    found = distinct(local_fits(rough, starts, 200, workers))[:ANEW_KEEP]
+    found = distinct(first_round(rough, rng, ANEW_STARTS, workers))[:ANEW_KEEP]
     z_theta = problem.pack(problem.mu_b, theta)[6:]
     log.info("%s: constants searched again at theta %s: %s", physics.name, np.round(theta, 4),
              ", ".join(f"{2 * r.cost:.4g}" for r in found))  # fmt: skip

@@ -354,8 +354,7 @@ def diagnose(
     warranted = best is not None and best.log_evidence_gain > evidence_threshold
     refit_dof, refit_p = np.nan, np.nan
     if warranted:
-        refit_dof = max(m - best.fit.effective_parameters, 1.0)
-        refit_p = float(chi2_dist.sf(best.fit.chi2, refit_dof))
+        refit_dof, refit_p = _refit_test(best.fit, m)
     if warranted and refit_p < alpha:  # rejected: its constants searched again, globally
         anew = stages.run(
             f"{best.name}: constants searched again",
@@ -372,16 +371,14 @@ def diagnose(
             ranked = sorted([anew if c is best else c for c in ranked],
                             key=lambda r: -r.log_evidence_gain)  # fmt: skip
             best = anew
-            refit_dof = max(m - best.fit.effective_parameters, 1.0)
-            refit_p = float(chi2_dist.sf(best.fit.chi2, refit_dof))
+            refit_dof, refit_p = _refit_test(best.fit, m)
     if warranted and refit_p < alpha and pairs:  # two effects at once
         two = pairs_with(best, physics, ranked, model, scans)
         two = rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, two, say, stages)
         top = next((c for c in two if c.fit.refined), None)
         if top is not None and top.log_evidence_gain > best.log_evidence_gain + evidence_threshold:
             best = top
-            refit_dof = max(m - best.fit.effective_parameters, 1.0)
-            refit_p = float(chi2_dist.sf(best.fit.chi2, refit_dof))
+            refit_dof, refit_p = _refit_test(best.fit, m)
         ranked = sorted(ranked + two, key=lambda r: -r.log_evidence_gain)
     if warranted:
         loose = unidentified(best.fit, V_b, unidentified_ratio)
@@ -422,6 +419,12 @@ def diagnose(
         chosen, refit_dof, refit_p, loose, sigma_Hz, err, measured.frequency_Hz, notes, scans,
         probabilities, rival, separation,
     )  # fmt: skip
+
+
+def _refit_test(fit_, m):
+    """``(dof, p)``: the chi-square test of a candidate's refit on ``m`` frequencies."""
+    dof = max(m - fit_.effective_parameters, 1.0)
+    return dof, float(chi2_dist.sf(fit_.chi2, dof))
 
 
 def _unsettled_notes(nominal, named):

@@ -72,13 +72,32 @@ def fit_nominal(problem, rough, rng, n_starts=N_STARTS, workers=1, keep=3):
     """
     if not isinstance(rough, JointProblem):
         rough = problem.on(rough)
-    starts = [np.zeros(6)] + [rng.standard_normal(6) for _ in range(n_starts)]
+    first = first_round(rough, rng, n_starts, workers)
     # a second round hops around the best first-round optimum (basins the prior's draws
     # seldom reach: on the measured Frederiksen plate the best one is two deviations off)
-    first = local_fits(rough, starts, 200, workers)
     starts = [r.x for r in first] + [first[0].x + rng.standard_normal(6) for _ in range(n_starts)]
     return fit(problem, starts, rough=rough, keep=keep, workers=workers, distinct=True,
                polish=nominal_polisher(problem), rough_nfev=200, tol=1e-8)  # fmt: skip
+
+
+def first_round(rough, rng, n_starts, workers=1):
+    """The global stage's first round: fits of the constants from the prior mean and draws.
+
+    Parameters
+    ----------
+    rough : JointProblem
+        A problem in the six whitened constants on a reduced model.
+    rng : numpy.random.Generator
+        Draws the ``n_starts`` starts (standard normal: the prior, whitened).
+    n_starts, workers : int
+
+    Returns
+    -------
+    list of scipy.optimize.OptimizeResult
+        Lowest cost first (:func:`.local.local_fits`, 200 evaluations each at most).
+    """
+    starts = [np.zeros(6)] + [rng.standard_normal(6) for _ in range(n_starts)]
+    return local_fits(rough, starts, 200, workers)
 
 
 def nominal_polisher(problem):

@@ -217,7 +217,8 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
     for r, hit, physics in zip(results, hits, physics_list, strict=True):
         where = "" if r.fit.refined else " (coarse mesh, not refined)"
         if r.fit.check is not None and not r.fit.check.settled:
-            where += f" (not settled in {r.fit.check.rounds} rounds: see the notes)"
+            where += (f" (not settled in {r.fit.check.rounds} rounds: the full model's "
+                      f"objective could still fall by {r.fit.check.decrement:.2g})")
         where += "".join(f" ({phase} fit taken from the store)" for phase in hit)
         variant = "".join(f" ({v})" for v in physics.settings().values())
         say(f"{r.name}{variant}: chi2 = {r.fit.chi2:.1f}, evidence gain "

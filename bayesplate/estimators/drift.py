@@ -97,10 +97,8 @@ def drift(problem, state, V, step, tol, k, max_iter):
         state.drift = []
         return ""
     moving = np.flatnonzero(n > 0)
-    if len(sizes) < 2 or sizes[-1] >= sizes[-2] or moving.size == 0:
-        state.drift = []
-        return ""
-    if np.any(n[moving] <= max_iter - k):
+    if (len(sizes) < 2 or sizes[-1] >= sizes[-2] or moving.size == 0
+            or np.any(n[moving] <= max_iter - k)):  # fmt: skip
         state.drift = []
         return ""
     i = moving[np.argmax(n[moving])]
