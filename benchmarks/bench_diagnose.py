@@ -8,8 +8,9 @@ code of another checkout (``PYTHONPATH=TREE``; e.g. ``git worktree add /tmp/diag
 fb3cd20``), in the same run, for the ratio. The scaling rows time one recording on three
 meshes and with three numbers of frequencies.
 
-Writes ``benchmark_diagnose.md`` to ``out_dir``. Run:
-``python benchmarks/bench_diagnose.py [--runs 0 3 ...] [--base TREE --base-runs 0 2]``.
+Writes ``benchmark_diagnose.md`` (and, with ``--scaling``, ``benchmark_diagnose_scaling.md``)
+to ``out_dir``. Run: ``python benchmarks/bench_diagnose.py [--runs 0 3 ...] [--base TREE
+--base-runs 0 2] [--scaling]``; ``--runs --scaling`` runs the scaling rows alone.
 """
 
 from __future__ import annotations
@@ -25,11 +26,14 @@ import subprocess
 import sys
 import time
 
+import numpy as np
+
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import _machine  # noqa: E402  (this folder's shared helper)
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 REPORT = "benchmark_diagnose.md"
+SCALING_REPORT = "benchmark_diagnose_scaling.md"
 TARGET_MEDIAN_S, TARGET_WORST_S = 30.0, 90.0
 #: The recording, meshes and frequency counts of the scaling rows.
 SCALING_RUN, SCALING_MESHES, SCALING_FREQUENCIES = 2, ((24, 24), (36, 36), (50, 50)), (8, 11, 14)
@@ -42,7 +46,6 @@ def one(index, workers, quick=False, mesh=None, frequencies=None):
     regression run of this script, not a measurement. ``mesh`` and ``frequencies``: another
     working mesh, or only the lowest ``frequencies`` recorded (the scaling rows).
     """
-    import numpy as np
 
     sys.path.insert(0, str(ROOT / "studies"))
     from concealment import NOISE, SEED, recordings, scenarios
@@ -95,7 +98,7 @@ def run(index, tree, workers, quick=False, mesh=None, frequencies=None):
     return json.loads(out.strip().splitlines()[-1])
 
 
-def write_report(rows, base_rows, scaling, info, out_dir, base_label, started):
+def write_report(rows, base_rows, info, out_dir, base_label, started):
     seconds = [r["seconds"] for r in rows]
     med, worst = statistics.median(seconds), max(seconds)
     workers = rows[0]["workers"]
@@ -137,19 +140,47 @@ def write_report(rows, base_rows, scaling, info, out_dir, base_label, started):
         lines += ["", f"Base ({base_label}) / now, wall time on the same recordings in this run: "
                   + ", ".join(f"{x:.1f}x" for x in ratios)
                   + f" (median {statistics.median(ratios):.1f}x)."]  # fmt: skip
-    if scaling:
-        lines += ["", "## How the cost grows", "",
-                  f"Recording {SCALING_RUN} ({rows[0]['effect'] if rows else ''}), diagnose on "
-                  "other meshes (recordings on twice as fine a mesh each way) and with only "
-                  "its lowest frequencies:", "",
-                  "| mesh | frequencies | unknowns | wall (s) | CPU (s) | verdict |",
-                  "|---|---|---|---|---|---|"]  # fmt: skip
-        for r in scaling:
-            nx, ny = r["mesh"]
-            lines.append(f"| {nx} x {ny} | {r['frequencies']} | {8 * (nx + 1) * (ny + 1)} | "
-                         f"{r['seconds']:.0f} | {r['cpu']:.0f} | {r['verdict']} "
-                         f"{r['chosen'] or ''} |")  # fmt: skip
     path = pathlib.Path(out_dir) / REPORT
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def write_scaling(scaling, info, out_dir, started):
+    """``benchmark_diagnose_scaling.md``: how diagnose's cost grows with mesh and frequencies."""
+    label = scaling[0]["effect"] + " " + scaling[0]["size"] if scaling else ""
+    lines = [
+        f"Made by `python benchmarks/bench_diagnose.py --runs --scaling` on {started}.",
+        "",
+        "# diagnose: how the cost grows with the mesh and the number of frequencies",
+        "",
+        f"Machine: {info['cpu']}, {info['nproc']} processors; {info['platform']}; Python "
+        f"{info['python']}, numpy {info['numpy']}, scipy {info['scipy']}. "
+        f"{scaling[0]['workers'] if scaling else 2} worker(s), each run in a fresh process, one "
+        "at a time; load = 1-minute load average before / after.",
+        "",
+        f"Recording {SCALING_RUN} of the concealment study ({label}), diagnosed on three "
+        "meshes (its recordings made each time on a mesh twice as fine each way, so they "
+        "differ slightly from mesh to mesh) with its 14 frequencies, and on the 50 x 50 mesh "
+        "with only its lowest 8 and 11. Unknowns: 8 per node.",
+        "",
+        "| mesh | frequencies | unknowns | wall (s) | CPU (s) | load | verdict | refined |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for r in scaling:
+        nx, ny = r["mesh"]
+        lines.append(f"| {nx} x {ny} | {r['frequencies']} | {8 * (nx + 1) * (ny + 1)} | "
+                     f"{r['seconds']:.0f} | {r['cpu']:.0f} | {r['load'][0]:.1f} / "
+                     f"{r['load'][1]:.1f} | {r['verdict']} {r['chosen'] or ''} | "
+                     f"{r['refined']} |")  # fmt: skip
+    by_mesh = [r for r in scaling if r["frequencies"] == 14]
+    if len(by_mesh) >= 2:
+        n = np.log([8 * (r["mesh"][0] + 1) * (r["mesh"][1] + 1) for r in by_mesh])
+        t = np.log([r["seconds"] for r in by_mesh])
+        slope = np.polyfit(n, t, 1)[0]
+        lines += ["", f"Wall time against unknowns at 14 frequencies: slope {slope:.2f} on "
+                  "log-log axes (a least-squares fit over the meshes above)."]  # fmt: skip
+    path = pathlib.Path(out_dir) / SCALING_REPORT
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines) + "\n")
     return path
@@ -165,14 +196,14 @@ def main(out_dir, runs, workers, base=None, base_runs=(), quick=False, scaling=F
         if base is not None and i in base_runs:
             base_rows.append(run(i, base, workers))
             print("base", json.dumps(base_rows[-1]), flush=True)
-        write_report(rows, base_rows, scale_rows, info, out_dir, str(base), started)
+        write_report(rows, base_rows, info, out_dir, str(base), started)
     if scaling:
         for mesh in SCALING_MESHES:
             for frequencies in SCALING_FREQUENCIES if mesh == SCALING_MESHES[-1] else (14,):
                 scale_rows.append(run(SCALING_RUN, ROOT, workers, mesh=mesh,
                                       frequencies=frequencies))  # fmt: skip
                 print("scaling", json.dumps(scale_rows[-1]), flush=True)
-                write_report(rows, base_rows, scale_rows, info, out_dir, str(base), started)
+                write_scaling(scale_rows, info, out_dir, started)
     return rows, base_rows, scale_rows
 
 

@@ -107,6 +107,26 @@ def test_benchmark_diagnose_quick(tmp_path):
     assert "| 0 | control | - | consistent | - |" in text
 
 
+def test_benchmark_diagnose_scaling_table_fits_the_growth(tmp_path):
+    # rows whose wall time grows as unknowns**1.5 (made here, not measured): the report's
+    # log-log slope is 1.5, and each row lands with its mesh, unknowns and verdict
+    bench = load_study(ROOT / "benchmarks" / "bench_diagnose.py")
+    info = {"cpu": "test cpu", "nproc": 2, "platform": "p", "python": "3", "numpy": "2",
+            "scipy": "1"}  # fmt: skip
+    rows = []
+    for (nx, ny), k in (((24, 24), 14), ((36, 36), 14), ((50, 50), 14), ((50, 50), 8)):
+        n = 8 * (nx + 1) * (ny + 1)
+        rows.append({"mesh": [nx, ny], "frequencies": k, "seconds": 1e-4 * n**1.5,
+                     "cpu": 1.0, "load": [1.0, 1.0], "verdict": "explained",
+                     "chosen": "point_mass", "refined": 3, "workers": 2,
+                     "effect": "point_mass", "size": "0.3 g"})  # fmt: skip
+    path = bench.write_scaling(rows, info, tmp_path, "2026-11-26 00:00 UTC")
+    text = path.read_text()
+    assert path.name == bench.SCALING_REPORT
+    assert "| 36 x 36 | 14 | 10952 |" in text and "| 50 x 50 | 8 | 20808 |" in text
+    assert "slope 1.50 on log-log axes" in text
+
+
 @pytest.mark.slow
 def test_forward_full_convergence(tmp_path):
     # Paper section 6.3: the 50 x 50 mesh "satisfactorily resolves the first 14 modes".
