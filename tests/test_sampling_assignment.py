@@ -19,8 +19,9 @@ from bayesplate.cli.sample import sample_text
 from bayesplate.io import bundled_case_path, load_case, sampling_to_dict
 from bayesplate.pairing import Pairing
 from bayesplate.posterior import GaussianProblem, observation_covariance, prior_in_stiffness
-from bayesplate.sampling import WhitenedLogPosterior, sample
+from bayesplate.sampling import WhitenedLogPosterior, prepare, sample
 from bayesplate.sampling.assigned import ChainAssignment, ReassignedLikelihood, reassignment
+from bayesplate.sampling.moves import RitzScreen
 
 SEED = 20070461
 PS, PU = P_SPURIOUS, P_UNOBSERVED
@@ -260,6 +261,45 @@ def test_sampler_calls_a_peak_between_two_modes_spurious(complete):
     assert "re-made at every point of the chain" in text
     peaks = sampling_to_dict(result, extra)["assignment"]["peaks"]
     assert peaks[6]["spurious"] == record.spurious[6]
+
+
+def test_ritz_screen_bounds_the_reassigned_density_off_the_box(rng):
+    # the DE screen off the fast model's box: with the assignment re-made, its bound (the best
+    # assignment of bounds at the Ritz values) is never below the density evaluated there
+    case = _plate1()
+    keep = np.delete(np.arange(14), 4)
+    missing = case.with_measured(
+        frequency_Hz=case.measured.frequency_Hz[keep], sigma_Hz=case.measured.sigma_Hz[keep]
+    )
+    setup = prepare(missing, rng=SEED, pairing="likelihood")
+    est = setup.estimate
+    density = WhitenedLogPosterior(setup.problem, est.b, est.covariance_b,
+                                   setup.sampling_forward(), setup.assigned)  # fmt: skip
+    screen = RitzScreen(density, setup.fast.reduced, setup.box)
+    z = 6.0 * rng.standard_normal((40, 6))
+    bounds = screen(z)
+    off = np.isfinite(bounds)  # off the box (inside it: +inf, evaluate)
+    assert np.count_nonzero(off) >= 10
+    with pytest.warns(UserWarning):  # off the box the full model is evaluated
+        values = np.array([density(q)[0] for q in z[off]])
+    assert np.all(values <= bounds[off] + 1e-9)
+    assert np.any(np.isfinite(values))
+
+
+def test_an_error_scale_keeps_the_settled_assignment_and_says_so(caplog):
+    import dataclasses
+
+    from bayesplate.error_scale import ErrorScalePrior
+
+    case = _plate1()
+    scaled = dataclasses.replace(
+        case, measured=dataclasses.replace(case.measured, error_scale=ErrorScalePrior(1.0, 3.0))
+    )
+    with caplog.at_level("WARNING", logger="bayesplate.sampling.setup"):
+        setup = prepare(scaled, rng=SEED, pairing="likelihood")
+    assert setup.assigned is None
+    assert "kept as settled" in setup.assignment and "error scale" in setup.assignment
+    assert any("kept as settled" in r.getMessage() for r in caplog.records)
 
 
 def test_pairing_by_order_gives_the_chain_of_the_code_before(complete):
