@@ -14,13 +14,14 @@ given):
 ``ln P(Y | b, a) = sum_paired [ln N(Y_i; g_j(b), v_i) + ln(1 - p_s) + ln(1 - p_u)]``
 ``               + sum_spurious [ln p_s - ln B] + sum_unpaired ln(p_u) rho(g_j(b))``,
 
-with ``Y_i`` the measured eigenvalues and ``v_i`` their variances (the diagonal of ``V_Y``,
-same convention as the problem), ``g_j`` the ``n`` lowest computed eigenvalues, a spurious
-peak uniform on ``[0, B]`` (``B`` the eigenvalue of the highest measured frequency plus three
-deviations, as in :mod:`bayesplate.assignment`) and ``rho`` the share of the searched band a
-computed mode nobody paired lies in: 1 up to the highest measured eigenvalue ``Y_top``, 0
-above ``B``, linear between. Its maximum is a linear assignment problem (Hungarian method,
-``scipy.optimize.linear_sum_assignment``) on an ``m x (n + m)`` score matrix.
+with ``Y_i`` the measured eigenvalues (rad^2/s^2) and ``v_i`` their variances (the diagonal of
+``V_Y``, rad^4/s^4, same convention as the problem), ``g_j`` the ``n`` lowest computed
+eigenvalues, a spurious peak uniform on ``[0, B]`` (``B`` the eigenvalue of the highest
+measured frequency plus three deviations, as in :mod:`bayesplate.assignment`) and ``rho`` the
+share of the searched band a computed mode nobody paired lies in: 1 up to the highest measured
+eigenvalue ``Y_top``, 0 above ``B``, linear between. Its maximum is a linear assignment
+problem (Hungarian method, ``scipy.optimize.linear_sum_assignment``) on an ``m x (n + m)``
+score matrix.
 
 Continuity. Each ``ln P(Y | b, a)`` is continuous in ``b`` (the eigenvalues are), and a
 maximum of finitely many continuous functions is continuous: where the best assignment
