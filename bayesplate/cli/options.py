@@ -170,5 +170,6 @@ def add_pairing_option(p):
         "when the case has measured shapes, else by the case's mode numbers ('index') if any, "
         "else 'order' (the i-th peak with the i-th computed mode, the paper's pairing); "
         "'likelihood': the most probable assignment by frequency (a computed mode may go "
-        "unobserved, a peak be spurious), settled by B",
+        "unobserved, a peak be spurious), settled by B; `sample` re-makes it at every point of "
+        "the chain (kept as settled with marginalised inputs or an error scale)",
     )

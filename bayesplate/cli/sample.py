@@ -54,7 +54,23 @@ def sample_text(case, result):
             f"{mean[i]:#10.4g} {sd[i]:#9.3g} {hdi[0, i]:#9.4g} "
             f"{hdi[1, i]:#9.4g} {result.ess_bulk[i]:6.0f} {result.rhat[i]:6.3f}"
         )
-    return "\n".join(lines + _input_rows(result))
+    return "\n".join(lines + _input_rows(result) + _assignment_lines(result))
+
+
+def _assignment_lines(result):
+    """Pairing by likelihood: how the chain treated the assignment, one line.
+
+    Then one line per peak whose assignment was not the same in all draws.
+    """
+    note = result.settings.get("assignment")
+    if note is None:
+        return []
+    lines = [note]
+    if result.assignment is not None:
+        varying = result.assignment.lines()
+        lines += varying or [f"every peak kept one assignment in all {result.assignment.n_draws} "
+                             "draws"]  # fmt: skip
+    return lines
 
 
 def _input_rows(result):

@@ -323,6 +323,31 @@ def sampling_to_dict(result, case, mve=None, scale=None):
         out["inputs_posterior"] = input_posterior_to_dict(result.input_posterior)
     if result.input_certificate is not None:
         out["input_certificate"] = input_certificate_to_dict(result.input_certificate)
+    if result.settings.get("assignment") is not None:
+        out["assignment"] = chain_assignment_to_dict(result.settings["assignment"],
+                                                     result.assignment)  # fmt: skip
+    return out
+
+
+def chain_assignment_to_dict(note, assignment):
+    """How the chain assigned the peaks (pairing by likelihood), for JSON.
+
+    The note, and per peak the fraction of draws with each 1-based computed mode and
+    spurious (no peaks where the assignment was kept as settled).
+    """
+    out = {"note": note}
+    if assignment is not None:
+        n = assignment.fractions.shape[1] - 1
+        out["n_draws"] = assignment.n_draws
+        out["peaks"] = [
+            {
+                "peak": i + 1,
+                "frequency_Hz": float(assignment.frequency_Hz[i]),
+                "modes": {str(j + 1): float(row[j]) for j in range(n) if row[j] > 0},
+                "spurious": float(row[n]),
+            }
+            for i, row in enumerate(assignment.fractions)
+        ]
     return out
 
 

@@ -58,6 +58,16 @@ Stopping
     burn-in of 3 ``tau``) reaches ``min_ess`` and the largest R-hat is below ``max_rhat``
     (1.01), or at ``max_steps``.
 
+Pairing by likelihood
+    The assignment of peaks to computed modes settled by B places the box and the MAP; the
+    chain then re-makes it at every point: the likelihood of all the measured peaks,
+    maximised over the assignments (:mod:`~bayesplate.sampling.assigned`, continuous in the
+    constants), two computed modes beyond the highest settled one offered. The result's
+    ``assignment`` gives, per peak, the fraction of draws with each mode or spurious. With
+    the inputs marginalised (a full ``V_Y``) or an error scale, and for several plates
+    sampled jointly, the settled assignment is kept (a warning; ``settings["assignment"]``).
+    Other pairings stay fixed, their chains unchanged.
+
 Output
     :class:`SamplingResult` with an ArviZ ``InferenceData``: ``posterior`` in the engineering
     constants in case-file units (``E1_GPa``, ..., ``nu12``), ``log_likelihood`` (the
@@ -72,7 +82,9 @@ Modules
     :mod:`~bayesplate.sampling.stopping`, :mod:`~bayesplate.sampling.storage` (HDF backend),
     :mod:`~bayesplate.sampling.result`, :mod:`~bayesplate.sampling.pipeline` (:func:`sample`),
     :mod:`~bayesplate.sampling.checks` (the linearised covariance against the posterior),
-    :mod:`~bayesplate.sampling.seeding` (the ``rng`` argument); several plates of one material:
+    :mod:`~bayesplate.sampling.seeding` (the ``rng`` argument),
+    :mod:`~bayesplate.sampling.assigned` (the assignment re-made in the chain),
+    :mod:`~bayesplate.sampling.box` (the fast model's box); several plates of one material:
     :mod:`~bayesplate.sampling.stacked` (their stacked problem),
     :mod:`~bayesplate.sampling.joint` (:func:`sample_plates`, the shared constants) and
     :mod:`~bayesplate.sampling.plate_checks` (which plate disagrees),

@@ -173,6 +173,7 @@ def sample_problem(
     forward=None,
     box=None,
     seed=None,
+    assigned=None,
 ):
     """Sample ``ln f(b | Y)`` of a Gaussian problem with emcee, whitened around ``center``.
 
@@ -222,6 +223,10 @@ def sample_problem(
         an :class:`~bayesplate.sampling.density.EigenvalueForward` holding a reduced model).
     seed : int, numpy.random.Generator or None
         Deprecated name of ``rng`` (a DeprecationWarning; removed in the next release).
+    assigned : bayesplate.sampling.assigned.ReassignedLikelihood, optional
+        The likelihood of all measured peaks with the assignment re-made at every point
+        (pairing by likelihood); the result then carries what the chain did
+        (``assignment``). None: the problem's fixed pairing.
 
     Returns
     -------
@@ -236,7 +241,7 @@ def sample_problem(
             f"(the {tune_rounds} x {tune_steps} tuning steps and one check of the stopping rule)"
         )
     entropy, rng = generator(resolve_rng(rng, seed, "sample_problem"))
-    density = WhitenedLogPosterior(problem, center, covariance, forward)
+    density = WhitenedLogPosterior(problem, center, covariance, forward, assigned)
     backend, stored = open_backend(backend_path, density, n_walkers)
     if moves is None:
         inside = None if box is None else InBox(density, box)

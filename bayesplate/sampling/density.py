@@ -80,6 +80,13 @@ class WhitenedLogPosterior:
     integrated out too (:func:`bayesplate.error_scale.loo_pointwise`); the sampler still moves
     in the six constants alone.
 
+    With `assigned` (a :class:`~bayesplate.sampling.assigned.ReassignedLikelihood`, pairing
+    by likelihood) the log-likelihood is instead that of ALL measured peaks with the
+    assignment re-made at ``b(z)`` (its maximum over assignments), and the second value
+    returned holds ``2 m`` numbers for the ``m`` peaks: each peak's term of the best
+    assignment, then the assignment's 0-based modes (-1 spurious) as floats
+    (:meth:`split_blob`). Only with a diagonal ``V_Y`` and no error scale.
+
     Parameters
     ----------
     problem : GaussianProblem
@@ -90,6 +97,9 @@ class WhitenedLogPosterior:
     forward : callable, optional
         ``forward(b, n_modes)`` replacing the problem's (anything with ``eigenvalues`` and
         ``sensitivities``); default the problem's own.
+    assigned : bayesplate.sampling.assigned.ReassignedLikelihood, optional
+        The likelihood with the assignment re-made at every point; None: the problem's own
+        with its fixed pairing.
 
     Attributes
     ----------
@@ -99,10 +109,16 @@ class WhitenedLogPosterior:
         Forward evaluations made in this process.
     """
 
-    def __init__(self, problem, center, covariance, forward=None):
+    def __init__(self, problem, center, covariance, forward=None, assigned=None):
         var = np.diag(problem.V_Y)
         # None: diagonal (independent eigenvalues); else the precision for conditional terms
         self._Q = None if np.array_equal(problem.V_Y, np.diag(var)) else np.linalg.inv(problem.V_Y)
+        if assigned is not None and (self._Q is not None or problem.error_scale is not None):
+            raise ValueError(
+                "the assignment is re-made only with a diagonal V_Y and no error scale "
+                "(inputs exact): keep the settled pairing for this problem"
+            )
+        self.assigned = assigned
         self._source = problem.forward if forward is None else forward
         self.problem = problem.with_forward(self._forward)
         b0 = np.array(center, dtype=float)
@@ -118,8 +134,20 @@ class WhitenedLogPosterior:
 
     @property
     def m(self):
-        """Number of measured eigenvalues."""
-        return self.problem.m
+        """Number of measured eigenvalues (all peaks when the assignment is re-made)."""
+        return self.problem.m if self.assigned is None else self.assigned.m
+
+    @property
+    def blob_size(self):
+        """Numbers returned beside the log-density: ``m``, or ``2 m`` with re-assignment."""
+        return self.m if self.assigned is None else 2 * self.m
+
+    def split_blob(self, blobs):
+        """``(pointwise, modes)`` of blobs shaped (..., blob_size); modes None when fixed."""
+        blobs = np.asarray(blobs, dtype=float)
+        if self.assigned is None:
+            return blobs, None
+        return blobs[..., : self.m], blobs[..., self.m :]
 
     def _forward(self, b, n_modes):
         modal = self._source(b, n_modes)
@@ -161,12 +189,24 @@ class WhitenedLogPosterior:
 
     def __call__(self, z):
         """``(log_density, pointwise)`` at whitened ``z``, shape (6,)."""
+        if self.assigned is not None:
+            return self._reassigned(z)
         self._last = None
         lp = self.problem.log_posterior(self.to_b(z))
         if not np.isfinite(lp) or self._last is None:
-            return -np.inf, np.full(self.m, np.nan)
+            return -np.inf, np.full(self.blob_size, np.nan)
         g = self._last[self.problem.pairing.modes]
         return lp + self.log_jacobian(z), self.pointwise(g)
+
+    def _reassigned(self, z):
+        """The log-density with the assignment re-made at ``b(z)``; pointwise and modes."""
+        b = self.to_b(z)
+        lp = self.problem.log_prior(b)
+        if not np.isfinite(lp):
+            return -np.inf, np.full(self.blob_size, np.nan)
+        g = self._forward(b, self.assigned.n).eigenvalues
+        ll, pointwise, modes = self.assigned.evaluate(g)
+        return lp + ll + self.log_jacobian(z), np.concatenate([pointwise, modes.astype(float)])
 
 
 def engineering_constants(density, z):

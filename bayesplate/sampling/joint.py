@@ -237,6 +237,11 @@ def prepare_joint(
         for c, m, r in zip(cases, models, streams, strict=True)
     ]
     singles = tuple(s.estimate for s in setups)
+    if any(s.assigned is not None for s in setups):  # the joint density has no re-assignment
+        log.warning(
+            "plates sampled jointly keep each plate's assignment by likelihood as "
+            "settled through the chain (it is re-made at every point for one plate)"
+        )
     t_setup = time.perf_counter() - started
     started = time.perf_counter()
     start = np.mean([s.b for s in singles], axis=0)

@@ -189,7 +189,9 @@ class RitzScreen:
     marginalised) the misfit ``r^T V_Y^-1 r`` is at least that of the eigenvalues ``I`` with
     ``Y_i > R_i`` alone, ``r_I^T (V_Y)_II^-1 r_I >= |gap_I|^2 / lambda_max((V_Y)_II)``, and
     the normalising term is ``-(ln det V_Y + m ln 2 pi) / 2``. With an error scale the bound
-    is the Student-t marginal at that misfit (it decreases with the misfit too).
+    is the Student-t marginal at that misfit (it decreases with the misfit too). With the
+    assignment re-made at every point (``density.assigned``), the bound is
+    :meth:`~bayesplate.sampling.assigned.ReassignedLikelihood.upper_bound` at the Ritz values.
 
     Parameters
     ----------
@@ -221,7 +223,12 @@ class RitzScreen:
             if not np.isfinite(prior):
                 bounds[k] = -np.inf
                 continue
+            assigned = self.density.assigned
             try:
+                if assigned is not None:  # the best assignment of the bounds bounds the best
+                    R = self.reduced.eigenvalues(b[k], assigned.n) * (1 + 1e-8)
+                    bounds[k] = prior + assigned.upper_bound(R)
+                    continue
                 R = self.reduced.eigenvalues(b[k], p.pairing.n_modes())[p.pairing.modes]
             except ValueError:  # the basis holds too few modes there: no bound
                 continue

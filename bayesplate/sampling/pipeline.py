@@ -127,6 +127,7 @@ fast, fast_options
         moves=moves,
         forward=setup.sampling_forward(),
         box=setup.box,
+        assigned=setup.assigned,
     )
     input_posterior, drawn = None, time.perf_counter()
     if setup.input_model is not None:  # one draw of the readings per kept draw of b
@@ -146,7 +147,8 @@ fast, fast_options
     settings = {**result.settings, "seed_entropy": entropy, "case": case.name,
                 "box_lower": None if setup.box is None else setup.box.lower,
                 "box_upper": None if setup.box is None else setup.box.upper,
-                "full_solves_setup": setup.n_full_solves, "inputs": setup.inputs}  # fmt: skip
+                "full_solves_setup": setup.n_full_solves, "inputs": setup.inputs,
+                "assignment": setup.assignment}  # fmt: skip
     return replace(
         result,
         input_posterior=input_posterior,

@@ -15,6 +15,7 @@ import numpy as np
 
 from .. import laminate
 from ..quantities import CASE_SCALE, ENGINEERING_KEYS, hz_from_eigenvalue, hz_sd
+from .assigned import ChainAssignment
 from .density import engineering_constants
 from .stopping import autocorr_time, burn_in, load_arviz
 
@@ -100,6 +101,11 @@ class SamplingResult:
         draw of ``b``); None with the inputs exact or none declared.
     input_certificate : bayesplate.inputs_posterior.InputCertificate or None
         The linear input model against full solves at the MAP.
+    assignment : bayesplate.sampling.assigned.ChainAssignment or None
+        With the assignment re-made at every point (pairing by likelihood): per measured
+        peak, the fraction of kept draws in which each computed mode explained it or it was
+        spurious. The ``log_likelihood`` group then covers all the peaks. None otherwise
+        (``settings["assignment"]`` says why when the pairing is by likelihood).
     """
 
     idata: object = field(repr=False)
@@ -139,6 +145,7 @@ class SamplingResult:
     settings: dict = field(default_factory=dict, repr=False)
     input_posterior: object = field(default=None, repr=False)
     input_certificate: object = None
+    assignment: object = None
 
     @property
     def ess_per_second(self):
@@ -184,8 +191,14 @@ def build_result(sampler, density, history, converged, wall, n_eval, forward0, s
     tau_max = float(np.max(tau))
     burn = burn_in(n_tune, tau_max, n)
     chain = sampler.get_chain(discard=burn)  # (draws, walkers, 6)
-    idata = _inference_data(density, chain, sampler.get_log_prob(discard=burn),
-                            sampler.get_blobs(discard=burn), settings)  # fmt: skip
+    pointwise, modes = density.split_blob(sampler.get_blobs(discard=burn))
+    idata = _inference_data(density, chain, sampler.get_log_prob(discard=burn), pointwise,
+                            settings)  # fmt: skip
+    assignment = None
+    if modes is not None:  # the best assignment stored at every draw (emcee's blobs)
+        assignment = ChainAssignment.from_draws(
+            density.assigned.frequency_Hz, modes.reshape(-1, density.m), density.assigned.n
+        )
     az = load_arviz()
     summary = az.summary(
         idata, var_names=list(ENGINEERING_KEYS), hdi_prob=HDI_PROB, round_to="none"
@@ -235,6 +248,7 @@ def build_result(sampler, density, history, converged, wall, n_eval, forward0, s
         n_evaluations=n_eval,
         n_forward=density.n_forward - forward0,
         settings=settings,
+        assignment=assignment,
     )
 
 
@@ -255,20 +269,29 @@ def _measured_numbers(problem):
     return np.arange(1, problem.m + 1) if kept is None else np.asarray(kept) + 1
 
 
+def _observed(density):
+    """Measured eigenvalues, their variances and 1-based numbers in the log-likelihood."""
+    assigned = density.assigned
+    if assigned is not None:  # every peak, the assignment re-made
+        return assigned.Y, assigned.variance, np.arange(1, assigned.m + 1)
+    p = density.problem
+    return p.Y, np.diag(p.V_Y), _measured_numbers(p)
+
+
 def _inference_data(density, chain, lp, blobs, settings):
     """ArviZ data: engineering constants (case units), pointwise log-likelihood, lp."""
     az = load_arviz()
     e = engineering_constants(density, chain).swapaxes(0, 1) * CASE_UNITS  # (walkers, draws, 6)
-    problem = density.problem
-    f = hz_from_eigenvalue(problem.Y)  # Y > 0: sqrt(Y) / (2 pi)
-    sigma_f = hz_sd(f, np.sqrt(np.diag(problem.V_Y)))
+    Y, variance, numbers = _observed(density)
+    f = hz_from_eigenvalue(Y)  # Y > 0: sqrt(Y) / (2 pi)
+    sigma_f = hz_sd(f, np.sqrt(variance))
     return az.from_dict(
         posterior={key: e[..., j] for j, key in enumerate(ENGINEERING_KEYS)},
         log_likelihood={"Y": np.asarray(blobs, dtype=float).swapaxes(0, 1)},
         sample_stats={"lp": (np.asarray(lp) - density.log_jacobian(chain)).T},
-        observed_data={"Y": problem.Y},
+        observed_data={"Y": Y},
         constant_data={"frequency_Hz": f, "sigma_Hz": sigma_f},
-        coords={"mode": _measured_numbers(problem)},
+        coords={"mode": numbers},
         dims={"Y": ["mode"], "frequency_Hz": ["mode"], "sigma_Hz": ["mode"]},
         attrs={
             "units": "moduli in GPa, nu12 dimensionless; Y in rad^2/s^2",

@@ -38,8 +38,10 @@ from ..inputs_posterior import declared_readings, input_conditional, linear_inpu
 from ..model import PlateModel
 from ..pairing import Pairing
 from ..posterior import INPUT_TREATMENTS, GaussianProblem
-from ..quantities import LOG_STIFFNESS
-from ..reduced import Box, fast_model
+from ..reduced import fast_model
+from .assigned import reassignment
+from .box import check_box as _check_box
+from .box import posterior_box
 from .density import EigenvalueForward
 from .seeding import resolve_rng
 
@@ -101,6 +103,13 @@ class SamplingSetup:
     input_certificate : bayesplate.inputs_posterior.InputCertificate or None
         The linear input model against full solves at the MAP (its solves counted in
         ``n_full_solves``).
+    assigned : bayesplate.sampling.assigned.ReassignedLikelihood or None
+        Pairing by likelihood: the likelihood of all the measured peaks with the assignment
+        re-made at every point of the chain (:mod:`bayesplate.sampling.assigned`); None
+        with any other pairing, and by likelihood where it is kept fixed (`assignment`).
+    assignment : str or None
+        Pairing by likelihood: how the chain treats the assignment, one sentence (re-made
+        at every point, or kept as settled and why); None with any other pairing.
     """
 
     problem: GaussianProblem = field(repr=False)
@@ -114,6 +123,8 @@ class SamplingSetup:
     inputs: str = "exact"
     input_model: object = field(default=None, repr=False)
     input_certificate: object = None
+    assigned: object = field(default=None, repr=False)
+    assignment: str | None = None
 
     @property
     def certificate(self):
@@ -163,6 +174,17 @@ def _pilot_model(case, model, pilot_mesh):
             return model
         pilot_mesh = (math.ceil(mesh.nx / 2), math.ceil(mesh.ny / 2))
     return PlateModel.from_case(case, mesh=tuple(pilot_mesh))
+
+
+def _reassignment(case, pairing, inputs, observation):
+    """:func:`.assigned.reassignment` for a case; a warning where it is kept as settled."""
+    full = inputs == "marginal" and bool(np.any(input_sources(case.plate)[1]))
+    scaled = getattr(case.measured, "error_scale", None) is not None
+    f, s = case.measured.frequency_Hz, case.measured.sigma_Hz
+    assigned, note = reassignment(pairing, f, s, observation, full, scaled)
+    if note is not None and assigned is None:
+        log.warning(note)
+    return assigned, note
 
 
 def resolve_inputs(case, inputs="auto"):
@@ -235,45 +257,6 @@ def _widened(problem, pilot):
     return replace(pilot, covariance_b=linearised_at(problem, pilot.b).covariance_b), 1
 
 
-def posterior_box(estimate, mu_b, V_b, n_sigma=6.0, weak=0.25, prior_sigma=3.0, floor=0.1):
-    """The fast model's box: where the posterior can be, from a (pilot) B estimate.
-
-    ``b`` +- ``n_sigma`` deviations of ``P`` in every coefficient; where the data barely
-    inform a coefficient (its deviation in ``P`` above ``weak`` times the prior's), the
-    posterior is not Gaussian and reaches as far as the prior (Frederiksen G13: 9
-    deviations of ``P`` above the MAP), so the box also covers the prior mean +-
-    ``prior_sigma`` prior deviations there. Cut to physical laminae as
-    :meth:`bayesplate.reduced.Box.from_covariance`: positive coefficients above ``floor``
-    times the estimate, ``|C12|`` below 0.99 ``sqrt(C11 C22)`` at the lower corner.
-
-    Parameters
-    ----------
-    estimate : EstimateResult
-    mu_b : array_like, shape (6,)
-        Prior mean of ``b``, Pa.
-    V_b : array_like, shape (6, 6)
-        Prior covariance of ``b``, Pa^2.
-    n_sigma, weak, prior_sigma, floor : float
-
-    Returns
-    -------
-    Box
-    """
-    b = np.asarray(estimate.b, dtype=float)
-    sd = np.sqrt(np.diag(estimate.covariance_b))
-    sd0 = np.sqrt(np.diag(np.asarray(V_b, dtype=float)))
-    lower, upper = b - n_sigma * sd, b + n_sigma * sd
-    wide = sd > weak * sd0
-    mu = np.asarray(mu_b, dtype=float)
-    lower[wide] = np.minimum(lower[wide], mu[wide] - prior_sigma * sd0[wide])
-    upper[wide] = np.maximum(upper[wide], mu[wide] + prior_sigma * sd0[wide])
-    positive = LOG_STIFFNESS
-    lower[positive] = np.maximum(lower[positive], floor * b[positive])
-    cap = 0.99 * math.sqrt(lower[0] * lower[1])
-    lower[2], upper[2] = max(lower[2], -cap), min(upper[2], cap)
-    return Box(lower, upper)
-
-
 def prepare(
     case,
     *,
@@ -311,8 +294,9 @@ def prepare(
     pairing : {"auto", "mac", "likelihood", "index", "order"} or Pairing
         As for :func:`bayesplate.estimators.estimate` (:func:`bayesplate.pairing.pair_measured`
         at the prior mean; ``"likelihood"``: the assignment B settles on, on the working
-        model, then kept fixed through the chain); the sampler computes no modes beyond the paired
-        ones.
+        model, placing the box and the MAP; the chain re-makes it at every point unless
+        the inputs are marginalised or an error scale is inferred (:func:`.assigned.\
+reassignment`); any other pairing stays fixed, no modes computed beyond the paired ones.
     box_sigma : float
         Half-width of the posterior box in deviations of the pilot B estimate.
     box : Box, optional
@@ -361,6 +345,8 @@ def prepare(
     problem = GaussianProblem.from_case(
         case, model, pair, conventions.observation, conventions.prior, mean, sd
     )
+    assigned, assignment = _reassignment(case, pairing, inputs, conventions.observation)
+    n_modes = pair.n_modes() if assigned is None else assigned.n
     exact = problem
     timings = {"pilot": 0.0, "build": 0.0, "map": 0.0}
     pilot, solves, conditional = None, 0, None
@@ -386,7 +372,7 @@ def prepare(
         started = time.perf_counter()
         options = {**FAST_DEFAULTS, **(fast_options or {})}
         center = box.center if pilot is None else pilot.b
-        fast = fast_model(model, center, box, pair.n_modes(), rng=rng, **options)
+        fast = fast_model(model, center, box, n_modes, rng=rng, **options)
         timings["build"] = time.perf_counter() - started
         solves += fast.build_solves
         log.info("fast model: %s", fast.certificate)
@@ -396,7 +382,8 @@ def prepare(
         solves += spent
     setup = SamplingSetup(problem, model, fast if forward == "reduced" else None, None,
                           pilot, None if fast is None else fast.box, timings, solves,
-                          inputs, conditional)  # fmt: skip
+                          inputs, conditional, assigned=assigned,
+                          assignment=assignment)  # fmt: skip
     started = time.perf_counter()
     # B from the settled assignment's estimate (B's fixed point from the prior mean may be
     # another optimum with a pairing that skips modes); from the prior mean otherwise
@@ -474,20 +461,3 @@ def _run_on_fast(setup, method, tol, **kwargs):
 
 def _mesh_text(model):
     return f"{model.mesh.nx} x {model.mesh.ny} mesh"
-
-
-def _check_box(box, estimate):
-    """Log how far the MAP is from the box's edges, in linearised deviations.
-
-    An edge closer than ``box_sigma`` deviations is a physical cut (a floor of
-    :meth:`Box.from_covariance`, where the likelihood usually falls steeply: G23 of the
-    Frederiksen plate loses 600 in log-likelihood at the floor, 2.5 deviations below the
-    MAP). Walkers beyond an edge are full-model fallbacks, warned about by the fast model
-    and counted in the result.
-    """
-    if box is None:
-        return
-    sd = np.sqrt(np.diag(estimate.covariance_b))
-    low, high = (estimate.b - box.lower) / sd, (box.upper - estimate.b) / sd
-    log.info("the MAP is %s (lower) / %s (upper) deviations from the fast model's box "
-             "edges", np.round(low, 1), np.round(high, 1))  # fmt: skip
