@@ -41,9 +41,12 @@ import datetime
 import functools
 import json
 import logging
+import os
 import pathlib
 import sys
 import time
+import traceback
+import zlib
 
 import numpy as np
 from scipy.stats import binomtest, chi2, ncx2
@@ -68,9 +71,28 @@ ALPHA = DEFAULTS["alpha"]
 Z94 = 1.881  # half-width of a 94 % normal interval, in sd
 N_CLEAN = 20  # per family
 N_POWER = 10  # per candidate and size
-#: The power sizes, in running order: (label, the ideal test's rejection probability, factor):
-#: the size at which the ideal test rejects with that probability, times the factor.
-SIZES = (("ideal 0.9", 0.9, 1.0), ("3 x ideal 0.9", 0.9, 3.0), ("ideal 0.5", 0.5, 1.0))
+#: The power sizes, in running order: (label, reference test, its rejection probability,
+#: factor): the size at which the reference test rejects with that probability, times the
+#: factor. The ideal test is the chi-square at the true constants (m dof); the fitted test
+#: the same once the six constants have absorbed what they can (m - 6 dof).
+SIZES = (
+    ("fitted 0.9", "fitted", 0.9, 1.0),
+    ("3 x ideal 0.9", "ideal", 0.9, 3.0),
+    ("ideal 0.9", "ideal", 0.9, 1.0),
+    ("ideal 0.5", "ideal", 0.5, 1.0),
+)
+N_CONSTANTS = 6  # the constants diagnose fits (its stiffness coefficients)
+#: Rows of these code versions are kept in the cache but not counted: diagnose has changed
+#: since in ways that change its answers (its label: why).
+RETIRED = {
+    "2026-11-25 (b454113-6b495b0)": (
+        "made on 2026-11-25 by the code of b454113-6b495b0: since then diagnose's fits are "
+        "settled on reduced models (58b7f36), every promising candidate is settled in two "
+        "phases (7882a0d, b5719b8), a rejected refit is searched again (b88761d) and the "
+        "nominal fit's global stage shares its first round (9433d2b)"
+    ),
+}
+LEGACY_CODE = "2026-11-25 (b454113-6b495b0)"  # the label of rows stored without one
 FAMILIES = {"frederiksen_t300": (40, 20), "crossply": (32, 16)}  # diagnose's mesh
 QUICK_FAMILIES = {"frederiksen_t300": (6, 3), "crossply": (8, 4)}
 POWER_FAMILY = "frederiksen_t300"
@@ -121,6 +143,23 @@ def fitted_noncentrality(delta_lambda, S, sigma_lambda):
     A = np.asarray(S, dtype=float) / np.asarray(sigma_lambda, dtype=float)[:, None]
     coef, *_ = np.linalg.lstsq(A, r, rcond=None)
     return float(np.sum((r - A @ coef) ** 2))
+
+
+def fitted_lambdas(deltas, S, sigma_lambda):
+    """:func:`fitted_noncentrality` of each effect vector in ``deltas`` (one per size)."""
+    return [fitted_noncentrality(d, S, sigma_lambda) for d in deltas]
+
+
+def fitted_size(grid, deltas, S, sigma_lambda, power, alpha=ALPHA):
+    """The size at which the test of the fitted nominal model rejects with ``power``.
+
+    ``deltas[i]`` is the effect on the eigenvalues at ``grid[i]``; the test has ``m - 6``
+    degrees of freedom (``S`` has six columns); the fitted noncentralities on the grid are
+    inverted by :func:`size_for`. Returns ``(size or None, the noncentralities)``.
+    """
+    lams = fitted_lambdas(deltas, S, sigma_lambda)
+    m, k = np.shape(S)
+    return size_for(grid, lams, noncentrality_for(power, m - k, alpha)), lams
 
 
 def ideal_power(lam, m, alpha=ALPHA):
@@ -184,26 +223,38 @@ def _frequencies(case, plate):
 
 
 def sizes(quick=False):
-    """``{effect: {"grid", "lambda", "sizes": [size of each of SIZES, or None]}}``.
+    """``{effect: {"grid", "lambda", "fitted_lambda", "sizes": [size of each of SIZES or None]}}``.
 
-    The noncentrality of each effect on a grid of sizes (Frederiksen plate, recordings' mesh)
-    and the sizes of ``SIZES``; None where the grid (the admissible sizes) does not reach it.
+    The noncentrality of each effect on a grid of sizes (Frederiksen plate, recordings' mesh,
+    true constants), of the ideal test and of the fitted one (the six constants' linearised
+    absorption, :func:`fitted_noncentrality`), and the sizes of ``SIZES``, rounded to two
+    digits; None where the grid (the admissible sizes) does not reach it.
     """
     case, _, fine = _models(POWER_FAMILY, quick)
-    f0 = _frequencies(case, fine)
+    b = stiffness_from_engineering(case.reference)
+    nominal = fine.solve(b, case.measured.size)
+    f0 = nominal.frequency_Hz
     m = f0.size
+    sigma_lambda = 2.0 * NOISE * nominal.eigenvalues  # d lambda = 2 lambda df / f
     out = {}
     for name, (make, theta, _, grid) in EFFECTS.items():
         if quick and name != "point_mass":
             continue
         physics = make()
-        lams = [noncentrality(_frequencies(case, physics.apply(fine, np.asarray(theta(s)))), f0)
-                for s in grid]  # fmt: skip
-        found = [size_for(grid, lams, noncentrality_for(p, m)) for _, p, _ in SIZES]
-        found = [None if s is None or f * s > grid[-1] else f * s
-                 for s, (_, _, f) in zip(found, SIZES, strict=True)]  # fmt: skip
+        solved = [physics.apply(fine, np.asarray(theta(s), dtype=float)).solve(b, m) for s in grid]
+        lams = [noncentrality(x.frequency_Hz, f0) for x in solved]
+        deltas = [np.sort(x.eigenvalues) - nominal.eigenvalues for x in solved]
+        fitted = fitted_lambdas(deltas, nominal.sensitivities, sigma_lambda)
+        found = []
+        for _, reference, p, factor in SIZES:
+            if reference == "fitted":
+                at = size_for(grid, fitted, noncentrality_for(p, m - N_CONSTANTS))
+            else:
+                at = size_for(grid, lams, noncentrality_for(p, m))
+            found.append(None if at is None or factor * at > grid[-1] else factor * at)
         rounded = [None if s is None else float(f"{s:.2g}") for s in found]
-        out[name] = {"grid": list(map(float, grid)), "lambda": lams, "sizes": rounded}
+        out[name] = {"grid": list(map(float, grid)), "lambda": lams, "fitted_lambda": fitted,
+                     "sizes": rounded}  # fmt: skip
     return out
 
 
@@ -230,37 +281,86 @@ def absorbed(size_table, quick=False):
 
 
 def tasks(size_table, quick=False):
-    """Every replicate, in running order: ``(kind, family, effect, size index, size, rep)``."""
+    """Every replicate, in running order: ``(kind, family, effect, size label, size, rep)``.
+
+    First the size that decides the target (the fitted test's 0.9) replicate by replicate
+    across the candidates, each round followed by two clean replicates of each family; then
+    the other sizes together replicate by replicate, in the order of ``SIZES``: a partial run
+    has even counts. A size two labels share runs once (one key).
+    """
     n_clean, n_power = (2, 1) if quick else (N_CLEAN, N_POWER)
-    out = [("clean", family, None, None, None, rep)
-           for rep in range(n_clean) for family in FAMILIES]  # fmt: skip
-    # the first two sizes replicate by replicate together, then the rest: a partial run has
-    # even counts at both
-    blocks = [(0, 1), tuple(range(2, len(SIZES)))]
-    for block in blocks[:1] if quick else blocks:
+    first = [j for j, entry in enumerate(SIZES) if entry[0] == "fitted 0.9"]
+    rest = [j for j in range(len(SIZES)) if j not in first]
+    clean = [("clean", family, None, None, None, rep)
+             for rep in range(n_clean) for family in FAMILIES]  # fmt: skip
+    per_round = -(-len(clean) // n_power)  # clean replicates after each round
+    out = []
+
+    def power(block, rep):
+        for j in block:
+            for name, entry in size_table.items():
+                if entry["sizes"][j] is not None:
+                    out.append(("power", POWER_FAMILY, name, SIZES[j][0], entry["sizes"][j], rep))
+
+    for rep in range(n_power):
+        power(first, rep)
+        out.extend(clean[rep * per_round : (rep + 1) * per_round])
+    if not quick:
         for rep in range(n_power):
-            for j in block:
-                for name, entry in size_table.items():
-                    if entry["sizes"][j] is not None and not (quick and j > 0):
-                        out.append(("power", POWER_FAMILY, name, j, entry["sizes"][j], rep))
-    return out
+            power(rest, rep)
+    seen, unique = set(), []
+    for t in out:
+        if task_key(t) not in seen:
+            seen.add(task_key(t))
+            unique.append(t)
+    return unique
+
+
+def size_key(size):
+    """A size as it appears in the keys of the rows (two significant digits, stable)."""
+    return f"{float(size):.6g}"
 
 
 def task_key(task):
-    kind, family, effect, j, _, rep = task
-    return f"{kind}/{family}/{effect}/{j}/{rep}"
+    """The row's key: by the size's value, not its place in ``SIZES`` (which may change)."""
+    kind, family, effect, _, size, rep = task
+    if kind == "clean":
+        return f"clean/{family}/{rep}"
+    return f"power/{family}/{effect}/{size_key(size)}/{rep}"
 
 
 def _seed(task):
-    kind, family, effect, j, _, rep = task
+    """The replicate's seed, from what its key says (family, effect, size's value, rep)."""
+    kind, family, effect, _, size, rep = task
     spawn = (list(FAMILIES).index(family), 0 if effect is None else 1 + list(EFFECTS).index(effect),
-             0 if j is None else j, rep)  # fmt: skip
+             0 if size is None else zlib.crc32(size_key(size).encode()), rep)  # fmt: skip
     return np.random.SeedSequence(SEED, spawn_key=spawn)
+
+
+def run_task_recorded(task, quick=False, code=None):
+    """:func:`run_task`, its failure a row too (verdict ``error``, the traceback's end):
+    a replicate that raises is recorded, not lost, and the run goes on."""
+    start = time.perf_counter()
+    try:
+        row = run_task(task, quick)
+    except Exception as exc:  # noqa: BLE001 - every failure is a result of the study
+        kind, family, effect, label, size, rep = task
+        row = {
+            "key": task_key(task), "kind": kind, "family": family, "effect": effect,
+            "size_label": label, "size": size, "rep": rep, "verdict": "error", "chosen": None,
+            "rival": None, "error": f"{type(exc).__name__}: {exc}",
+            "traceback": traceback.format_exc()[-2000:], "recovered": None, "images": [],
+            "truth": None, "seconds": time.perf_counter() - start,
+        }  # fmt: skip
+    row["code"] = code
+    row["finished"] = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
+    row["load"] = list(os.getloadavg())
+    return row
 
 
 def run_task(task, quick=False):
     """Make the recordings of one replicate, diagnose them blind; the row (plain data)."""
-    kind, family, effect, j, size, rep = task
+    kind, family, effect, label, size, rep = task
     logging.getLogger("bayesplate").setLevel(logging.ERROR)
     case, model, fine = _models(family, quick)
     rng = np.random.default_rng(_seed(task))
@@ -282,7 +382,7 @@ def run_task(task, quick=False):
     b_true = stiffness_from_engineering(case.reference)
     row = {
         "key": task_key(task), "kind": kind, "family": family, "effect": effect,
-        "size_index": j, "size": size, "rep": rep, "verdict": d.verdict,
+        "size_label": label, "size": size, "rep": rep, "verdict": d.verdict,
         "chosen": d.chosen.name if d.chosen else None,
         "rival": d.rival.name if d.rival is not None else None,
         "p_value": float(d.p_value), "refit_p": float(d.refit_p_value),
@@ -317,6 +417,11 @@ def named(row):
 def wrong_name(row):
     """An ``explained`` verdict that names another candidate than the concealed one."""
     return row["verdict"] == "explained" and row["chosen"] != row["effect"]
+
+
+def wrong_pair(row):
+    """An ``ambiguous`` verdict whose two named candidates are both not the concealed one."""
+    return row["verdict"] == "ambiguous" and row["effect"] not in (row["chosen"], row["rival"])
 
 
 def covered(row):
@@ -354,13 +459,87 @@ def _settings(quick):
     return json.loads(json.dumps(settings))  # as read back from the cache (lists, not tuples)
 
 
+def _empty(quick):
+    return {"settings": _settings(quick), "sizes": None, "rows": {}, "retired": {},
+            "seconds": 0.0, "runs": []}  # fmt: skip
+
+
 def load(out_dir, quick):
     path = _cache_path(out_dir, quick)
     if path.exists():
         stored = json.loads(path.read_text())
         if stored.get("settings") == _settings(quick):
-            return stored
-    return {"settings": _settings(quick), "sizes": None, "rows": {}, "seconds": 0.0}
+            return {**_empty(quick), **stored}
+    return _empty(quick)
+
+
+def _row_key(row):
+    """A row's key from its content (the keys of older caches held the size's place)."""
+    if row["kind"] == "clean":
+        return f"clean/{row['family']}/{row['rep']}"
+    return f"power/{row['family']}/{row['effect']}/{size_key(row['size'])}/{row['rep']}"
+
+
+def migrate(stored):
+    """Bring the cache's rows to the current size table and code, in place; return it.
+
+    Each row is keyed by the size's value. A power row whose (effect, size) is still in the
+    table is kept (labelled with the size's current label); one whose size is no longer
+    run, and every row of a code version in ``RETIRED``, is moved to ``stored["retired"]``
+    (kept, not counted) with the reason. Rows stored without a code label are labelled
+    ``LEGACY_CODE``, and the wall time stored with them goes with them.
+    """
+    table = stored.get("sizes") or {}
+    labels = {}  # (effect, size key) -> the first label of SIZES with that size
+    for effect, entry in table.items():
+        for (label, *_), size in zip(SIZES, entry["sizes"], strict=True):
+            if size is not None:
+                labels.setdefault((effect, size_key(size)), label)
+    retired = stored.setdefault("retired", {})
+    legacy = [r for r in stored["rows"].values() if "code" not in r]
+    if legacy:
+        spent = stored.setdefault("retired_seconds", {})
+        spent[LEGACY_CODE] = spent.get(LEGACY_CODE, 0.0) + stored.get("seconds", 0.0)
+        stored["seconds"] = 0.0
+    kept = {}
+    for row in stored["rows"].values():
+        row.setdefault("code", LEGACY_CODE)
+        if "size_index" in row:  # older rows: the size's place in the SIZES of their day
+            row.pop("size_index")
+        key = _row_key(row)
+        row["key"] = key
+        why = RETIRED.get(row["code"])
+        if why is None and row["kind"] == "power":
+            label = labels.get((row["effect"], size_key(row["size"])))
+            if label is None:
+                why = "its size is no longer run"
+            else:
+                row["size_label"] = label
+        if why is None:
+            kept[key] = row
+        else:
+            retired[f"{row['code']}|{key}"] = {**row, "retired": why}
+    stored["rows"] = kept
+    return stored
+
+
+def code_version():
+    """The commit the study runs (``+modified`` when the package or studies differ from it)."""
+    import subprocess
+
+    root = pathlib.Path(__file__).resolve().parents[1]
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, text=True,
+                              capture_output=True, check=True).stdout.strip()  # fmt: skip
+        dirty = subprocess.run(["git", "status", "--porcelain", "--", "bayesplate", "studies"],
+                               cwd=root, text=True, capture_output=True).stdout.strip()  # fmt: skip
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    return head + ("+modified" if dirty else "")
+
+
+def _now():
+    return datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
 
 
 def main(out_dir="reports", quick=False, workers=None, report_only=False):
@@ -372,26 +551,33 @@ def main(out_dir="reports", quick=False, workers=None, report_only=False):
     spec = [list(entry) for entry in SIZES]
     if (stored["sizes"] is None or stored.get("size_spec") != spec) and not report_only:
         stored["sizes"], stored["size_spec"] = sizes(quick), spec
-        # power rows of other sizes are of no use; clean ones do not depend on them
-        stored["rows"] = {k: r for k, r in stored["rows"].items() if r["kind"] == "clean"}
-        atomic_write_text(path, json.dumps(stored))
+    if stored["sizes"] is not None:
+        migrate(stored)  # rows keyed by the size's value: those of sizes still run are kept
+        if not report_only:
+            atomic_write_text(path, json.dumps(stored))
     todo = [] if report_only else [t for t in tasks(stored["sizes"], quick)
                                    if task_key(t) not in stored["rows"]]  # fmt: skip
     print(f"{len(todo)} replicates to run ({len(stored['rows'])} cached)", flush=True)
     start, base = time.perf_counter(), stored.get("seconds", 0.0)
+    code = code_version()
+    if todo:
+        stored["runs"].append({"start": _now(), "end": None, "code": code, "workers": workers,
+                               "rows": 0, "load": list(os.getloadavg())})  # fmt: skip
 
     def keep(position, row):  # each row stored as it comes: an interrupted run resumes
         stored["rows"][row["key"]] = row
         stored["seconds"] = base + time.perf_counter() - start
+        stored["runs"][-1].update(end=_now(), rows=stored["runs"][-1]["rows"] + 1)
         atomic_write_text(path, json.dumps(stored))
-        print(f"{row['key']:45s} {row['verdict']:12s} {row['chosen'] or '-':22s} "
-              f"{row['seconds']:5.0f} s ({position + 1}/{len(todo)})", flush=True)  # fmt: skip
+        print(f"{_now()} {row['key']:48s} {row['verdict']:12s} {row['chosen'] or '-':22s} "
+              f"{row['seconds']:5.0f} s ({position + 1}/{len(todo)})"
+              + (f" {row['error']}" if row["verdict"] == "error" else ""), flush=True)  # fmt: skip
         write_report(out_dir, stored, quick, workers)
 
     _ship_by_value()
     if todo:
-        map_tasks(functools.partial(run_task, quick=quick), todo, workers=workers,
-                  progress=False, on_result=keep)  # fmt: skip
+        map_tasks(functools.partial(run_task_recorded, quick=quick, code=code), todo,
+                  workers=workers, progress=False, on_result=keep)  # fmt: skip
     return write_report(out_dir, stored, quick, workers)
 
 
@@ -408,7 +594,7 @@ def _machine():
     sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
     from _study_host import cpu
 
-    return cpu()
+    return f"the {os.cpu_count()}-core development machine ({cpu()})"
 
 
 def write_report(out_dir, stored, quick, workers):
@@ -436,20 +622,38 @@ def false_alarms(rows, family=None):
     return sum(r["verdict"] != "consistent" for r in clean), len(clean)
 
 
-def power_cells(rows, size_table):
-    """Per (effect, size index): counts of the ideal test's and diagnose's outcomes."""
+def power_cells(rows):
+    """Per (effect, size key): counts of the ideal test's and diagnose's outcomes."""
     cells = {}
     for r in rows:
         if r["kind"] != "power":
             continue
-        c = cells.setdefault((r["effect"], r["size_index"]), {
-            "n": 0, "named": 0, "wrong": 0, "ideal": 0, "verdicts": {}})  # fmt: skip
+        c = cells.setdefault((r["effect"], size_key(r["size"])), {
+            "n": 0, "named": 0, "wrong": 0, "pair": 0, "ideal": 0, "verdicts": {}})  # fmt: skip
         c["n"] += 1
         c["named"] += named(r)
         c["wrong"] += wrong_name(r)
-        c["ideal"] += r["ideal_chi2"] > chi2.ppf(1.0 - ALPHA, r["m"])
+        c["pair"] += wrong_pair(r)
+        c["ideal"] += r["verdict"] != "error" and r["ideal_chi2"] > chi2.ppf(1.0 - ALPHA, r["m"])
         c["verdicts"][r["verdict"]] = c["verdicts"].get(r["verdict"], 0) + 1
     return cells
+
+
+def _fitted_p(left, effect, j):
+    lam = (left.get(effect) or [None] * len(SIZES))[j]
+    return None if lam is None else ideal_power(lam, 14 - N_CONSTANTS)
+
+
+def _verdicts(counts):
+    return ", ".join(f"{v} {k}" for v, k in sorted(counts.items()))
+
+
+def _load_line(rows):
+    loads = [r["load"][0] for r in rows if r.get("load")]
+    if not loads:
+        return ""
+    return (f" Load average (1 min) when each row finished: median {np.median(loads):.2f}, "
+            f"{min(loads):.2f}-{max(loads):.2f}.")  # fmt: skip
 
 
 def report(rows, stored, quick, workers):
@@ -457,12 +661,15 @@ def report(rows, stored, quick, workers):
     n_tasks = len(tasks(size_table, quick)) if size_table else 0
     meshes = QUICK_FAMILIES if quick else FAMILIES
     today = datetime.date.today().isoformat()
+    uptime = ", ".join(f"{x:.2f}" for x in os.getloadavg())
     lines = [
         "# Calibration of `diagnose`: false alarms, power, coverage of the refit",
         "",
         f"Made by `python studies/calibration.py{' --quick' if quick else ''}` (seed {SEED}) "
-        f"on {today}, {_machine()}, {workers} worker(s); {len(rows)} of {n_tasks} replicates "
-        f"finished in {stored.get('seconds', 0.0) / 60:.0f} min of wall time.",
+        f"on {today}, on {_machine()}, {workers} worker(s); {len(rows)} of {n_tasks} replicates "
+        f"finished in {stored.get('seconds', 0.0) / 60:.0f} min of wall time (the runs' time "
+        f"to their last finished row); load averages (1, 5, 15 min) when this report was "
+        f"written: {uptime}.{_load_line(rows)}",
         "",
         "Recordings: the plate (with the concealed effect) on a mesh twice as fine each way as "
         f"diagnose's, its lowest 14 frequencies with {100 * NOISE:.1f} % Gaussian noise, sorted; "
@@ -471,6 +678,9 @@ def report(rows, stored, quick, workers):
         + ", ".join(f"{k} {v[0]} x {v[1]}" for k, v in meshes.items())
         + ".",
         "",
+    ]
+    lines += _provenance(rows, stored)
+    lines += [
         "## False alarms (nothing concealed)",
         "",
         "The nominal fit's p-value would be uniform on (0, 1) (median 0.5) if its chi-square "
@@ -482,60 +692,64 @@ def report(rows, stored, quick, workers):
         "|---|---|---|---|---|---|---|",
     ]
     for family in [*meshes, None]:
+        clean = [r for r in rows if r["kind"] == "clean" and family in (None, r["family"])]
         k, n = false_alarms(rows, family)
         if n == 0:
             continue
         lo, hi = wilson(k, n)
         verdicts = {}
-        for r in rows:
-            if r["kind"] == "clean" and family in (None, r["family"]):
-                verdicts[r["verdict"]] = verdicts.get(r["verdict"], 0) + 1
-        clean = [r for r in rows if r["kind"] == "clean" and family in (None, r["family"])]
-        q = np.percentile([r["p_value"] for r in clean], [10, 50, 90])
-        gain = max(max(r["gains"].values()) for r in clean)
+        for r in clean:
+            verdicts[r["verdict"]] = verdicts.get(r["verdict"], 0) + 1
+        ok = [r for r in clean if r["verdict"] != "error"]
+        q = np.percentile([r["p_value"] for r in ok], [10, 50, 90]) if ok else [np.nan] * 3
+        gain = max((max(r["gains"].values()) for r in ok if r["gains"]), default=np.nan)
         lines.append(
-            f"| {family or 'both'} | {n} | {k} | {lo:.2f}-{hi:.2f} | "
-            + ", ".join(f"{v} {c}" for v, c in sorted(verdicts.items()))
-            + f" | {q[0]:.2f} / {q[1]:.2f} / {q[2]:.2f} | {gain:+.1f} |"
+            f"| {family or 'both'} | {n} | {k} | {lo:.2f}-{hi:.2f} | {_verdicts(verdicts)} "
+            f"| {q[0]:.2f} / {q[1]:.2f} / {q[2]:.2f} | {gain:+.1f} |"
         )
+    left = stored.get("absorbed") or {}  # set by write_report
     lines += ["", "## Power (Frederiksen plate)", "",
               "Sizes where the ideal test (chi-square at the true constants on the recordings' "
-              "mesh, 14 dof, 1 %) rejects with probability 0.5 and 0.9, and three times the "
-              "latter; `ideal P(reject)` is its noncentral chi-square probability there, "
-              "`ideal rejects` its count on the replicates' recordings. `fitted P(reject)`: "
-              "the same test once the six constants have absorbed what they can of the effect "
-              "(linearised, 8 dof, no prior; `fitted_noncentrality`): the power left to any "
-              "method that, like diagnose, does not know the constants.", "",
-              "| candidate | size | ideal P(reject) | fitted P(reject) | ideal rejects | "
-              "diagnose names it | Wilson 95 % | wrong name | verdicts |",
-              "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
-    left = stored.get("absorbed") or {}  # set by write_report
-    cells = power_cells(rows, size_table)
+              "mesh, 14 dof, 1 %) rejects with probability 0.5 and 0.9, three times the "
+              "latter, and where the fitted test rejects with probability 0.9. The fitted "
+              "test is the same once the six constants have absorbed what they can of the "
+              "effect (linearised, 8 dof, no prior; `fitted_noncentrality`): the power left "
+              "to any method that, like diagnose, does not know the constants. Its size is "
+              "found on the same grid of sizes as the ideal one's (fine mesh, true constants, "
+              "log-log interpolation), rounded to two digits; `fitted P(reject)` and `ideal "
+              "P(reject)` are then computed at the rounded size. `ideal rejects`: the ideal "
+              "test's count on the replicates' recordings. `named right`: `explained` with the "
+              "concealed candidate, or `ambiguous` with it among the two. `wrong names`: "
+              "`explained` with another candidate, and (after the +) `ambiguous` between two "
+              "others.", "",
+              "| candidate | size | fitted P(reject) | ideal P(reject) | replicates run | "
+              "ideal rejects | named right | Wilson 95 % | wrong names | verdicts |",
+              "|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    cells = power_cells(rows)
     for effect, entry in size_table.items():
         unit = EFFECTS[effect][2]
-        for j in sorted(range(len(SIZES)), key=lambda i: (SIZES[i][1], SIZES[i][2])):
+        order = sorted(range(len(SIZES)), key=lambda i: (entry["sizes"][i] is None,
+                                                         entry["sizes"][i] or 0.0))  # fmt: skip
+        for j in order:
             s = entry["sizes"][j]
-            c = cells.get((effect, j))
             if s is None:
-                lines.append(
-                    f"| {effect} | {SIZES[j][0]}: beyond the admissible sizes | - | - "
-                    "| - | - | - | - | - |"
-                )
+                lines.append(f"| {effect} | {SIZES[j][0]}: beyond the admissible sizes | - | - "
+                             "| - | - | - | - | - | - |")  # fmt: skip
                 continue
+            c = cells.get((effect, size_key(s)))
             p = f"{ideal_power(lambda_at(entry, s), 14):.2f}"
-            fitted = (left.get(effect) or [None] * len(SIZES))[j]
-            q = "-" if fitted is None else f"{ideal_power(fitted, 14 - 6):.2f}"
-            head = f"| {effect} | {f'{s:.2g} {unit}'.strip()} ({SIZES[j][0]}) | {p} | {q} |"
+            fp = _fitted_p(left, effect, j)
+            q = "-" if fp is None else f"{fp:.2f}"
+            head = f"| {effect} | {f'{s:.2g} {unit}'.strip()} ({SIZES[j][0]}) | {q} | {p} |"
             if c is None:
-                lines.append(f"{head} not run | | | | |")
+                lines.append(f"{head} 0 | | | | | |")
                 continue
             lo, hi = wilson(c["named"], c["n"])
             lines.append(
-                f"{head} {c['ideal']}/{c['n']} | "
-                f"{c['named']}/{c['n']} | {lo:.2f}-{hi:.2f} | {c['wrong']} | "
-                + ", ".join(f"{v} {k}" for v, k in sorted(c["verdicts"].items()))
-                + " |"
+                f"{head} {c['n']} | {c['ideal']} | {c['named']} | {lo:.2f}-{hi:.2f} | "
+                f"{c['wrong']} + {c['pair']} | {_verdicts(c['verdicts'])} |"
             )
+    lines += ["", *_absorption(size_table, left)]
     checks = [covered(r) for r in rows if r["kind"] == "power"]
     inside = [v for c in checks for v in c.values()]
     per = {}
@@ -554,28 +768,119 @@ def report(rows, stored, quick, workers):
         )
     else:
         lines.append("No replicate named its concealed candidate yet.")
-    lines += ["", "## Targets (issue 13)", ""] + _targets(rows, cells, size_table, inside)
+    errors = [r for r in rows if r["verdict"] == "error"]
+    lines += ["", "## Failures", ""]
+    if errors:
+        lines += [f"- `{r['key']}`: {r['error']}" for r in errors]
+    else:
+        lines.append("No replicate raised.")
+    lines += ["", "## Targets (issue 13)", ""]
+    lines += _targets(rows, cells, size_table, left, inside, quick)
     return "\n".join(lines) + "\n"
 
 
-def _targets(rows, cells, size_table, inside):
-    k, n = false_alarms(rows)
-    out = [f"- false alarms: {k} of {n} clean replicates not `consistent` (target: at most 2 of "
-           f"40){'' if n >= 40 else ' - partial'}"]  # fmt: skip
-    j90 = 0  # SIZES[0]: where the ideal test rejects in 9 of 10
-    for effect in size_table:
-        c = cells.get((effect, j90))
-        if c is None:
-            out.append(f"- {effect}: not run at the 0.9 size")
-            continue
+def _provenance(rows, stored):
+    """Which code made which rows; the rows set aside and why."""
+    out = ["## Which code made the rows", ""]
+    by_code = {}
+    for r in rows:
+        by_code.setdefault(r.get("code"), []).append(r)
+    for code, mine in sorted(by_code.items(), key=lambda kv: str(kv[0])):
+        days = sorted({(r.get("finished") or "")[:10] for r in mine} - {""})
+        out.append(f"- counted: {len(mine)} rows ({sum(r['kind'] == 'clean' for r in mine)} "
+                   f"clean, {sum(r['kind'] == 'power' for r in mine)} power) made by `{code}`"
+                   + (f" on {', '.join(days)}" if days else "") + ".")  # fmt: skip
+    retired = list((stored.get("retired") or {}).values())
+    reasons = {}
+    for r in retired:
+        reasons.setdefault((r["code"], r["retired"]), []).append(r)
+    spent = stored.get("retired_seconds") or {}
+    for (code, why), mine in reasons.items():
+        clean = [r for r in mine if r["kind"] == "clean"]
+        power = [r for r in mine if r["kind"] == "power"]
+        k = sum(r["verdict"] != "consistent" for r in clean)
         out.append(
-            f"- {effect} at the 0.9 size: named in {c['named']} of {c['n']} (target: 8 of "
-            f"10), ideal test rejected {c['ideal']} of {c['n']}"
+            f"- set aside, not counted: {len(mine)} rows of `{code}` ({why}): {len(clean)} "
+            f"clean, {k} not `consistent`; {len(power)} power, named right in "
+            f"{sum(named(r) for r in power)}, wrong names {sum(wrong_name(r) for r in power)}"
+            + (f"; {spent[code] / 60:.0f} min of wall time" if code in spent else "")
+            + "."
         )
-    wrong = sum(wrong_name(r) for r in rows if r["kind"] == "power")
+    return [*out, ""]
+
+
+def _absorption(size_table, left):
+    """Why the issue's ideal-0.9 target is out of reach: the constants absorb the effect."""
+    j90 = [entry[0] for entry in SIZES].index("ideal 0.9")
+    jf = [entry[0] for entry in SIZES].index("fitted 0.9")
+    parts = []
+    for effect, entry in size_table.items():
+        s, lam = entry["sizes"][j90], (left.get(effect) or [None] * len(SIZES))[j90]
+        if s is None or lam is None:
+            continue
+        ideal = lambda_at(entry, s)
+        sf = entry["sizes"][jf]
+        ratio = "" if sf is None else f", fitted 0.9 at {sf / s:.1f} x the size"
+        parts.append((ideal_power(lam, 14 - N_CONSTANTS), f"{effect} "
+                      f"{ideal_power(lam, 14 - N_CONSTANTS):.2f} ({100 * (1 - lam / ideal):.0f} % "
+                      f"of the noncentrality absorbed{ratio})"))  # fmt: skip
+    if not parts:
+        return []
+    listed = "; ".join(text for _, text in sorted(parts))
+    return [
+        "**Why the issue's target (named in 8 of 10 at the ideal 0.9 size) is out of reach.** "
+        "The ideal test knows the true constants; diagnose fits the six constants, and they "
+        "absorb most of a small effect: a change of the constants mimics much of what the "
+        "effect does to 14 frequencies. What is left is the noncentrality of the test of the "
+        "fitted nominal model (8 dof). At the ideal 0.9 sizes that test rejects with "
+        f"probability: {listed}. No method that estimates the constants can name an effect "
+        "its fitted nominal model does not reject, so at the ideal 0.9 size it names it at "
+        "most that often (up to the linearisation); the achievable reference is the fitted "
+        "test, and the target is judged against both below."
+    ]
+
+
+def _judge(c, need=8, of=N_POWER):
+    """The target 'named right in `need` of `of`' on the replicates run so far (no forecast)."""
+    if c is None or c["n"] == 0:
+        return "not run yet"
+    k, n = c["named"], c["n"]
+    so_far = f"named right in {k} of {n} run so far" if n < of else f"named right in {k} of {n}"
+    if k >= need:
+        return f"{so_far}: met"
+    if n - k > of - need:
+        return f"{so_far}: missed ({n - k} misses; the target allows {of - need})"
+    return f"{so_far}: open (partial)" if n < of else f"{so_far}: missed"
+
+
+def _targets(rows, cells, size_table, left, inside, quick):
+    n_clean = 2 * (2 if quick else N_CLEAN)
+    k, n = false_alarms(rows)
+    out = [
+        f"- false alarms: {k} of {n} clean replicates not `consistent` (target: at most 2 of "
+        f"{n_clean}){'' if n >= n_clean else f' - partial, {n} of {n_clean} run so far'}"
+    ]
+    names = [entry[0] for entry in SIZES]
+    for label in ("fitted 0.9", "ideal 0.9"):
+        j = names.index(label)
+        ref = "the achievable reference" if label == "fitted 0.9" else "the issue's reference"
+        out.append(f"- at the {label} size ({ref}), target named right in 8 of 10:")
+        for effect, entry in size_table.items():
+            s = entry["sizes"][j]
+            if s is None:
+                out.append(f"  - {effect}: the size lies beyond the admissible sizes")
+                continue
+            c = cells.get((effect, size_key(s)))
+            fp = _fitted_p(left, effect, j)
+            expect = "" if fp is None else f" (fitted P(reject) {fp:.2f})"
+            ideal = "" if c is None else f"; ideal test rejected {c['ideal']} of {c['n']}"
+            out.append(f"  - {effect} at {s:.2g}{expect}: {_judge(c)}{ideal}")
+    power = [r for r in rows if r["kind"] == "power"]
+    wrong = sum(wrong_name(r) for r in power)
+    pair = sum(wrong_pair(r) for r in power)
     out.append(
-        f"- wrong names (`explained` with another candidate): {wrong} of "
-        f"{sum(r['kind'] == 'power' for r in rows)} power replicates (target: none)"
+        f"- wrong names: {wrong} `explained` with another candidate and {pair} `ambiguous` "
+        f"between two others, of {len(power)} power replicates run (target: none)"
     )
     if inside:
         out.append(
@@ -583,6 +888,12 @@ def _targets(rows, cells, size_table, inside):
             "(target: 0.85-0.99)"
         )
     return out
+
+
+def _on(sizes_at, grid, lams):
+    """Noncentralities log-log interpolated from a grid onto other sizes."""
+    logs = np.log(np.maximum(np.asarray(lams, dtype=float), 1e-12))
+    return np.exp(np.interp(np.log(sizes_at), np.log(grid), logs))
 
 
 def plot(rows, size_table, path):
@@ -594,22 +905,30 @@ def plot(rows, size_table, path):
     names = list(size_table)
     fig, axes = plt.subplots(2, (len(names) + 1) // 2, figsize=(3.2 * ((len(names) + 1) // 2), 6),
                              squeeze=False)  # fmt: skip
-    cells = power_cells(rows, size_table)
+    cells = power_cells(rows)
+    m = 14
     for ax, effect in zip(axes.flat, names, strict=False):
         entry = size_table[effect]
         grid, lams = np.asarray(entry["grid"]), np.asarray(entry["lambda"])
-        m = 14
         fine = np.geomspace(grid[0], grid[-1], 200)
-        lam = np.exp(np.interp(np.log(fine), np.log(grid), np.log(np.maximum(lams, 1e-12))))
-        ax.semilogx(fine, [ideal_power(x, m) for x in lam], "k-", label="ideal test")
-        for j, s in enumerate(entry["sizes"]):
-            c = cells.get((effect, j))
-            if s is None or c is None:
+        ideal = _on(fine, grid, lams)
+        ax.semilogx(fine, [ideal_power(x, m) for x in ideal], "k-", label="ideal test")
+        if entry.get("fitted_lambda"):
+            fitted = _on(fine, grid, entry["fitted_lambda"])
+            ax.semilogx(fine, [ideal_power(x, m - N_CONSTANTS) for x in fitted], "k--",
+                        label="fitted test")  # fmt: skip
+        first = True
+        for (label, *_), s in zip(SIZES, entry["sizes"], strict=True):
+            c = cells.get((effect, size_key(s))) if s is not None else None
+            if label == "fitted 0.9" and s is not None:
+                ax.axvline(s, color="C1", lw=0.8, ls=":")
+            if c is None:
                 continue
             p = c["named"] / c["n"]
             lo, hi = wilson(c["named"], c["n"])
             ax.errorbar([s], [p], yerr=[[p - lo], [hi - p]], fmt="o", color="C0",
-                        label="diagnose names it" if j == 0 else None)  # fmt: skip
+                        label="diagnose names it" if first else None)  # fmt: skip
+            first = False
         ax.set_title(effect.replace("_", " "), fontsize=9)
         ax.set_xlabel(f"size ({EFFECTS[effect][2] or 'ratio'})", fontsize=8)
         ax.set_ylim(-0.05, 1.05)
