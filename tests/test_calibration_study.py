@@ -231,3 +231,15 @@ def test_a_replicate_that_raises_is_recorded(monkeypatch):
     assert row["verdict"] == "error" and "no convergence" in row["error"]
     assert row["key"] == cal.task_key(task) and row["code"] == "abc1234"
     assert not cal.named(row) and not cal.wrong_name(row)
+
+
+@pytest.mark.slow  # one diagnosis on the quick 6 x 3 mesh, a few seconds
+def test_the_widening_is_the_one_diagnose_applies():
+    """The deviations diagnose reports it tested against, over the recordings' own."""
+    case, model, fine = cal._models("frederiksen_t300", True)
+    f = np.sort(cal._frequencies(case, fine))
+    blind = case.with_measured(frequency_Hz=f, sigma_Hz=cal.NOISE * f)
+    d = cal.diagnose(blind, model=model, rng=1, pairing="order")
+    widen = cal.widening(quick=True, frequency_Hz=f)
+    assert widen.max() > 1.0  # the coarse quick mesh's error is widened in
+    assert d.sigma_Hz / (cal.NOISE * f) == pytest.approx(widen, rel=0.02)
