@@ -635,19 +635,21 @@ def write_report(out_dir, stored, quick, workers):
         if kept.get("sizes") != stored["sizes"]:
             kept = {"sizes": stored["sizes"], "absorbed": absorbed(stored["sizes"], quick)}
             atomic_write_text(side, json.dumps(kept))
-        if "widened" not in kept:  # the same at diagnose's widened deviations
+        if "widened_grid" not in kept:  # the same at diagnose's widened deviations
             widen = widening(quick)
             kept["widening"] = list(map(float, widen))
             kept["widened"] = absorbed(stored["sizes"], quick, widen)
+            on_grid = {e: {"sizes": entry["grid"]} for e, entry in stored["sizes"].items()}
+            kept["widened_grid"] = absorbed(on_grid, quick, widen)  # for the figure
             atomic_write_text(side, json.dumps(kept))
-        stored = {**stored, "absorbed": kept["absorbed"], "widened": kept["widened"],
-                  "widening": kept["widening"]}  # fmt: skip
+        stored = {**stored, **{k: kept[k] for k in ("absorbed", "widened", "widening",
+                                                    "widened_grid")}}  # fmt: skip
     rows = list(stored["rows"].values())
     name = "calibration-quick" if quick else "calibration"
     text = report(rows, stored, quick, workers)
     atomic_write_text(out / f"{name}.md", text)
     if any(r["kind"] == "power" for r in rows):
-        plot(rows, stored["sizes"], out / f"{name}.png")
+        plot(rows, stored["sizes"], out / f"{name}.png", stored.get("widened_grid"))
     return out / f"{name}.md"
 
 
@@ -972,11 +974,14 @@ def _on(sizes_at, grid, lams):
     return np.exp(np.interp(np.log(sizes_at), np.log(grid), logs))
 
 
-def plot(rows, size_table, path):
+def plot(rows, size_table, path, widened_grid=None):
+    """Per candidate: the ideal test's, the fitted test's (and at diagnose's deviations)
+    power against size, and diagnose's rate of naming it at each size run (Wilson 95 %)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     names = list(size_table)
     fig, axes = plt.subplots(2, (len(names) + 1) // 2, figsize=(3.2 * ((len(names) + 1) // 2), 6),
@@ -993,6 +998,10 @@ def plot(rows, size_table, path):
             fitted = _on(fine, grid, entry["fitted_lambda"])
             ax.semilogx(fine, [ideal_power(x, m - N_CONSTANTS) for x in fitted], "k--",
                         label="fitted test")  # fmt: skip
+        if widened_grid and widened_grid.get(effect):
+            wide = _on(fine, grid, widened_grid[effect])
+            ax.semilogx(fine, [ideal_power(x, m - N_CONSTANTS) for x in wide], ":", color="0.4",
+                        label="fitted, diagnose's deviations")  # fmt: skip
         first = True
         for (label, *_), s in zip(SIZES, entry["sizes"], strict=True):
             c = cells.get((effect, size_key(s))) if s is not None else None
@@ -1008,6 +1017,10 @@ def plot(rows, size_table, path):
         ax.set_title(effect.replace("_", " "), fontsize=9)
         ax.set_xlabel(f"size ({EFFECTS[effect][2] or 'ratio'})", fontsize=8)
         ax.set_ylim(-0.05, 1.05)
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+        run = [s for s in entry["sizes"] if s is not None]
+        if run:
+            ax.set_xlim(max(grid[0], min(run) / 4.0), min(grid[-1], max(run) * 3.0))
     for ax in list(axes.flat)[len(names) :]:
         ax.axis("off")
     axes.flat[0].set_ylabel("rate")
