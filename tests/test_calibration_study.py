@@ -243,3 +243,28 @@ def test_the_widening_is_the_one_diagnose_applies():
     widen = cal.widening(quick=True, frequency_Hz=f)
     assert widen.max() > 1.0  # the coarse quick mesh's error is widened in
     assert d.sigma_Hz / (cal.NOISE * f) == pytest.approx(widen, rel=0.02)
+
+
+def test_the_aimed_test_of_the_fitted_model_rejects_at_the_bound():
+    """Knowing the effect's direction, the statistic is the residual's component along what
+    the constants leave of it: simulated with fitted constants, it rejects (1 dof, 1 %) at
+    ``bound_power`` of the fitted noncentrality, more often than the 8-dof test."""
+    rng = np.random.default_rng(5)
+    m = 14
+    S = rng.standard_normal((m, 6))
+    sigma = rng.uniform(0.5, 2.0, m)
+    A = S / sigma[:, None]
+    effect = rng.standard_normal(m) * sigma * 1.3  # some of it in the span of S
+    lam = cal.fitted_noncentrality(effect, S, sigma)
+    r = effect / sigma
+    coef, *_ = np.linalg.lstsq(A, r, rcond=None)
+    left = r - A @ coef
+    direction = left / np.linalg.norm(left)
+    z = r + rng.standard_normal((20000, m))
+    coef, *_ = np.linalg.lstsq(A, z.T, rcond=None)
+    residual = z.T - A @ coef
+    rate = np.mean((direction @ residual) ** 2 > chi2.ppf(0.99, 1))
+    p = cal.bound_power(lam)
+    assert 0.2 < p < 0.98
+    assert abs(rate - p) < 4 * np.sqrt(p * (1 - p) / 20000)
+    assert p > cal.ideal_power(lam, m - 6)
