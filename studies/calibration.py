@@ -41,9 +41,12 @@ import datetime
 import functools
 import json
 import logging
+import os
 import pathlib
 import sys
 import time
+import traceback
+import zlib
 
 import numpy as np
 from scipy.stats import binomtest, chi2, ncx2
@@ -59,8 +62,10 @@ from bayesplate.discrepancy import (
     PointSupport,
     ThicknessTaper,
 )
-from bayesplate.discrepancy.diagnose import DEFAULTS, diagnose
+from bayesplate.discrepancy.diagnose import DEFAULTS, coarse_model, diagnose
 from bayesplate.io import atomic_write_text
+from bayesplate.posterior import prior_in_stiffness
+from bayesplate.quantities import hz_from_eigenvalue
 
 SEED = 20261125
 NOISE = 0.002  # relative deviation of each recorded frequency
@@ -68,9 +73,28 @@ ALPHA = DEFAULTS["alpha"]
 Z94 = 1.881  # half-width of a 94 % normal interval, in sd
 N_CLEAN = 20  # per family
 N_POWER = 10  # per candidate and size
-#: The power sizes, in running order: (label, the ideal test's rejection probability, factor):
-#: the size at which the ideal test rejects with that probability, times the factor.
-SIZES = (("ideal 0.9", 0.9, 1.0), ("3 x ideal 0.9", 0.9, 3.0), ("ideal 0.5", 0.5, 1.0))
+#: The power sizes, in running order: (label, reference test, its rejection probability,
+#: factor): the size at which the reference test rejects with that probability, times the
+#: factor. The ideal test is the chi-square at the true constants (m dof); the fitted test
+#: the same once the six constants have absorbed what they can (m - 6 dof).
+SIZES = (
+    ("fitted 0.9", "fitted", 0.9, 1.0),
+    ("3 x ideal 0.9", "ideal", 0.9, 3.0),
+    ("ideal 0.9", "ideal", 0.9, 1.0),
+    ("ideal 0.5", "ideal", 0.5, 1.0),
+)
+N_CONSTANTS = 6  # the constants diagnose fits (its stiffness coefficients)
+#: Rows of these code versions are kept in the cache but not counted: diagnose has changed
+#: since in ways that change its answers (its label: why).
+RETIRED = {
+    "2026-11-25 (b454113-6b495b0)": (
+        "made on 2026-11-25 by the code of b454113-6b495b0: since then diagnose's fits are "
+        "settled on reduced models (58b7f36), every promising candidate is settled in two "
+        "phases (7882a0d, b5719b8), a rejected refit is searched again (b88761d) and the "
+        "nominal fit's global stage shares its first round (9433d2b)"
+    ),
+}
+LEGACY_CODE = "2026-11-25 (b454113-6b495b0)"  # the label of rows stored without one
 FAMILIES = {"frederiksen_t300": (40, 20), "crossply": (32, 16)}  # diagnose's mesh
 QUICK_FAMILIES = {"frederiksen_t300": (6, 3), "crossply": (8, 4)}
 POWER_FAMILY = "frederiksen_t300"
@@ -121,6 +145,30 @@ def fitted_noncentrality(delta_lambda, S, sigma_lambda):
     A = np.asarray(S, dtype=float) / np.asarray(sigma_lambda, dtype=float)[:, None]
     coef, *_ = np.linalg.lstsq(A, r, rcond=None)
     return float(np.sum((r - A @ coef) ** 2))
+
+
+def fitted_lambdas(deltas, S, sigma_lambda):
+    """:func:`fitted_noncentrality` of each effect vector in ``deltas`` (one per size)."""
+    return [fitted_noncentrality(d, S, sigma_lambda) for d in deltas]
+
+
+def fitted_size(grid, deltas, S, sigma_lambda, power, alpha=ALPHA):
+    """The size at which the test of the fitted nominal model rejects with ``power``.
+
+    ``deltas[i]`` is the effect on the eigenvalues at ``grid[i]``; the test has ``m - 6``
+    degrees of freedom (``S`` has six columns); the fitted noncentralities on the grid are
+    inverted by :func:`size_for`. Returns ``(size or None, the noncentralities)``.
+    """
+    lams = fitted_lambdas(deltas, S, sigma_lambda)
+    m, k = np.shape(S)
+    return size_for(grid, lams, noncentrality_for(power, m - k, alpha)), lams
+
+
+def bound_power(lam, alpha=ALPHA):
+    """The most powerful test at level ``alpha`` of an effect known in advance (1 dof):
+    a bound on the rate at which any method with that false-alarm rate detects it, given
+    the noncentrality ``lam`` it leaves."""
+    return ideal_power(lam, 1, alpha)
 
 
 def ideal_power(lam, m, alpha=ALPHA):
@@ -184,35 +232,73 @@ def _frequencies(case, plate):
 
 
 def sizes(quick=False):
-    """``{effect: {"grid", "lambda", "sizes": [size of each of SIZES, or None]}}``.
+    """``{effect: {"grid", "lambda", "fitted_lambda", "sizes": [size of each of SIZES or None]}}``.
 
-    The noncentrality of each effect on a grid of sizes (Frederiksen plate, recordings' mesh)
-    and the sizes of ``SIZES``; None where the grid (the admissible sizes) does not reach it.
+    The noncentrality of each effect on a grid of sizes (Frederiksen plate, recordings' mesh,
+    true constants), of the ideal test and of the fitted one (the six constants' linearised
+    absorption, :func:`fitted_noncentrality`), and the sizes of ``SIZES``, rounded to two
+    digits; None where the grid (the admissible sizes) does not reach it.
     """
     case, _, fine = _models(POWER_FAMILY, quick)
-    f0 = _frequencies(case, fine)
+    b = stiffness_from_engineering(case.reference)
+    nominal = fine.solve(b, case.measured.size)
+    f0 = nominal.frequency_Hz
     m = f0.size
+    sigma_lambda = 2.0 * NOISE * nominal.eigenvalues  # d lambda = 2 lambda df / f
     out = {}
     for name, (make, theta, _, grid) in EFFECTS.items():
         if quick and name != "point_mass":
             continue
         physics = make()
-        lams = [noncentrality(_frequencies(case, physics.apply(fine, np.asarray(theta(s)))), f0)
-                for s in grid]  # fmt: skip
-        found = [size_for(grid, lams, noncentrality_for(p, m)) for _, p, _ in SIZES]
-        found = [None if s is None or f * s > grid[-1] else f * s
-                 for s, (_, _, f) in zip(found, SIZES, strict=True)]  # fmt: skip
+        solved = [physics.apply(fine, np.asarray(theta(s), dtype=float)).solve(b, m) for s in grid]
+        lams = [noncentrality(x.frequency_Hz, f0) for x in solved]
+        deltas = [np.sort(x.eigenvalues) - nominal.eigenvalues for x in solved]
+        fitted = fitted_lambdas(deltas, nominal.sensitivities, sigma_lambda)
+        found = []
+        for _, reference, p, factor in SIZES:
+            if reference == "fitted":
+                at = size_for(grid, fitted, noncentrality_for(p, m - N_CONSTANTS))
+            else:
+                at = size_for(grid, lams, noncentrality_for(p, m))
+            found.append(None if at is None or factor * at > grid[-1] else factor * at)
         rounded = [None if s is None else float(f"{s:.2g}") for s in found]
-        out[name] = {"grid": list(map(float, grid)), "lambda": lams, "sizes": rounded}
+        out[name] = {"grid": list(map(float, grid)), "lambda": lams, "fitted_lambda": fitted,
+                     "sizes": rounded}  # fmt: skip
     return out
 
 
-def absorbed(size_table, quick=False):
-    """``{effect: [fitted-constants noncentrality at each size, or None]}`` (Frederiksen)."""
+def widening(quick=False, frequency_Hz=None):
+    """How much diagnose widens each recorded frequency's deviation (Frederiksen plate).
+
+    As diagnose does: its mesh's own error, estimated as a third of the difference to the
+    mesh half as fine at the prior mean, is added in quadrature when it exceeds
+    ``mesh_error_ratio`` deviations somewhere. Returns ``hypot(1, error / (NOISE f))`` per
+    mode (ones when it does not widen), ``f`` the recorded frequencies (default: the clean
+    plate's on the recordings' mesh, without noise).
+    """
+    case, model, fine = _models(POWER_FAMILY, quick)
+    if frequency_Hz is None:
+        frequency_Hz = np.sort(_frequencies(case, fine))
+    mu_b, _ = prior_in_stiffness(case.prior.mean, case.prior.sd, "full")
+    m = case.measured.size
+    f = hz_from_eigenvalue(model.solve(mu_b, m).eigenvalues)
+    err = (hz_from_eigenvalue(coarse_model(model).solve(mu_b, m).eigenvalues) - f) / 3.0
+    ratio = np.abs(err) / (NOISE * np.asarray(frequency_Hz, dtype=float))
+    return np.hypot(1.0, ratio) if ratio.max() > DEFAULTS["mesh_error_ratio"] else np.ones(m)
+
+
+def absorbed(size_table, quick=False, widen=None):
+    """``{effect: [fitted-constants noncentrality at each size, or None]}`` (Frederiksen).
+
+    ``widen``: factors on the recordings' deviations (:func:`widening`: the test diagnose
+    runs); None for the declared ones.
+    """
     case, _, fine = _models(POWER_FAMILY, quick)
     b = stiffness_from_engineering(case.reference)
     nominal = fine.solve(b, case.measured.size)
     sigma_lambda = 2.0 * NOISE * nominal.eigenvalues  # d lambda = 2 lambda df / f
+    if widen is not None:
+        sigma_lambda = sigma_lambda * np.asarray(widen, dtype=float)
     out = {}
     for name, entry in size_table.items():
         make, theta_of, _, _ = EFFECTS[name]
@@ -230,37 +316,86 @@ def absorbed(size_table, quick=False):
 
 
 def tasks(size_table, quick=False):
-    """Every replicate, in running order: ``(kind, family, effect, size index, size, rep)``."""
+    """Every replicate, in running order: ``(kind, family, effect, size label, size, rep)``.
+
+    First the size that decides the target (the fitted test's 0.9) replicate by replicate
+    across the candidates, each round followed by two clean replicates of each family; then
+    the other sizes together replicate by replicate, in the order of ``SIZES``: a partial run
+    has even counts. A size two labels share runs once (one key).
+    """
     n_clean, n_power = (2, 1) if quick else (N_CLEAN, N_POWER)
-    out = [("clean", family, None, None, None, rep)
-           for rep in range(n_clean) for family in FAMILIES]  # fmt: skip
-    # the first two sizes replicate by replicate together, then the rest: a partial run has
-    # even counts at both
-    blocks = [(0, 1), tuple(range(2, len(SIZES)))]
-    for block in blocks[:1] if quick else blocks:
+    first = [j for j, entry in enumerate(SIZES) if entry[0] == "fitted 0.9"]
+    rest = [j for j in range(len(SIZES)) if j not in first]
+    clean = [("clean", family, None, None, None, rep)
+             for rep in range(n_clean) for family in FAMILIES]  # fmt: skip
+    per_round = -(-len(clean) // n_power)  # clean replicates after each round
+    out = []
+
+    def power(block, rep):
+        for j in block:
+            for name, entry in size_table.items():
+                if entry["sizes"][j] is not None:
+                    out.append(("power", POWER_FAMILY, name, SIZES[j][0], entry["sizes"][j], rep))
+
+    for rep in range(n_power):
+        power(first, rep)
+        out.extend(clean[rep * per_round : (rep + 1) * per_round])
+    if not quick:
         for rep in range(n_power):
-            for j in block:
-                for name, entry in size_table.items():
-                    if entry["sizes"][j] is not None and not (quick and j > 0):
-                        out.append(("power", POWER_FAMILY, name, j, entry["sizes"][j], rep))
-    return out
+            power(rest, rep)
+    seen, unique = set(), []
+    for t in out:
+        if task_key(t) not in seen:
+            seen.add(task_key(t))
+            unique.append(t)
+    return unique
+
+
+def size_key(size):
+    """A size as it appears in the keys of the rows (two significant digits, stable)."""
+    return f"{float(size):.6g}"
 
 
 def task_key(task):
-    kind, family, effect, j, _, rep = task
-    return f"{kind}/{family}/{effect}/{j}/{rep}"
+    """The row's key: by the size's value, not its place in ``SIZES`` (which may change)."""
+    kind, family, effect, _, size, rep = task
+    if kind == "clean":
+        return f"clean/{family}/{rep}"
+    return f"power/{family}/{effect}/{size_key(size)}/{rep}"
 
 
 def _seed(task):
-    kind, family, effect, j, _, rep = task
+    """The replicate's seed, from what its key says (family, effect, size's value, rep)."""
+    kind, family, effect, _, size, rep = task
     spawn = (list(FAMILIES).index(family), 0 if effect is None else 1 + list(EFFECTS).index(effect),
-             0 if j is None else j, rep)  # fmt: skip
+             0 if size is None else zlib.crc32(size_key(size).encode()), rep)  # fmt: skip
     return np.random.SeedSequence(SEED, spawn_key=spawn)
+
+
+def run_task_recorded(task, quick=False, code=None):
+    """:func:`run_task`, its failure a row too (verdict ``error``, the traceback's end):
+    a replicate that raises is recorded, not lost, and the run goes on."""
+    start = time.perf_counter()
+    try:
+        row = run_task(task, quick)
+    except Exception as exc:  # noqa: BLE001 - every failure is a result of the study
+        kind, family, effect, label, size, rep = task
+        row = {
+            "key": task_key(task), "kind": kind, "family": family, "effect": effect,
+            "size_label": label, "size": size, "rep": rep, "verdict": "error", "chosen": None,
+            "rival": None, "error": f"{type(exc).__name__}: {exc}",
+            "traceback": traceback.format_exc()[-2000:], "recovered": None, "images": [],
+            "truth": None, "seconds": time.perf_counter() - start,
+        }  # fmt: skip
+    row["code"] = code
+    row["finished"] = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
+    row["load"] = list(os.getloadavg())
+    return row
 
 
 def run_task(task, quick=False):
     """Make the recordings of one replicate, diagnose them blind; the row (plain data)."""
-    kind, family, effect, j, size, rep = task
+    kind, family, effect, label, size, rep = task
     logging.getLogger("bayesplate").setLevel(logging.ERROR)
     case, model, fine = _models(family, quick)
     rng = np.random.default_rng(_seed(task))
@@ -282,7 +417,7 @@ def run_task(task, quick=False):
     b_true = stiffness_from_engineering(case.reference)
     row = {
         "key": task_key(task), "kind": kind, "family": family, "effect": effect,
-        "size_index": j, "size": size, "rep": rep, "verdict": d.verdict,
+        "size_label": label, "size": size, "rep": rep, "verdict": d.verdict,
         "chosen": d.chosen.name if d.chosen else None,
         "rival": d.rival.name if d.rival is not None else None,
         "p_value": float(d.p_value), "refit_p": float(d.refit_p_value),
@@ -317,6 +452,11 @@ def named(row):
 def wrong_name(row):
     """An ``explained`` verdict that names another candidate than the concealed one."""
     return row["verdict"] == "explained" and row["chosen"] != row["effect"]
+
+
+def wrong_pair(row):
+    """An ``ambiguous`` verdict whose two named candidates are both not the concealed one."""
+    return row["verdict"] == "ambiguous" and row["effect"] not in (row["chosen"], row["rival"])
 
 
 def covered(row):
@@ -354,13 +494,87 @@ def _settings(quick):
     return json.loads(json.dumps(settings))  # as read back from the cache (lists, not tuples)
 
 
+def _empty(quick):
+    return {"settings": _settings(quick), "sizes": None, "rows": {}, "retired": {},
+            "seconds": 0.0, "runs": []}  # fmt: skip
+
+
 def load(out_dir, quick):
     path = _cache_path(out_dir, quick)
     if path.exists():
         stored = json.loads(path.read_text())
         if stored.get("settings") == _settings(quick):
-            return stored
-    return {"settings": _settings(quick), "sizes": None, "rows": {}, "seconds": 0.0}
+            return {**_empty(quick), **stored}
+    return _empty(quick)
+
+
+def _row_key(row):
+    """A row's key from its content (the keys of older caches held the size's place)."""
+    if row["kind"] == "clean":
+        return f"clean/{row['family']}/{row['rep']}"
+    return f"power/{row['family']}/{row['effect']}/{size_key(row['size'])}/{row['rep']}"
+
+
+def migrate(stored):
+    """Bring the cache's rows to the current size table and code, in place; return it.
+
+    Each row is keyed by the size's value. A power row whose (effect, size) is still in the
+    table is kept (labelled with the size's current label); one whose size is no longer
+    run, and every row of a code version in ``RETIRED``, is moved to ``stored["retired"]``
+    (kept, not counted) with the reason. Rows stored without a code label are labelled
+    ``LEGACY_CODE``, and the wall time stored with them goes with them.
+    """
+    table = stored.get("sizes") or {}
+    labels = {}  # (effect, size key) -> the first label of SIZES with that size
+    for effect, entry in table.items():
+        for (label, *_), size in zip(SIZES, entry["sizes"], strict=True):
+            if size is not None:
+                labels.setdefault((effect, size_key(size)), label)
+    retired = stored.setdefault("retired", {})
+    legacy = [r for r in stored["rows"].values() if "code" not in r]
+    if legacy:
+        spent = stored.setdefault("retired_seconds", {})
+        spent[LEGACY_CODE] = spent.get(LEGACY_CODE, 0.0) + stored.get("seconds", 0.0)
+        stored["seconds"] = 0.0
+    kept = {}
+    for row in stored["rows"].values():
+        row.setdefault("code", LEGACY_CODE)
+        if "size_index" in row:  # older rows: the size's place in the SIZES of their day
+            row.pop("size_index")
+        key = _row_key(row)
+        row["key"] = key
+        why = RETIRED.get(row["code"])
+        if why is None and row["kind"] == "power":
+            label = labels.get((row["effect"], size_key(row["size"])))
+            if label is None:
+                why = "its size is no longer run"
+            else:
+                row["size_label"] = label
+        if why is None:
+            kept[key] = row
+        else:
+            retired[f"{row['code']}|{key}"] = {**row, "retired": why}
+    stored["rows"] = kept
+    return stored
+
+
+def code_version():
+    """The commit the study runs (``+modified`` when the package or studies differ from it)."""
+    import subprocess
+
+    root = pathlib.Path(__file__).resolve().parents[1]
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, text=True,
+                              capture_output=True, check=True).stdout.strip()  # fmt: skip
+        dirty = subprocess.run(["git", "status", "--porcelain", "--", "bayesplate", "studies"],
+                               cwd=root, text=True, capture_output=True).stdout.strip()  # fmt: skip
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    return head + ("+modified" if dirty else "")
+
+
+def _now():
+    return datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
 
 
 def main(out_dir="reports", quick=False, workers=None, report_only=False):
@@ -372,26 +586,33 @@ def main(out_dir="reports", quick=False, workers=None, report_only=False):
     spec = [list(entry) for entry in SIZES]
     if (stored["sizes"] is None or stored.get("size_spec") != spec) and not report_only:
         stored["sizes"], stored["size_spec"] = sizes(quick), spec
-        # power rows of other sizes are of no use; clean ones do not depend on them
-        stored["rows"] = {k: r for k, r in stored["rows"].items() if r["kind"] == "clean"}
-        atomic_write_text(path, json.dumps(stored))
+    if stored["sizes"] is not None:
+        migrate(stored)  # rows keyed by the size's value: those of sizes still run are kept
+        if not report_only:
+            atomic_write_text(path, json.dumps(stored))
     todo = [] if report_only else [t for t in tasks(stored["sizes"], quick)
                                    if task_key(t) not in stored["rows"]]  # fmt: skip
     print(f"{len(todo)} replicates to run ({len(stored['rows'])} cached)", flush=True)
     start, base = time.perf_counter(), stored.get("seconds", 0.0)
+    code = code_version()
+    if todo:
+        stored["runs"].append({"start": _now(), "end": None, "code": code, "workers": workers,
+                               "rows": 0, "load": list(os.getloadavg())})  # fmt: skip
 
     def keep(position, row):  # each row stored as it comes: an interrupted run resumes
         stored["rows"][row["key"]] = row
         stored["seconds"] = base + time.perf_counter() - start
+        stored["runs"][-1].update(end=_now(), rows=stored["runs"][-1]["rows"] + 1)
         atomic_write_text(path, json.dumps(stored))
-        print(f"{row['key']:45s} {row['verdict']:12s} {row['chosen'] or '-':22s} "
-              f"{row['seconds']:5.0f} s ({position + 1}/{len(todo)})", flush=True)  # fmt: skip
+        print(f"{_now()} {row['key']:48s} {row['verdict']:12s} {row['chosen'] or '-':22s} "
+              f"{row['seconds']:5.0f} s ({position + 1}/{len(todo)})"
+              + (f" {row['error']}" if row["verdict"] == "error" else ""), flush=True)  # fmt: skip
         write_report(out_dir, stored, quick, workers)
 
     _ship_by_value()
     if todo:
-        map_tasks(functools.partial(run_task, quick=quick), todo, workers=workers,
-                  progress=False, on_result=keep)  # fmt: skip
+        map_tasks(functools.partial(run_task_recorded, quick=quick, code=code), todo,
+                  workers=workers, progress=False, on_result=keep)  # fmt: skip
     return write_report(out_dir, stored, quick, workers)
 
 
@@ -408,7 +629,7 @@ def _machine():
     sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
     from _study_host import cpu
 
-    return cpu()
+    return f"the {os.cpu_count()}-core development machine ({cpu()})"
 
 
 def write_report(out_dir, stored, quick, workers):
@@ -421,13 +642,21 @@ def write_report(out_dir, stored, quick, workers):
         if kept.get("sizes") != stored["sizes"]:
             kept = {"sizes": stored["sizes"], "absorbed": absorbed(stored["sizes"], quick)}
             atomic_write_text(side, json.dumps(kept))
-        stored = {**stored, "absorbed": kept["absorbed"]}
+        if "widened_grid" not in kept:  # the same at diagnose's widened deviations
+            widen = widening(quick)
+            kept["widening"] = list(map(float, widen))
+            kept["widened"] = absorbed(stored["sizes"], quick, widen)
+            on_grid = {e: {"sizes": entry["grid"]} for e, entry in stored["sizes"].items()}
+            kept["widened_grid"] = absorbed(on_grid, quick, widen)  # for the figure
+            atomic_write_text(side, json.dumps(kept))
+        stored = {**stored, **{k: kept[k] for k in ("absorbed", "widened", "widening",
+                                                    "widened_grid")}}  # fmt: skip
     rows = list(stored["rows"].values())
     name = "calibration-quick" if quick else "calibration"
     text = report(rows, stored, quick, workers)
     atomic_write_text(out / f"{name}.md", text)
     if any(r["kind"] == "power" for r in rows):
-        plot(rows, stored["sizes"], out / f"{name}.png")
+        plot(rows, stored["sizes"], out / f"{name}.png", stored.get("widened_grid"))
     return out / f"{name}.md"
 
 
@@ -436,20 +665,58 @@ def false_alarms(rows, family=None):
     return sum(r["verdict"] != "consistent" for r in clean), len(clean)
 
 
-def power_cells(rows, size_table):
-    """Per (effect, size index): counts of the ideal test's and diagnose's outcomes."""
+def power_cells(rows):
+    """Per (effect, size key): counts of the ideal test's and diagnose's outcomes."""
     cells = {}
     for r in rows:
         if r["kind"] != "power":
             continue
-        c = cells.setdefault((r["effect"], r["size_index"]), {
-            "n": 0, "named": 0, "wrong": 0, "ideal": 0, "verdicts": {}})  # fmt: skip
+        c = cells.setdefault((r["effect"], size_key(r["size"])), {
+            "n": 0, "named": 0, "wrong": 0, "pair": 0, "ideal": 0, "rejected": 0,
+            "verdicts": {}})  # fmt: skip
         c["n"] += 1
         c["named"] += named(r)
         c["wrong"] += wrong_name(r)
-        c["ideal"] += r["ideal_chi2"] > chi2.ppf(1.0 - ALPHA, r["m"])
+        c["pair"] += wrong_pair(r)
+        c["rejected"] += r["verdict"] != "error" and r["p_value"] < ALPHA
+        c["ideal"] += r["verdict"] != "error" and r["ideal_chi2"] > chi2.ppf(1.0 - ALPHA, r["m"])
         c["verdicts"][r["verdict"]] = c["verdicts"].get(r["verdict"], 0) + 1
     return cells
+
+
+def _fitted_p(left, effect, j):
+    """The fitted test's power at the ``j``-th size, from noncentralities ``left``."""
+    lam = (left.get(effect) or [None] * len(SIZES))[j]
+    return None if lam is None else ideal_power(lam, 14 - N_CONSTANTS)
+
+
+def _verdicts(counts):
+    return ", ".join(f"{v} {k}" for v, k in sorted(counts.items()))
+
+
+def _load_line(rows):
+    loads = [r["load"][0] for r in rows if r.get("load")]
+    if not loads:
+        return ""
+    return (f" Load average (1 min) when each row finished: median {np.median(loads):.2f}, "
+            f"{min(loads):.2f}-{max(loads):.2f}.")  # fmt: skip
+
+
+def _times(rows):
+    seconds = [r["seconds"] for r in rows if r.get("seconds") is not None]
+    if not seconds:
+        return ""
+    return (f" One diagnosis took {np.median(seconds):.0f} s (median; "
+            f"{min(seconds):.0f}-{max(seconds):.0f} s).")  # fmt: skip
+
+
+def _partial(done, n_tasks):
+    if done >= n_tasks:
+        return []
+    return [f"A partial run ({done} of {n_tasks} replicates): the counts below are of the "
+            "replicates finished, in the running order (the fitted 0.9 size round by round "
+            "with the clean replicates between its rounds, then the other sizes replicate by "
+            "replicate); the rest resume from the cache on the next run.", ""]  # fmt: skip
 
 
 def report(rows, stored, quick, workers):
@@ -457,13 +724,17 @@ def report(rows, stored, quick, workers):
     n_tasks = len(tasks(size_table, quick)) if size_table else 0
     meshes = QUICK_FAMILIES if quick else FAMILIES
     today = datetime.date.today().isoformat()
+    uptime = ", ".join(f"{x:.2f}" for x in os.getloadavg())
     lines = [
         "# Calibration of `diagnose`: false alarms, power, coverage of the refit",
         "",
         f"Made by `python studies/calibration.py{' --quick' if quick else ''}` (seed {SEED}) "
-        f"on {today}, {_machine()}, {workers} worker(s); {len(rows)} of {n_tasks} replicates "
-        f"finished in {stored.get('seconds', 0.0) / 60:.0f} min of wall time.",
+        f"on {today}, on {_machine()}, {workers} worker(s); {len(rows)} of {n_tasks} replicates "
+        f"finished in {stored.get('seconds', 0.0) / 60:.0f} min of wall time (the runs' time "
+        f"to their last finished row); load averages (1, 5, 15 min) when this report was "
+        f"written: {uptime}.{_load_line(rows)}{_times(rows)}",
         "",
+        *_partial(len(rows), n_tasks),
         "Recordings: the plate (with the concealed effect) on a mesh twice as fine each way as "
         f"diagnose's, its lowest 14 frequencies with {100 * NOISE:.1f} % Gaussian noise, sorted; "
         "diagnose runs blind on the nominal case, pairing by order, at its defaults "
@@ -471,6 +742,9 @@ def report(rows, stored, quick, workers):
         + ", ".join(f"{k} {v[0]} x {v[1]}" for k, v in meshes.items())
         + ".",
         "",
+    ]
+    lines += _provenance(rows, stored)
+    lines += [
         "## False alarms (nothing concealed)",
         "",
         "The nominal fit's p-value would be uniform on (0, 1) (median 0.5) if its chi-square "
@@ -482,60 +756,75 @@ def report(rows, stored, quick, workers):
         "|---|---|---|---|---|---|---|",
     ]
     for family in [*meshes, None]:
+        clean = [r for r in rows if r["kind"] == "clean" and family in (None, r["family"])]
         k, n = false_alarms(rows, family)
         if n == 0:
             continue
         lo, hi = wilson(k, n)
         verdicts = {}
-        for r in rows:
-            if r["kind"] == "clean" and family in (None, r["family"]):
-                verdicts[r["verdict"]] = verdicts.get(r["verdict"], 0) + 1
-        clean = [r for r in rows if r["kind"] == "clean" and family in (None, r["family"])]
-        q = np.percentile([r["p_value"] for r in clean], [10, 50, 90])
-        gain = max(max(r["gains"].values()) for r in clean)
+        for r in clean:
+            verdicts[r["verdict"]] = verdicts.get(r["verdict"], 0) + 1
+        ok = [r for r in clean if r["verdict"] != "error"]
+        q = np.percentile([r["p_value"] for r in ok], [10, 50, 90]) if ok else [np.nan] * 3
+        gain = max((max(r["gains"].values()) for r in ok if r["gains"]), default=np.nan)
         lines.append(
-            f"| {family or 'both'} | {n} | {k} | {lo:.2f}-{hi:.2f} | "
-            + ", ".join(f"{v} {c}" for v, c in sorted(verdicts.items()))
-            + f" | {q[0]:.2f} / {q[1]:.2f} / {q[2]:.2f} | {gain:+.1f} |"
+            f"| {family or 'both'} | {n} | {k} | {lo:.2f}-{hi:.2f} | {_verdicts(verdicts)} "
+            f"| {q[0]:.2f} / {q[1]:.2f} / {q[2]:.2f} | {gain:+.1f} |"
         )
+    left = stored.get("absorbed") or {}  # set by write_report
     lines += ["", "## Power (Frederiksen plate)", "",
               "Sizes where the ideal test (chi-square at the true constants on the recordings' "
-              "mesh, 14 dof, 1 %) rejects with probability 0.5 and 0.9, and three times the "
-              "latter; `ideal P(reject)` is its noncentral chi-square probability there, "
-              "`ideal rejects` its count on the replicates' recordings. `fitted P(reject)`: "
-              "the same test once the six constants have absorbed what they can of the effect "
-              "(linearised, 8 dof, no prior; `fitted_noncentrality`): the power left to any "
-              "method that, like diagnose, does not know the constants.", "",
-              "| candidate | size | ideal P(reject) | fitted P(reject) | ideal rejects | "
-              "diagnose names it | Wilson 95 % | wrong name | verdicts |",
-              "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
-    left = stored.get("absorbed") or {}  # set by write_report
-    cells = power_cells(rows, size_table)
+              "mesh, 14 dof, 1 %) rejects with probability 0.5 and 0.9, three times the "
+              "latter, and where the fitted test rejects with probability 0.9. The fitted "
+              "test is the same once the six constants have absorbed what they can of the "
+              "effect (linearised, 8 dof, no prior; `fitted_noncentrality`): the power left "
+              "to any method that, like diagnose, does not know the constants. Its size is "
+              "found on the same grid of sizes as the ideal one's (fine mesh, true constants, "
+              "log-log interpolation), rounded to two digits; `fitted P(reject)` and `ideal "
+              "P(reject)` are then computed at the rounded size. `ideal rejects`: the ideal "
+              "test's count on the replicates' recordings. `named right`: `explained` with the "
+              "concealed candidate, or `ambiguous` with it among the two. `wrong names`: "
+              "`explained` with another candidate, and (after the +) `ambiguous` between two "
+              "others. `fitted, 1 dof`: the most powerful test of the fitted nominal model, "
+              "aimed at the effect (below); `fitted, diagnose's deviations`: the fitted test "
+              "with the deviations diagnose tests against (below); `nominal rejected`: "
+              "diagnose's own nominal chi-square at 1 % (p < 0.01; it names a candidate whose "
+              "evidence gain is warranted whether or not that test rejects).", "",
+              "| candidate | size | fitted P(reject) | fitted, 1 dof | fitted, diagnose's "
+              "deviations | ideal P(reject) | replicates run | ideal rejects | nominal "
+              "rejected | named right | Wilson 95 % | wrong names | verdicts |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    cells = power_cells(rows)
     for effect, entry in size_table.items():
         unit = EFFECTS[effect][2]
-        for j in sorted(range(len(SIZES)), key=lambda i: (SIZES[i][1], SIZES[i][2])):
+        order = sorted(range(len(SIZES)), key=lambda i: (entry["sizes"][i] is None,
+                                                         entry["sizes"][i] or 0.0))  # fmt: skip
+        for j in order:
             s = entry["sizes"][j]
-            c = cells.get((effect, j))
             if s is None:
-                lines.append(
-                    f"| {effect} | {SIZES[j][0]}: beyond the admissible sizes | - | - "
-                    "| - | - | - | - | - |"
-                )
+                lines.append(f"| {effect} | {SIZES[j][0]}: beyond the admissible sizes | - | - "
+                             "| - | - | - | - | - | - | - | - | - |")  # fmt: skip
                 continue
+            c = cells.get((effect, size_key(s)))
             p = f"{ideal_power(lambda_at(entry, s), 14):.2f}"
-            fitted = (left.get(effect) or [None] * len(SIZES))[j]
-            q = "-" if fitted is None else f"{ideal_power(fitted, 14 - 6):.2f}"
-            head = f"| {effect} | {f'{s:.2g} {unit}'.strip()} ({SIZES[j][0]}) | {p} | {q} |"
+            fp = _fitted_p(left, effect, j)
+            q = "-" if fp is None else f"{fp:.2f}"
+            wp = _fitted_p(stored.get("widened") or {}, effect, j)
+            w = "-" if wp is None else f"{wp:.2f}"
+            one = entry_p(left, size_table, effect, j, bound_power) if fp is not None else None
+            o = "-" if one is None else f"{one:.2f}"
+            head = (f"| {effect} | {f'{s:.2g} {unit}'.strip()} ({SIZES[j][0]}) | {q} | {o} "
+                    f"| {w} | {p} |")  # fmt: skip
             if c is None:
-                lines.append(f"{head} not run | | | | |")
+                lines.append(f"{head} 0 | | | | | | |")
                 continue
             lo, hi = wilson(c["named"], c["n"])
             lines.append(
-                f"{head} {c['ideal']}/{c['n']} | "
-                f"{c['named']}/{c['n']} | {lo:.2f}-{hi:.2f} | {c['wrong']} | "
-                + ", ".join(f"{v} {k}" for v, k in sorted(c["verdicts"].items()))
-                + " |"
+                f"{head} {c['n']} | {c['ideal']} | {c['rejected']} | {c['named']} | "
+                f"{lo:.2f}-{hi:.2f} | "
+                f"{c['wrong']} + {c['pair']} | {_verdicts(c['verdicts'])} |"
             )
+    lines += ["", *_absorption(size_table, left, rows), "", *_widened(stored, cells)]
     checks = [covered(r) for r in rows if r["kind"] == "power"]
     inside = [v for c in checks for v in c.values()]
     per = {}
@@ -554,28 +843,189 @@ def report(rows, stored, quick, workers):
         )
     else:
         lines.append("No replicate named its concealed candidate yet.")
-    lines += ["", "## Targets (issue 13)", ""] + _targets(rows, cells, size_table, inside)
+    wrong = [r for r in rows if r["kind"] == "power" and (wrong_name(r) or wrong_pair(r))]
+    lines += ["", "## Wrong names", ""]
+    if wrong:
+        lines += [f"- `{r['key']}`: {r['verdict']} with {r['chosen']}"
+                  + (f" (rival {r['rival']})" if r["rival"] else "")
+                  + f", nominal p {r['p_value']:.2g}, refit p {r['refit_p']:.2g}"
+                  for r in wrong]  # fmt: skip
+    else:
+        lines.append("None so far.")
+    errors = [r for r in rows if r["verdict"] == "error"]
+    lines += ["", "## Failures", ""]
+    if errors:
+        lines += [f"- `{r['key']}`: {r['error']}" for r in errors]
+    else:
+        lines.append("No replicate raised.")
+    lines += ["", "## Targets (issue 13)", ""]
+    lines += _targets(rows, cells, size_table, left, inside, quick)
     return "\n".join(lines) + "\n"
 
 
-def _targets(rows, cells, size_table, inside):
-    k, n = false_alarms(rows)
-    out = [f"- false alarms: {k} of {n} clean replicates not `consistent` (target: at most 2 of "
-           f"40){'' if n >= 40 else ' - partial'}"]  # fmt: skip
-    j90 = 0  # SIZES[0]: where the ideal test rejects in 9 of 10
-    for effect in size_table:
-        c = cells.get((effect, j90))
-        if c is None:
-            out.append(f"- {effect}: not run at the 0.9 size")
-            continue
+def _provenance(rows, stored):
+    """Which code made which rows; the rows set aside and why."""
+    out = ["## Which code made the rows", ""]
+    by_code = {}
+    for r in rows:
+        by_code.setdefault(r.get("code"), []).append(r)
+    for code, mine in sorted(by_code.items(), key=lambda kv: str(kv[0])):
+        days = sorted({(r.get("finished") or "")[:10] for r in mine} - {""})
+        out.append(f"- counted: {len(mine)} rows ({sum(r['kind'] == 'clean' for r in mine)} "
+                   f"clean, {sum(r['kind'] == 'power' for r in mine)} power) made by `{code}`"
+                   + (f" on {', '.join(days)}" if days else "") + ".")  # fmt: skip
+    retired = list((stored.get("retired") or {}).values())
+    reasons = {}
+    for r in retired:
+        reasons.setdefault((r["code"], r["retired"]), []).append(r)
+    spent = stored.get("retired_seconds") or {}
+    for (code, why), mine in reasons.items():
+        clean = [r for r in mine if r["kind"] == "clean"]
+        power = [r for r in mine if r["kind"] == "power"]
+        k = sum(r["verdict"] != "consistent" for r in clean)
         out.append(
-            f"- {effect} at the 0.9 size: named in {c['named']} of {c['n']} (target: 8 of "
-            f"10), ideal test rejected {c['ideal']} of {c['n']}"
+            f"- set aside, not counted: {len(mine)} rows of `{code}` ({why}): {len(clean)} "
+            f"clean, {k} not `consistent`; {len(power)} power, named right in "
+            f"{sum(named(r) for r in power)}, wrong names {sum(wrong_name(r) for r in power)}"
+            + (f"; {spent[code] / 60:.0f} min of wall time" if code in spent else "")
+            + "."
         )
-    wrong = sum(wrong_name(r) for r in rows if r["kind"] == "power")
+    return [*out, ""]
+
+
+def _absorption(size_table, left, rows):
+    """Why the issue's ideal-0.9 target is out of reach: the constants absorb the effect."""
+    j90 = [entry[0] for entry in SIZES].index("ideal 0.9")
+    jf = [entry[0] for entry in SIZES].index("fitted 0.9")
+    parts = []
+    for effect, entry in size_table.items():
+        s, lam = entry["sizes"][j90], (left.get(effect) or [None] * len(SIZES))[j90]
+        if s is None or lam is None:
+            continue
+        ideal = lambda_at(entry, s)
+        sf = entry["sizes"][jf]
+        ratio = "" if sf is None else f"; fitted 0.9 at {sf / s:.1f} x the size"
+        p8, p1 = ideal_power(lam, 14 - N_CONSTANTS), bound_power(lam)
+        parts.append((p8, f"{effect} {p8:.2f} ({p1:.2f} aimed; {100 * (1 - lam / ideal):.0f} % "
+                          f"of the noncentrality absorbed{ratio})"))  # fmt: skip
+    if not parts:
+        return []
+    listed = "; ".join(text for _, text in sorted(parts))
+    short = [e for e in size_table if entry_p(left, size_table, e, j90, bound_power) < 0.8]
+    beyond = [r for r in rows if r["kind"] == "power" and named(r) and r["p_value"] >= ALPHA]
+    return [
+        "**Why the issue's target (named in 8 of 10 at the ideal 0.9 size) is out of reach.** "
+        "The ideal test knows the true constants; diagnose fits the six constants, and they "
+        "absorb most of a small effect: a change of the constants mimics much of what the "
+        "effect does to 14 frequencies. What is left is the fitted noncentrality, the same "
+        "for every method that estimates the constants (linearised). The test of the fitted "
+        "nominal model (8 dof) and, in brackets, the most powerful test there is for that "
+        "noncentrality (aimed at the effect known in advance, size and place included: 1 "
+        "dof, 1 %; `fitted, 1 dof` in the table) reject at the ideal 0.9 sizes with "
+        f"probability: {listed}. So no method that fits the constants, with a false-alarm "
+        "rate of at most 1 %, can name "
+        + (", ".join(short) if short else "any of them")
+        + " in 8 of 10 at the ideal 0.9 size: there the target is out of reach by "
+        "construction. The 8-dof test is the achievable reference the fitted 0.9 size is "
+        "set by, not a bound: diagnose names by evidence against a few candidates, not by "
+        "an omnibus test, and can name an effect its nominal test does not reject "
+        f"({len(beyond)} of the replicates run were named right with the nominal p-value "
+        "at or above 1 %)."
+    ]
+
+
+def _widened(stored, cells):
+    """What diagnose's own test gives away: it widens the deviations by its mesh's error."""
+    widen = np.asarray(stored.get("widening") or [])
+    if widen.size == 0:
+        return []
+    jf = [entry[0] for entry in SIZES].index("fitted 0.9")
+    table, wide = stored["sizes"] or {}, stored.get("widened") or {}
+    at = [(e, _fitted_p(wide, e, jf)) for e in table if table[e]["sizes"][jf] is not None]
+    at = [(e, p) for e, p in at if p is not None]
+    run = [cells.get((e, size_key(table[e]["sizes"][jf]))) for e, _ in at]
+    k = sum(c["rejected"] for c in run if c)
+    n = sum(c["n"] for c in run if c)
+    if widen.max() <= 1.0:
+        return ["Diagnose tests against the recordings' declared deviations (its mesh's error "
+                "stays below its threshold)."]  # fmt: skip
+    return [
+        "**Diagnose's own test is weaker than the fitted test.** On its working mesh it "
+        "estimates the mesh's error (a third of the difference to the mesh half as fine) and, "
+        f"as it exceeds {DEFAULTS['mesh_error_ratio']} deviations, adds it to the deviations "
+        f"in quadrature: they are widened by {widen.min():.2f}-{widen.max():.2f} x (median "
+        f"{np.median(widen):.2f}) on this plate, so its chi-square carries less of an effect "
+        "than the fitted test's at the declared 0.2 % (and the clean plates' nominal p-values "
+        "sit high, above). With the widened deviations, the fitted test at the fitted 0.9 "
+        "sizes rejects with probability "
+        + ", ".join(f"{e} {p:.2f}" for e, p in sorted(at, key=lambda x: x[1]))
+        + f"; diagnose's nominal test rejected in {k} of the {n} replicates run there. "
+        "The fitted reference is thus the power of a method that tests at the declared "
+        "deviations; diagnose, at its defaults on this mesh, gives part of it away to its "
+        "mesh's error."
+    ]
+
+
+def _judge(c, need=8, of=N_POWER):
+    """The target 'named right in `need` of `of`' on the replicates run so far (no forecast)."""
+    if c is None or c["n"] == 0:
+        return "not run yet"
+    k, n = c["named"], c["n"]
+    so_far = f"named right in {k} of {n} run so far" if n < of else f"named right in {k} of {n}"
+    if k >= need:
+        return f"{so_far}: met"
+    if n - k > of - need:
+        return f"{so_far}: missed ({n - k} misses; the target allows {of - need})"
+    return f"{so_far}: open (partial)" if n < of else f"{so_far}: missed"
+
+
+def entry_p(left, size_table, effect, j, power=None):
+    """The fitted test's power at an effect's ``j``-th size (1 where unknown: no claim);
+    ``power``: of the noncentrality left, e.g. :func:`bound_power` (default the 8 dof test)."""
+    lam = (left.get(effect) or [None] * len(SIZES))[j]
+    if size_table[effect]["sizes"][j] is None or lam is None:
+        return 1.0
+    return ideal_power(lam, 14 - N_CONSTANTS) if power is None else power(lam)
+
+
+def _targets(rows, cells, size_table, left, inside, quick):
+    n_clean = 2 * (2 if quick else N_CLEAN)
+    k, n = false_alarms(rows)
+    out = [
+        f"- false alarms: {k} of {n} clean replicates not `consistent` (target: at most 2 of "
+        f"{n_clean}){'' if n >= n_clean else f' - partial, {n} of {n_clean} run so far'}"
+    ]
+    names = [entry[0] for entry in SIZES]
+    for label in ("fitted 0.9", "ideal 0.9"):
+        j = names.index(label)
+        ref = "the achievable reference" if label == "fitted 0.9" else "the issue's reference"
+        out.append(f"- at the {label} size ({ref}), target named right in 8 of 10:")
+        for effect, entry in size_table.items():
+            s = entry["sizes"][j]
+            if s is None:
+                out.append(f"  - {effect}: the size lies beyond the admissible sizes")
+                continue
+            c = cells.get((effect, size_key(s)))
+            fp = _fitted_p(left, effect, j)
+            expect = "" if fp is None else f" (fitted P(reject) {fp:.2f})"
+            ideal = ("" if c is None else f"; ideal test rejected {c['ideal']} of {c['n']}, "
+                     f"diagnose's nominal test {c['rejected']} of {c['n']}")  # fmt: skip
+            out.append(f"  - {effect} at {s:.2g}{expect}: {_judge(c)}{ideal}")
+        if label == "ideal 0.9":
+            short = [e for e in size_table
+                     if entry_p(left, size_table, e, j, bound_power) < 0.8]  # fmt: skip
+            if short:
+                out.append(
+                    "  - out of reach by construction (even the most powerful test of "
+                    "the fitted nominal model, aimed at the effect, 1 dof at 1 %, "
+                    "rejects there with probability below 0.8): " + ", ".join(short)
+                )
+    power = [r for r in rows if r["kind"] == "power"]
+    wrong = sum(wrong_name(r) for r in power)
+    pair = sum(wrong_pair(r) for r in power)
     out.append(
-        f"- wrong names (`explained` with another candidate): {wrong} of "
-        f"{sum(r['kind'] == 'power' for r in rows)} power replicates (target: none)"
+        f"- wrong names: {wrong} `explained` with another candidate and {pair} `ambiguous` "
+        f"between two others, of {len(power)} power replicates run (target: none)"
     )
     if inside:
         out.append(
@@ -585,34 +1035,59 @@ def _targets(rows, cells, size_table, inside):
     return out
 
 
-def plot(rows, size_table, path):
+def _on(sizes_at, grid, lams):
+    """Noncentralities log-log interpolated from a grid onto other sizes."""
+    logs = np.log(np.maximum(np.asarray(lams, dtype=float), 1e-12))
+    return np.exp(np.interp(np.log(sizes_at), np.log(grid), logs))
+
+
+def plot(rows, size_table, path, widened_grid=None):
+    """Per candidate: the ideal test's, the fitted test's (and at diagnose's deviations)
+    power against size, and diagnose's rate of naming it at each size run (Wilson 95 %)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     names = list(size_table)
     fig, axes = plt.subplots(2, (len(names) + 1) // 2, figsize=(3.2 * ((len(names) + 1) // 2), 6),
                              squeeze=False)  # fmt: skip
-    cells = power_cells(rows, size_table)
+    cells = power_cells(rows)
+    m = 14
     for ax, effect in zip(axes.flat, names, strict=False):
         entry = size_table[effect]
         grid, lams = np.asarray(entry["grid"]), np.asarray(entry["lambda"])
-        m = 14
         fine = np.geomspace(grid[0], grid[-1], 200)
-        lam = np.exp(np.interp(np.log(fine), np.log(grid), np.log(np.maximum(lams, 1e-12))))
-        ax.semilogx(fine, [ideal_power(x, m) for x in lam], "k-", label="ideal test")
-        for j, s in enumerate(entry["sizes"]):
-            c = cells.get((effect, j))
-            if s is None or c is None:
+        ideal = _on(fine, grid, lams)
+        ax.semilogx(fine, [ideal_power(x, m) for x in ideal], "k-", label="ideal test")
+        if entry.get("fitted_lambda"):
+            fitted = _on(fine, grid, entry["fitted_lambda"])
+            ax.semilogx(fine, [ideal_power(x, m - N_CONSTANTS) for x in fitted], "k--",
+                        label="fitted test")  # fmt: skip
+        if widened_grid and widened_grid.get(effect):
+            wide = _on(fine, grid, widened_grid[effect])
+            ax.semilogx(fine, [ideal_power(x, m - N_CONSTANTS) for x in wide], ":", color="0.4",
+                        label="fitted, diagnose's deviations")  # fmt: skip
+        first = True
+        for (label, *_), s in zip(SIZES, entry["sizes"], strict=True):
+            c = cells.get((effect, size_key(s))) if s is not None else None
+            if label == "fitted 0.9" and s is not None:
+                ax.axvline(s, color="C1", lw=0.8, ls=":")
+            if c is None:
                 continue
             p = c["named"] / c["n"]
             lo, hi = wilson(c["named"], c["n"])
             ax.errorbar([s], [p], yerr=[[p - lo], [hi - p]], fmt="o", color="C0",
-                        label="diagnose names it" if j == 0 else None)  # fmt: skip
+                        label="diagnose names it" if first else None)  # fmt: skip
+            first = False
         ax.set_title(effect.replace("_", " "), fontsize=9)
         ax.set_xlabel(f"size ({EFFECTS[effect][2] or 'ratio'})", fontsize=8)
         ax.set_ylim(-0.05, 1.05)
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+        run = [s for s in entry["sizes"] if s is not None]
+        if run:
+            ax.set_xlim(max(grid[0], min(run) / 4.0), min(grid[-1], max(run) * 3.0))
     for ax in list(axes.flat)[len(names) :]:
         ax.axis("off")
     axes.flat[0].set_ylabel("rate")
