@@ -207,11 +207,11 @@ def load_rows(out_dir, quick):
 
 
 def run(out_dir, n_replicates=200, sampler_minutes=None, quick=False, seed=SEED):
-    """Run what the cache lacks; return the rows, the drawn errors and this session's seconds.
+    """Run what the cache lacks; return the rows, the drawn errors and this run's seconds.
 
     B on every replicate first (both treatments), then the sampler, replicate by replicate
     (each row stored as it comes: an interrupted run resumes), until `sampler_minutes` of
-    this session (None: no cap).
+    this run (None: no cap).
     """
     rows = load_rows(out_dir, quick)
     rng = np.random.default_rng(seed)
@@ -407,7 +407,7 @@ def report(rows, n, errors, seconds, command):
 def main(out_dir, quick=False, replicates=None, sampler_minutes=None):
     """Run what the cache lacks and write the report; return its path.
 
-    `sampler_minutes`: a cap on this session's sampling (default none; quick: 0, no sampler).
+    `sampler_minutes`: a cap on this run's sampling (default none; quick: 0, no sampler).
     """
     logging.getLogger("bayesplate").setLevel(logging.ERROR)
     n = replicates or (6 if quick else 200)
@@ -426,7 +426,7 @@ if __name__ == "__main__":
     parser.add_argument("--quick", action="store_true", help="6 replicates, no sampler")
     parser.add_argument("--replicates", type=int, default=None, help="default 200")
     parser.add_argument("--sampler-minutes", type=float, default=None,
-                        help="cap on this session's sampling (default: none)")  # fmt: skip
+                        help="cap on this run's sampling (default: none)")  # fmt: skip
     parser.add_argument("--out", default=pathlib.Path(__file__).resolve().parents[1] / "reports")
     args = parser.parse_args()
     print(main(args.out, args.quick, args.replicates, args.sampler_minutes))
