@@ -22,7 +22,7 @@ The sampler (emcee on the certified fast model, :func:`bayesplate.sampling.sampl
 then runs on every replicate (both treatments); with the inputs marginal it also draws the
 thickness and density (:mod:`bayesplate.inputs_posterior`), and a replicate's input interval
 covers when it holds the plate's true thickness (density). ``--sampler-minutes`` caps one
-session; the report says how many replicates were sampled. Every finished row (B's, the
+run; the report says how many replicates were sampled. Every finished row (B's, the
 sampler's) is stored as it comes in ``out_dir/.cache/input_coverage.json`` (atomic writes),
 so an interrupted run resumes where it stopped.
 
@@ -357,8 +357,8 @@ def report(rows, n, errors, seconds, command):
         "# Coverage of the 94 % intervals with uncertain thickness and density",
         "",
         f"Made by `{command}` on {datetime.date.today()}, {cpu()}, {os.cpu_count()} cores, "
-        f"{_load_text(rows)}; {seconds:.0f} s in the last session, {b_seconds:.0f} s of B fits "
-        f"and {sum(sampled):.0f} s of sampling over all sessions (the rows are cached in "
+        f"{_load_text(rows)}; {seconds:.0f} s in the last run, {b_seconds:.0f} s of B fits "
+        f"and {sum(sampled):.0f} s of sampling over all runs (the rows are cached in "
         f"`.cache/`, {np.mean(sampled) if sampled else float('nan'):.1f} s a replicate for "
         f"both treatments). "
         f"Synthetic plate {LENGTH * 1e3:.0f} x {WIDTH * 1e3:.0f} x {THICKNESS * 1e3:.0f} mm, "
