@@ -56,6 +56,8 @@ __all__ = [
     "Assignment",
     "assign",
     "assign_with_shapes",
+    "best_assignment",
+    "spurious_band_Hz",
     "most_probable",
     "predictive_sd_Hz",
 ]
@@ -255,7 +257,7 @@ def _log_pair(f, s, c, t, p_unobserved, p_spurious, dof=None):
     for name, p in (("p_unobserved", p_unobserved), ("p_spurious", p_spurious)):
         if not 0.0 < p < 1.0:
             raise ValueError(f"{name} = {p}: must lie strictly between 0 and 1")
-    band = float(np.max(f + _BAND_SIGMAS * s))
+    band = spurious_band_Hz(f, s)
     in_band = c <= np.max(f)
     var = s[:, None] ** 2 + t[None, :] ** 2
     if dof is None:
@@ -271,17 +273,51 @@ def _log_pair(f, s, c, t, p_unobserved, p_spurious, dof=None):
 
 def _solve(log_pair, log_spurious, in_band, band, p_unobserved):
     """The assignment maximising the summed pair and spurious scores (Hungarian)."""
-    m, n = log_pair.shape
+    modes, total = best_assignment(log_pair, log_spurious)
+    log_p = total + np.count_nonzero(in_band) * np.log(p_unobserved)
+    unobserved = np.setdiff1d(np.flatnonzero(in_band), modes[modes >= 0])
+    return Assignment(modes, unobserved, float(log_p), band)
+
+
+def best_assignment(score, spurious):
+    """One-to-one pairs and spurious peaks maximising the summed scores (Hungarian method).
+
+    A linear assignment problem on an ``m x (n + m)`` cost matrix: the ``n`` computed modes,
+    then one "spurious" column per peak, open to that peak alone.
+
+    Parameters
+    ----------
+    score : numpy.ndarray, shape (m, n)
+        Score of pairing peak ``i`` with computed mode ``j`` (log-probability, nats); scores
+        below ``-1e12`` count as ``-1e12`` (a pair excluded outright).
+    spurious : float or numpy.ndarray, shape (m,)
+        Score of each peak left spurious.
+
+    Returns
+    -------
+    modes : numpy.ndarray of int, shape (m,)
+        0-based computed mode of each peak; -1 spurious.
+    total : float
+        The maximal summed score.
+    """
+    m, n = score.shape
     cost = np.full((m, n + m), _FORBIDDEN)
-    cost[:, :n] = np.minimum(-log_pair, _FORBIDDEN)
-    cost[np.arange(m), n + np.arange(m)] = -log_spurious
+    cost[:, :n] = np.minimum(-score, _FORBIDDEN)
+    cost[np.arange(m), n + np.arange(m)] = -np.asarray(spurious, dtype=float)
     rows, cols = linear_sum_assignment(cost)
     modes = np.full(m, -1)
     paired = cols < n
     modes[rows[paired]] = cols[paired]
-    log_p = float(-cost[rows, cols].sum() + np.count_nonzero(in_band) * np.log(p_unobserved))
-    unobserved = np.setdiff1d(np.flatnonzero(in_band), modes[modes >= 0])
-    return Assignment(modes, unobserved, log_p, band)
+    return modes, float(-cost[rows, cols].sum())
+
+
+def spurious_band_Hz(frequency_Hz, sigma_Hz):
+    """``B``: the upper end of the range a spurious peak may lie in, Hz.
+
+    The highest of ``f_i + 3 s_i`` over the measured peaks (:data:`_BAND_SIGMAS`).
+    """
+    f = np.asarray(frequency_Hz, dtype=float)
+    return float(np.max(f + _BAND_SIGMAS * np.asarray(sigma_Hz, dtype=float)))
 
 
 def _log_evidence(modes, Y, V_Y, g, S, shift, V_b, in_band, p_unobserved, p_spurious, log_B):
@@ -394,7 +430,7 @@ def most_probable(
     Y = eigenvalue_from_hz(f)
     V_Y = np.diag(eigenvalue_sd(f, s) ** 2)
     shift = S @ (np.asarray(prior_mean_b, dtype=float) - np.asarray(b, dtype=float))
-    band = float(np.max(f + _BAND_SIGMAS * s))
+    band = spurious_band_Hz(f, s)
     log_B = np.log(eigenvalue_from_hz(band))
     in_band = g <= eigenvalue_from_hz(np.max(f))
     m, n = f.size, g.size

@@ -53,9 +53,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
-from ..assignment import P_SPURIOUS, P_UNOBSERVED
+from ..assignment import P_SPURIOUS, P_UNOBSERVED, best_assignment, spurious_band_Hz
 from ..posterior import observation_covariance
 from ..quantities import eigenvalue_from_hz
 
@@ -63,7 +62,6 @@ __all__ = ["REASSIGN_EXTRA_MODES", "ChainAssignment", "ReassignedLikelihood", "r
 
 #: Computed modes beyond the highest settled one that the chain may pair a peak with.
 REASSIGN_EXTRA_MODES = 2
-_BAND_SIGMAS = 3.0  # as bayesplate.assignment: the band ends 3 deviations above the top peak
 
 
 class ReassignedLikelihood:
@@ -110,7 +108,7 @@ class ReassignedLikelihood:
         self.variance = np.diag(observation_covariance(f, s, observation)).copy()
         self.n = int(n_modes)
         self.top = float(np.max(self.Y))
-        self.band = float(eigenvalue_from_hz(np.max(f + _BAND_SIGMAS * s)))
+        self.band = float(eigenvalue_from_hz(spurious_band_Hz(f, s)))
         self.p_unobserved, self.p_spurious = float(p_unobserved), float(p_spurious)
         self._paired = np.log1p(-p_spurious) + np.log1p(-p_unobserved)
         self._spurious = np.log(p_spurious) - np.log(self.band)
@@ -236,18 +234,11 @@ def reassignment(pairing, frequency_Hz, sigma_Hz, observation, full_covariance, 
 def _solve(pair, spurious, unpaired):
     """The assignment maximising ``sum pair + sum spurious + sum unpaired``; its total.
 
-    ``sum_unpaired u_j = sum_all u_j - sum_paired u_j``: a pair scores ``pair_ij - u_j``, a
-    peak's own spurious column ``spurious_i``, the other spurious columns are forbidden.
+    ``sum_unpaired u_j = sum_all u_j - sum_paired u_j``: a pair scores ``pair_ij - u_j``
+    (:func:`bayesplate.assignment.best_assignment`).
     """
-    m, n = pair.shape
-    cost = np.full((m, n + m), np.inf)
-    cost[:, :n] = -(pair - unpaired[None, :])
-    cost[np.arange(m), n + np.arange(m)] = -spurious
-    rows, cols = linear_sum_assignment(cost)
-    modes = np.full(m, -1)
-    on = cols < n
-    modes[rows[on]] = cols[on]
-    return modes, float(-cost[rows, cols].sum() + unpaired.sum())
+    modes, total = best_assignment(pair - unpaired[None, :], spurious)
+    return modes, total + float(unpaired.sum())
 
 
 @dataclass(frozen=True)
