@@ -62,10 +62,9 @@ from bayesplate.discrepancy import (
     PointSupport,
     ThicknessTaper,
 )
-from bayesplate.discrepancy.diagnose import DEFAULTS, coarse_model, diagnose
+from bayesplate.discrepancy.diagnose import DEFAULTS, diagnose, mesh_error
 from bayesplate.io import atomic_write_text
 from bayesplate.posterior import prior_in_stiffness
-from bayesplate.quantities import hz_from_eigenvalue
 
 SEED = 20261125
 NOISE = 0.002  # relative deviation of each recorded frequency
@@ -281,8 +280,7 @@ def widening(quick=False, frequency_Hz=None):
         frequency_Hz = np.sort(_frequencies(case, fine))
     mu_b, _ = prior_in_stiffness(case.prior.mean, case.prior.sd, "full")
     m = case.measured.size
-    f = hz_from_eigenvalue(model.solve(mu_b, m).eigenvalues)
-    err = (hz_from_eigenvalue(coarse_model(model).solve(mu_b, m).eigenvalues) - f) / 3.0
+    err = mesh_error(model, mu_b, m)
     ratio = np.abs(err) / (NOISE * np.asarray(frequency_Hz, dtype=float))
     return np.hypot(1.0, ratio) if ratio.max() > DEFAULTS["mesh_error_ratio"] else np.ones(m)
 
