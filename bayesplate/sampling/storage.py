@@ -145,7 +145,7 @@ def open_backend(path, density, n_walkers):
     backend = _Stored(path)
     _remove_stale(backend.path)
     fingerprint = _fingerprint(density.problem)
-    assigned = getattr(density, "assigned", None)
+    assigned = density.assigned
     if assigned is not None:  # another target: all the peaks, the assignment re-made
         fingerprint = np.concatenate([fingerprint, assigned.Y, [assigned.n]])
     stored = _read(path, backend) if pathlib.Path(path).exists() else None
