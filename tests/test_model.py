@@ -146,3 +146,49 @@ def test_same_inputs_give_the_same_numbers():
     a, b = m.solve(B_REF, 8), m.solve(B_REF, 8)
     assert np.array_equal(a.eigenvalues, b.eigenvalues)
     assert np.array_equal(a.sensitivities, b.sensitivities)
+
+
+# ------------------------------------------------ the Rayleigh bound of the lowest eigenvalue
+# Candidate priors (discrepancy/elastic_foundation.py, point_support.py) scale on it.
+
+
+def test_lowest_eigenvalue_bound_is_navier_for_a_thin_simply_supported_cross_ply():
+    # [0/90/0] has D16 = D26 = 0, so sin(pi x/a) sin(pi y/b) is its Kirchhoff mode and the
+    # bound is exact there; at a/h = 200 the TSDT Navier solution (tests/reference, an
+    # independent code) differs from Kirchhoff by shear deformation only, about 0.05 %.
+    try:
+        from reference import navier_tsdt as nt
+    except ImportError:  # tests/ imported as a package
+        from tests.reference import navier_tsdt as nt
+    a, b, h, rho = 0.3, 0.2, 1.5e-3, 1537.0
+    model = PlateModel(a, b, h, rho, [0, 90, 0], mesh=(4, 4), boundary="simply_supported")
+    E1, E2, nu12, G12, G13, G23 = E_REF
+    omega = nt.navier_frequencies(a, b, h, rho, (0, 90, 0), E1, E2, nu12, G12, G13, G23, m=1, n=1)
+    ratio = model.lowest_eigenvalue_bound(B_REF) / omega[0] ** 2
+    assert 1.0 <= ratio < 1.002
+
+
+def test_lowest_eigenvalue_bound_of_a_free_square_isotropic_plate():
+    # w = xy is the twist: 576 D66/(I0 a^4) = 576 (1 - nu)/2 D/(rho h a^4); Leissa (1969,
+    # Vibration of Plates, table 4.75) gives the true lowest omega a^2 sqrt(rho h/D) = 13.468
+    # for nu = 0.3, so the bound is (sqrt(201.6)/13.468)^2 = 1.111 times the true value.
+    E, nu = 70e9, 0.3
+    e = np.array([E, E, nu, E / (2 * (1 + nu)), E / (2 * (1 + nu)), E / (2 * (1 + nu))])
+    model = PlateModel(0.2, 0.2, 1e-3, 2700.0, [0], mesh=(4, 4))
+    D = E * 1e-3**3 / (12 * (1 - nu**2))
+    bound = model.lowest_eigenvalue_bound(laminate.stiffness_from_engineering(e))
+    leissa = (13.468 / 0.2**2) ** 2 * D / (2700.0 * 1e-3)
+    assert bound / leissa == pytest.approx(576 * (1 - nu) / 2 / 13.468**2, rel=1e-3)
+
+
+@pytest.mark.parametrize(("a", "b", "layup", "mesh"), [
+    (0.1, 0.06, LAYUP, (10, 6)),  # unsymmetric: D - B A^-1 B
+    (0.3, 0.05, [0, 90, 90, 0], (24, 4)),  # a beam: the beam shape along x
+    (0.2, 0.2, [45, -45, -45, 45], (12, 12)),  # D12 near D11: the saddle x^2 - y^2
+])  # fmt: skip
+def test_lowest_eigenvalue_bound_lies_just_above_the_computed_one(a, b, layup, mesh):
+    # a Rayleigh quotient bounds the lowest eigenvalue from above; shear deformation and the
+    # shapes' distance from the true mode keep it within about 30 % on plates of any aspect
+    model = PlateModel(a, b, 2e-3, 1537.0, layup, mesh=mesh)
+    computed = model.solve(B_REF, 1).eigenvalues[0]
+    assert 1.0 < model.lowest_eigenvalue_bound(B_REF) / computed < 1.3

@@ -24,10 +24,11 @@ class ElasticFoundation(Physics):
     def parameters(self, model, b):
         """``k_N_m3`` >= 0.
 
-        Prior deviation: the ``k`` that lifts every bending eigenvalue by 10 % of a
-        plate-bending estimate of the lowest one.
+        Prior deviation: the ``k`` that lifts every bending eigenvalue by 10 % of the
+        lowest one (its Rayleigh bound,
+        :meth:`~bayesplate.model.PlateModel.lowest_eigenvalue_bound`).
         """
-        lowest = -10.0 * model.spectral_shift(b)  # the shift is a tenth of that estimate
+        lowest = model.lowest_eigenvalue_bound(b)
         scale = 0.1 * model.density * model.thickness * lowest
         return (Parameter("k_N_m3", 0.0, scale, 0.0, np.inf),)
 

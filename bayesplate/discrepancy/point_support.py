@@ -16,12 +16,13 @@ __all__ = ["PointSupport", "point_support_map", "point_support_scan", "reference
 def reference_stiffness(model, b):
     """The spring that lifts a mode by about its own eigenvalue: ``lambda_1 m_plate``, N/m.
 
-    ``lambda_1`` is the plate-bending estimate of the lowest eigenvalue behind
-    :meth:`~bayesplate.model.PlateModel.spectral_shift`, ``m_plate`` the plate's mass.
+    ``lambda_1`` is the Rayleigh bound of the lowest eigenvalue
+    (:meth:`~bayesplate.model.PlateModel.lowest_eigenvalue_bound`), ``m_plate`` the
+    plate's mass.
     A spring ``k`` at ``(x, y)`` lifts mode ``i`` by ``k w_i(x, y)^2`` to first order, and
     ``w_i^2`` of a mass-normalised mode is of order ``1 / m_plate``.
     """
-    lowest = -10.0 * model.spectral_shift(b)  # the shift is a tenth of that estimate
+    lowest = model.lowest_eigenvalue_bound(b)
     return lowest * model.density * model.thickness * model.mesh.a * model.mesh.b
 
 
