@@ -1,7 +1,8 @@
-"""The machine a study ran on, for its report (a helper of this folder, not a study)."""
+"""The machine and the code a study ran on, for its report (a helper here, not a study)."""
 
 import pathlib
 import platform
+import subprocess
 
 
 def cpu():
@@ -13,3 +14,16 @@ def cpu():
     except OSError:
         pass
     return platform.machine()
+
+
+def code_version():
+    """The commit the study runs (``+modified`` when the package or studies differ from it)."""
+    root = pathlib.Path(__file__).resolve().parents[1]
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, text=True,
+                              capture_output=True, check=True).stdout.strip()  # fmt: skip
+        dirty = subprocess.run(["git", "status", "--porcelain", "--", "bayesplate", "studies"],
+                               cwd=root, text=True, capture_output=True).stdout.strip()  # fmt: skip
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    return head + ("+modified" if dirty else "")

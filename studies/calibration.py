@@ -66,6 +66,11 @@ from bayesplate.discrepancy.diagnose import DEFAULTS, diagnose, mesh_error
 from bayesplate.io import atomic_write_text
 from bayesplate.posterior import prior_in_stiffness
 
+_HERE = pathlib.Path(__file__).resolve().parent
+if str(_HERE) not in sys.path:
+    sys.path.insert(0, str(_HERE))
+from _study_host import code_version, cpu  # noqa: E402  (this folder's helper, not a package)
+
 SEED = 20261125
 NOISE = 0.002  # relative deviation of each recorded frequency
 ALPHA = DEFAULTS["alpha"]
@@ -86,6 +91,16 @@ N_CONSTANTS = 6  # the constants diagnose fits (its stiffness coefficients)
 #: Rows of these code versions are kept in the cache but not counted: diagnose has changed
 #: since in ways that change its answers (its label: why).
 RETIRED = {
+    **dict.fromkeys(
+        ("1a9717d", "369bb3e"),
+        (
+            "made on 2026-11-26 by the code of 1a9717d and 369bb3e: since then the elastic "
+            "foundation's and the point support's priors scale on a Rayleigh bound of the lowest "
+            "eigenvalue, where a lower estimate 14 times low had shrunk the foundation's prior "
+            "(a strong foundation was named a point support), which changes every replicate's "
+            "evidences"
+        ),
+    ),
     "2026-11-25 (b454113-6b495b0)": (
         "made on 2026-11-25 by the code of b454113-6b495b0: since then diagnose's fits are "
         "settled on reduced models (58b7f36), every promising candidate is settled in two "
@@ -534,6 +549,14 @@ def migrate(stored):
         spent = stored.setdefault("retired_seconds", {})
         spent[LEGACY_CODE] = spent.get(LEGACY_CODE, 0.0) + stored.get("seconds", 0.0)
         stored["seconds"] = 0.0
+    for run in stored.get("runs", []):  # the wall time of retired code goes with its rows
+        if run.get("code") in RETIRED and not run.get("retired") and run.get("end"):
+            took = (datetime.datetime.fromisoformat(run["end"])
+                    - datetime.datetime.fromisoformat(run["start"])).total_seconds()  # fmt: skip
+            spent = stored.setdefault("retired_seconds", {})
+            spent[run["code"]] = spent.get(run["code"], 0.0) + took
+            stored["seconds"] = max(0.0, stored.get("seconds", 0.0) - took)
+            run["retired"] = True
     kept = {}
     for row in stored["rows"].values():
         row.setdefault("code", LEGACY_CODE)
@@ -554,21 +577,6 @@ def migrate(stored):
             retired[f"{row['code']}|{key}"] = {**row, "retired": why}
     stored["rows"] = kept
     return stored
-
-
-def code_version():
-    """The commit the study runs (``+modified`` when the package or studies differ from it)."""
-    import subprocess
-
-    root = pathlib.Path(__file__).resolve().parents[1]
-    try:
-        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, text=True,
-                              capture_output=True, check=True).stdout.strip()  # fmt: skip
-        dirty = subprocess.run(["git", "status", "--porcelain", "--", "bayesplate", "studies"],
-                               cwd=root, text=True, capture_output=True).stdout.strip()  # fmt: skip
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
-    return head + ("+modified" if dirty else "")
 
 
 def _now():
@@ -624,9 +632,6 @@ def _ship_by_value():
 
 
 def _machine():
-    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-    from _study_host import cpu
-
     return f"the {os.cpu_count()}-core development machine ({cpu()})"
 
 

@@ -14,7 +14,9 @@ is Frederiksen's own estimate of its constants. Run: `python studies/concealment
 
 from __future__ import annotations
 
+import datetime
 import json
+import os
 import sys
 import time
 from functools import partial
@@ -37,9 +39,22 @@ from bayesplate.discrepancy.diagnose import diagnose
 from bayesplate.discrepancy.pair import Pair
 from bayesplate.io import atomic_write_text
 
+_HERE = Path(__file__).resolve().parent
+if str(_HERE) not in sys.path:
+    sys.path.insert(0, str(_HERE))
+from _study_host import code_version, cpu  # noqa: E402  (this folder's helper, not a package)
+
 NOISE = 0.002
 SEED = 20261121
 NAMES = ("E1", "E2", "nu12", "G12", "G13", "G23")
+#: Rows made by these code versions are run again (diagnose has changed since in ways that
+#: change its answers); rows without a code label were made before rows carried one.
+RETIRED = {
+    None: "made before 2026-11-26 by code that did not label its rows: every fit since "
+    "settled on reduced models, the new candidates (cutout, point support) competing, and "
+    "the foundation's and point support's priors on the Rayleigh bound of the lowest "
+    "eigenvalue",
+}
 
 
 def scenarios(quick=False):
@@ -93,6 +108,12 @@ def run_scenario(index, quick=False):
     start = time.perf_counter()
     d = diagnose(blind, model=model, rng=SEED, pairing="order")
     row = _row(label, physics, size, theta, d, case, model, time.perf_counter() - start)
+    row.update(
+        code=code_version(),
+        cpu=cpu(),
+        load=os.getloadavg()[0],
+        finished=datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+    )
     print(f"{label:22s} {size:12s} -> {d.verdict:12s} {row['chosen']} "
           f"({row['seconds']:.0f} s)", flush=True)  # fmt: skip
     return row
@@ -109,7 +130,9 @@ def main(out_dir="reports", quick=False, workers=1, scheduler=None):
     """
     cache = Path(out_dir) / ".cache" / f"concealment{'-quick' if quick else ''}.json"
     done = json.loads(cache.read_text()) if cache.exists() else {}
+    done = {k: row for k, row in done.items() if row.get("code") not in RETIRED}
     todo = [i for i in range(len(scenarios(quick))) if str(i) not in done]
+    print(f"{len(todo)} scenarios to run ({len(done)} cached)", flush=True)
 
     def keep(position, row):  # each row stored as it comes: an interrupted run resumes
         done[str(todo[position])] = row
@@ -136,7 +159,9 @@ def write_report(out_dir="reports", quick=False):
     cache = Path(out_dir) / ".cache" / f"concealment{'-quick' if quick else ''}.json"
     done = json.loads(cache.read_text()) if cache.exists() else {}
     n = len(scenarios(quick))
-    rows = [done[str(i)] for i in range(n) if str(i) in done]
+    rows = [
+        done[str(i)] for i in range(n) if str(i) in done and done[str(i)].get("code") not in RETIRED
+    ]
     case = load_case(bundled_case_path("frederiksen_t300"))
     mesh = (12, 6) if quick else case.mesh
     _with_mirror_images(rows, scenarios(quick), PlateModel.from_case(case, mesh=mesh))
@@ -249,6 +274,8 @@ def _report(rows, mesh, quick):
         f"{2 * mesh[0]} x {2 * mesh[1]} with {100 * NOISE:.1f} % Gaussian noise on each of "
         "14 frequencies. Constants errors are (estimate / truth - 1) in %.",
         "",
+        *_provenance(rows),
+        "",
         "| effect | size | nominal p | verdict | chosen | recovered parameters | constants "
         "before (%) | constants after (%) | time (s) |",
         "|---|---|---|---|---|---|---|---|---|",
@@ -264,6 +291,23 @@ def _report(rows, mesh, quick):
         f"{k} {v:+.1f}" for k, v in sorted(r["gains"].items(), key=lambda kv: -kv[1]))
         for r in rows]  # fmt: skip
     return "\n".join(head + lines + gains + _findings(rows)) + "\n"
+
+
+def _provenance(rows):
+    """Which code made the rows, when, on which machine and at which load."""
+    by_code = {}
+    for r in rows:
+        by_code.setdefault((r.get("code"), r.get("cpu")), []).append(r)
+    out = []
+    for (code, machine), mine in by_code.items():
+        days = sorted({r["finished"][:10] for r in mine if r.get("finished")})
+        loads = [r["load"] for r in mine if r.get("load") is not None]
+        out.append(f"Rows made by the code of `{code}` on {', '.join(days) or '?'}, "
+                   f"{machine or 'an unrecorded machine'} (2 cores), "
+                   f"load average {min(loads):.1f}-{max(loads):.1f} (other work beside): "
+                   f"{len(mine)} rows, {sum(r['seconds'] for r in mine) / 60:.0f} min of "
+                   "diagnose." if loads else f"Rows made by `{code}`: {len(mine)}.")  # fmt: skip
+    return out
 
 
 def _findings(rows):
@@ -296,4 +340,10 @@ def _findings(rows):
 
 
 if __name__ == "__main__":
-    main(quick="--quick" in sys.argv, workers=2)
+    import argparse
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="two scenarios on a 12 x 6 mesh")
+    parser.add_argument("--workers", type=int, default=2, help="processes (default 2)")
+    args = parser.parse_args()
+    main(quick=args.quick, workers=args.workers)
