@@ -1,7 +1,7 @@
 """Benchmark of diagnose's fork pool (issue 15): does ``workers=2`` beat ``workers=1`` on one case?
 
 diagnose runs its independent fits (the nominal model's starts, the candidates) through
-:func:`bayesplate.discrepancy.parallel.fork_map`: forked processes that inherit the plate
+:func:`bayesplate.parallel.fork_map`: forked processes that inherit the plate
 model. The issue keeps that pool only if it is measured faster for one case. The workload:
 ``diagnose`` of the bundled case ``--case`` (default plate1) on a ``--mesh`` mesh (default
 12 x 6), all candidates, a fixed seed; each run in a fresh Python process (nothing cached

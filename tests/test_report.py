@@ -459,3 +459,19 @@ def test_a_report_resumed_on_the_fast_model_gives_the_same_numbers(tmp_path, mon
         np.testing.assert_array_equal(a["b"], b["b"])
         np.testing.assert_array_equal(a["sd"], b["sd"])
         assert a["iterations"] == b["iterations"]
+
+
+def test_the_sampler_beside_diagnose_gives_the_numbers_of_the_two_in_turn(monkeypatch):
+    # on two cores the report samples in a forked process while diagnose runs: the
+    # posterior and the diagnosis are those of the steps run one after the other
+    from bayesplate.report import runner
+
+    options = ReportOptions(quick=True)
+    side = compute_report(bundled_case_path("plate1"), options, progress=lambda line: None)
+    assert runner.available_cores() < 2 or "sample" in side.computed
+    monkeypatch.setattr(runner, "available_cores", lambda: 1)
+    turn = compute_report(bundled_case_path("plate1"), options, progress=lambda line: None)
+    for key in ("mean", "sd", "hdi", "ess_bulk"):
+        np.testing.assert_array_equal(side.results["sample"][key], turn.results["sample"][key])
+    assert side.results["diagnose"]["diagnosis"] == turn.results["diagnose"]["diagnosis"]
+    assert side.seconds["sample"] > 0  # the sampler's own time, measured in its process

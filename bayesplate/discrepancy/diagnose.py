@@ -40,6 +40,7 @@ from scipy.stats import chi2 as chi2_dist
 
 from ..model import PlateModel
 from ..pairing import Pairing
+from ..parallel import fork_map
 from ..posterior import observed_eigenvalues, prior_in_stiffness
 from ..quantities import hz_from_eigenvalue
 from . import candidates as all_candidates
@@ -48,7 +49,6 @@ from .fit import JointFit, JointProblem
 from .locate import absorbable_projector, mode_kinds
 from .nominal import N_STARTS, check_fast, fit_nominal, nominal_reduced, nominal_stage
 from .pair import pairs_with
-from .parallel import fork_map
 from .probabilities import model_probabilities
 from .rank import CandidateResult, improved_nominal, rank, searched_anew
 from .scan import RitzBasis
@@ -477,7 +477,7 @@ def _scans(physics_list, model, nominal, modes, Y, sigma, P, ritz, workers=1):
 
     The Ritz basis (:mod:`.scan`) holds the nominal modes up to ``RITZ_EXTRA_MODES`` beyond
     the highest paired one (``ritz``: the nominal fit's modes). The candidates' scans are
-    independent: on ``workers`` processes (:func:`.parallel.fork_map`).
+    independent: on ``workers`` processes (:func:`bayesplate.parallel.fork_map`).
     """
     basis = RitzBasis.from_modes(model, ritz)
     found = fork_map(lambda physics: physics.scan(model, basis, nominal.b, Y, sigma, modes, P),

@@ -315,7 +315,7 @@ def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None, keep
     keep : int
         How many of the best coarse results to refine (the best fine one is returned).
     workers : int
-        Processes for the local fits from the starts (see :func:`.parallel.fork_map`).
+        Processes for the local fits from the starts (see :func:`bayesplate.parallel.fork_map`).
     rough : JointProblem, optional
         A cheaper version of ``problem`` (a reduced model: :meth:`JointProblem.on_pencil`)
         used as ``coarse`` is; it takes precedence over ``coarse``.

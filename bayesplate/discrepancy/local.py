@@ -2,7 +2,7 @@
 
 Each start is fitted by scipy's trust-region reflective least squares on the whitened
 residuals ``r(z)`` of :class:`.fit.JointProblem` (``|r|^2 = chi2 + chi2_prior``), within the
-problem's bounds, the independent starts on forked workers (:func:`.parallel.fork_map`).
+problem's bounds, the independent starts on forked workers (:func:`bayesplate.parallel.fork_map`).
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import logging
 import numpy as np
 from scipy.optimize import least_squares
 
-from .parallel import fork_map
+from ..parallel import fork_map
 
 __all__ = ["DISTINCT", "distinct", "local_fits", "problem_name"]
 

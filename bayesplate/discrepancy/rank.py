@@ -19,11 +19,11 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..parallel import fork_map
 from .anew import constants_anew
 from .fit import JointFit, JointProblem, fit, rough_fit, settle
 from .local import DISTINCT
 from .nominal import nominal_polisher
-from .parallel import fork_map
 from .pencil import candidate_pencil
 from .polish import polish_and_finish
 from .store import fit_digest

@@ -13,6 +13,7 @@ import numpy as np
 
 from ..io import load_case
 from ..pairing import MAC_EXTRA_MODES
+from ..parallel import Forked, available_cores
 from . import steps
 from .cache import StepCache
 from .data import ESTIMATORS, ReportData, _b_at, _estimate_for_modes, sampling_available
@@ -69,9 +70,11 @@ def compute_report(case_file, options=None, cache_dir=None, progress=None, label
         for method in ESTIMATORS:
             run.estimate(method)
         run.modes()
-        if options.sample:
+        if options.sample and options.diagnose:
+            run.sample_beside_diagnose()
+        elif options.sample:
             run.sample()
-        if options.diagnose:
+        elif options.diagnose:
             run.diagnose()
     say("all steps done")
     return data
@@ -142,27 +145,53 @@ class _Runner:
             lambda: steps.modes_step(self.case, data.plate_model(), b, n, self.options.n_shapes),
         )
 
-    def sample(self):
+    def _sample_options(self):
+        return {"seed": self.options.seed, "quick": self.options.quick,
+                "pairing": self.pairing_options}  # fmt: skip
+
+    def _sample(self):
+        return steps.sample_step(self.case, self.data.plate_model(), self.data.pairing_for_steps(),
+                                 self.options, self.data.fast_model())  # fmt: skip
+
+    def sample(self, compute=None, title="posterior sampling"):
         if not sampling_available():
             self.say("posterior sampling: not in this version of bayesplate (section left out)")
             return
-        self.step(
-            "sample",
-            "posterior sampling",
-            {
-                "seed": self.options.seed,
-                "quick": self.options.quick,
-                "pairing": self.pairing_options,
-            },
-            lambda: steps.sample_step(
-                self.case,
-                self.data.plate_model(),
-                self.data.pairing_for_steps(),
-                self.options,
-                self.data.fast_model(),
-            ),  # fmt: skip
-            optional=True,
-        )
+        self.step("sample", title, self._sample_options(), compute or self._sample, optional=True)
+
+    def sample_beside_diagnose(self):
+        """The sampler in a forked process while diagnose runs in this one.
+
+        Both are long and independent (the sampler runs on the fast model B built, diagnose
+        on the full model); on two cores side by side they take about the longer one's time
+        (diagnose's own workers share the cores with the sampler). The results are those of
+        the two run in turn: the sampler's numbers depend only on its seed. One core, a
+        cached posterior, or no sampler: in turn.
+        """
+        cached = self.cache.load("sample", {"mesh": self.data.mesh, **self._sample_options()})
+        if not sampling_available() or cached is not None or available_cores() < 2:
+            self.sample()
+            self.diagnose()
+            return
+        self.data.fast_model()  # built here (its progress lines, its time): the child inherits it
+
+        def timed():
+            started = time.perf_counter()
+            return self._sample(), time.perf_counter() - started
+
+        self.say("posterior sampling: started beside diagnose")
+        with Forked(timed) as beside:
+            self.diagnose()
+            took = {}
+
+            def wait():
+                result, took["seconds"] = beside.result()
+                return result
+
+            self.sample(compute=wait, title="posterior sampling (beside diagnose)")
+        if "seconds" in took and "sample" in self.data.seconds:
+            self.data.seconds["sample"] = took["seconds"]  # its own time, not the wait
+            self.say(f"posterior sampling took {took['seconds']:.1f} s beside diagnose")
 
     def diagnose(self):
         from ..io.stage_store import DirectoryStore
