@@ -32,6 +32,7 @@ found about each (maps, scans, results) is keyed by its :attr:`~.base.Physics.na
 
 from __future__ import annotations
 
+import copy
 import logging
 from dataclasses import dataclass, field, replace
 
@@ -44,6 +45,7 @@ from ..parallel import fork_map
 from ..posterior import observed_eigenvalues, prior_in_stiffness
 from ..quantities import hz_from_eigenvalue
 from . import candidates as all_candidates
+from . import reassign
 from .base import mirror_positions
 from .fit import JointFit, JointProblem
 from .locate import absorbable_projector, mode_kinds
@@ -81,9 +83,12 @@ DEFAULTS = {
     "workers": 1,  # processes for independent fits (fork); the CLI uses 2
     "ambiguity_margin": 2.0,  # nats (odds about 7:1): a different candidate this close ties
     "pairs": True,  # fit two effects at once when the best single one is rejected
+    "reassign": True,  # the assignment made again at the verdict's fit (not by order/index)
 }
 """Default values of :func:`diagnose`'s keyword-only options (their single source)."""
 
+#: Passes of diagnose at most when the assignment is made again at each verdict's fit.
+MAX_PASSES = 3
 #: Elastic modes of the Ritz basis of the scans beyond the highest paired one.
 RITZ_EXTRA_MODES = 20
 
@@ -129,6 +134,10 @@ class Diagnosis:
         When ``ambiguous``: the runner-up, a different candidate.
     separation : Separation or None
         When ``ambiguous``: the measurement that would tell ``chosen`` from ``rival``.
+    peak_modes : numpy.ndarray of int, shape (m_all,), or None
+        The computed mode (0-based) of every measured peak in the pass kept, -1 where it was
+        left out as spurious; set when the assignment was made again at the verdict's fit
+        (:mod:`.reassign`).
     """
 
     verdict: str
@@ -154,6 +163,7 @@ class Diagnosis:
     probabilities: dict = field(default_factory=dict)
     rival: CandidateResult | None = None
     separation: Separation | None = None
+    peak_modes: np.ndarray | None = None
 
 
 def coarse_model(model):
@@ -199,6 +209,7 @@ def diagnose(
     workers=DEFAULTS["workers"],
     ambiguity_margin=DEFAULTS["ambiguity_margin"],
     pairs=DEFAULTS["pairs"],
+    reassign=DEFAULTS["reassign"],
     prior_odds=None,
     fast=None,
     store=None,
@@ -246,6 +257,12 @@ def diagnose(
         verdict is ``ambiguous``, nats (2: about 7 to 1).
     pairs : bool
         Fit two effects at once when the best single candidate's refit is rejected.
+    reassign : bool
+        When the pairing is the assignment by likelihood: make it again at the fit the
+        verdict rests on and, where it differs, diagnose again with it, and keep the pass
+        that explains all peaks best (:mod:`.reassign`). Pairing by order or index is kept
+        as asked, and pairing by shapes too (made again from frequencies alone it would
+        ignore them).
     prior_odds : dict, optional
         ``{candidate name: prior odds against the nominal model}`` (default 1 for every
         candidate; a case-file key for them is not defined yet).
@@ -276,149 +293,213 @@ def diagnose(
         from ..estimators import settle_pairing
 
         pairing, _ = settle_pairing(case, model, pairing, tol=1e-2)
-    measured, modes = pairing.select(case.measured), pairing.modes
-    m = measured.size
-    notes = []
-    if getattr(case.measured, "error_scale", None) is not None:
-        notes.append("the case gives an error scale for its deviations; diagnose tests against "
-                     "the declared deviations (s = 1), so a misfit the scale would absorb "
-                     "shows here as a mismatch")  # fmt: skip
 
-    coarse = coarse_model(model)
-    n_solve = int(modes.max()) + 1
-    fine_lam = model.solve(mu_b, n_solve).eigenvalues
-    coarse_at_mean = coarse.solve(mu_b, n_solve).eigenvalues
-    err = ((hz_from_eigenvalue(coarse_at_mean) - hz_from_eigenvalue(fine_lam)) / 3.0)[modes]
-    sigma_Hz = np.asarray(measured.sigma_Hz, dtype=float)
-    ratio = np.abs(err) / sigma_Hz
-    say(f"mesh {model.mesh.nx} x {model.mesh.ny}: error up to {ratio.max():.2f} sigma")
-    if ratio.max() > mesh_error_ratio:
-        sigma_Hz = np.hypot(sigma_Hz, err)
-        notes.append(
-            f"the mesh's own error reaches {ratio.max():.2f} sigma (mode "
-            f"{int(np.argmax(ratio)) + 1}); it was added to the deviations in quadrature: "
-            "use a finer [model] mesh"
-        )
-    Y = observed_eigenvalues(measured.frequency_Hz)
-    sigma = 2.0 * Y * sigma_Hz / measured.frequency_Hz  # d lambda = 2 lambda df / f
+    def one_pass(pairing, rng):
+        """Steps 1-5 with one assignment of the peaks to the computed modes."""
+        measured, modes = pairing.select(case.measured), pairing.modes
+        m = measured.size
+        notes = []
+        if getattr(case.measured, "error_scale", None) is not None:
+            notes.append("the case gives an error scale for its deviations; diagnose tests against "
+                         "the declared deviations (s = 1), so a misfit the scale would absorb "
+                         "shows here as a mismatch")  # fmt: skip
 
-    nominal_problem = JointProblem(model, Y, sigma, mu_b, V_b, modes)
-    options = (alpha, evidence_threshold, n_starts, unidentified_ratio, mesh_error_ratio,
-               refine_margin, basin_margin, ambiguity_margin, pairs, prior_odds)  # fmt: skip
-    stages = Stages(store, digest(Y, sigma, measured.frequency_Hz, modes, mu_b, V_b, options,
-                                  plate_digest(model), physics, fast), say)  # fmt: skip
-    rough, nominal = nominal_stage(nominal_problem, (mu_b, V_b), coarse,
-                                   (fine_lam / coarse_at_mean)[modes], rng, n_starts, workers,
-                                   fast, stages)  # fmt: skip
-    stages = stages.then("nominal", fit_digest(nominal))
-    if fast is not None:
-        check_fast(fast, nominal, modes, notes)
-    dof = max(m - nominal.effective_parameters, 1.0)
-    p_value = float(chi2_dist.sf(nominal.chi2, dof))
-    say(f"nominal fit: chi2 = {nominal.chi2:.1f} on {dof:.1f} dof, p = {p_value:.3g}")
-    mode_p = predictive_p_values(nominal, nominal_problem)
-    loose = unidentified(nominal, V_b, unidentified_ratio, basin_margin)
+        coarse = coarse_model(model)
+        n_solve = int(modes.max()) + 1
+        fine_lam = model.solve(mu_b, n_solve).eigenvalues
+        coarse_at_mean = coarse.solve(mu_b, n_solve).eigenvalues
+        err = ((hz_from_eigenvalue(coarse_at_mean) - hz_from_eigenvalue(fine_lam)) / 3.0)[modes]
+        sigma_Hz = np.asarray(measured.sigma_Hz, dtype=float)
+        ratio = np.abs(err) / sigma_Hz
+        say(f"mesh {model.mesh.nx} x {model.mesh.ny}: error up to {ratio.max():.2f} sigma")
+        if ratio.max() > mesh_error_ratio:
+            sigma_Hz = np.hypot(sigma_Hz, err)
+            notes.append(
+                f"the mesh's own error reaches {ratio.max():.2f} sigma (mode "
+                f"{int(np.argmax(ratio)) + 1}); it was added to the deviations in quadrature: "
+                "use a finer [model] mesh"
+            )
+        Y = observed_eigenvalues(measured.frequency_Hz)
+        sigma = 2.0 * Y * sigma_Hz / measured.frequency_Hz  # d lambda = 2 lambda df / f
 
-    kinds = mode_kinds(model, _paired(nominal, modes))
-    # what the constants can absorb, whitened: projected out of the maps and of the scans
-    P = absorbable_projector(_paired(nominal, modes).sensitivities * nominal.b / sigma[:, None])
-    maps = _maps(physics, model, nominal, modes, sigma, P)
-    region, mirrors = _region(model, maps)
-    located = [int(i) + 1 for i in np.flatnonzero(np.abs(nominal.residual_sigma) > 2.0)]
-
-    coarse_nominal = coarse.solve(nominal.b, int(modes.max()) + 1 + RITZ_EXTRA_MODES)
-    level = {"coarse": coarse, "scale": nominal.eigenvalues / coarse_nominal.eigenvalues[modes],
-             "margin": refine_margin, "workers": workers,
-             "coarse_modes": coarse_nominal.vectors, "rough": rough}  # fmt: skip
-    ritz = model.solve(nominal.b, int(modes.max()) + 1 + RITZ_EXTRA_MODES)
-    level["modes"] = ritz.vectors
-    scans = _scans(physics, model, nominal, modes, Y, sigma, P, ritz, workers)
-    ranked = rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics, say, stages)
-    better = stages.run(
-        "nominal refit from the candidates' constants",
-        stages.key("improved", [fit_digest(c.fit) for c in ranked]),
-        lambda: improved_nominal(nominal_problem, nominal, ranked, level),
-    )
-    if better is not None:
-        stages = stages.then("improved", fit_digest(better))
-        say(f"nominal fit improved from a candidate's constants: chi2 = {better.chi2:.1f}")
-        shift = better.log_evidence - nominal.log_evidence
-        ranked = [replace(c, log_evidence_gain=c.log_evidence_gain - shift) for c in ranked]
-        earlier = ((nominal.b, nominal.chi2 + nominal.chi2_prior), *nominal.alternatives)
-        nominal = replace(better, alternatives=earlier)  # the other basins stay known
+        nominal_problem = JointProblem(model, Y, sigma, mu_b, V_b, modes)
+        options = (alpha, evidence_threshold, n_starts, unidentified_ratio, mesh_error_ratio,
+                   refine_margin, basin_margin, ambiguity_margin, pairs, prior_odds)  # fmt: skip
+        stages = Stages(store, digest(Y, sigma, measured.frequency_Hz, modes, mu_b, V_b, options,
+                                      plate_digest(model), physics, fast), say)  # fmt: skip
+        rough, nominal = nominal_stage(nominal_problem, (mu_b, V_b), coarse,
+                                       (fine_lam / coarse_at_mean)[modes], rng, n_starts, workers,
+                                       fast, stages)  # fmt: skip
+        stages = stages.then("nominal", fit_digest(nominal))
+        if fast is not None:
+            check_fast(fast, nominal, modes, notes)
         dof = max(m - nominal.effective_parameters, 1.0)
         p_value = float(chi2_dist.sf(nominal.chi2, dof))
+        say(f"nominal fit: chi2 = {nominal.chi2:.1f} on {dof:.1f} dof, p = {p_value:.3g}")
         mode_p = predictive_p_values(nominal, nominal_problem)
         loose = unidentified(nominal, V_b, unidentified_ratio, basin_margin)
-    best = next((c for c in ranked if c.fit.refined), None)
-    warranted = best is not None and best.log_evidence_gain > evidence_threshold
-    refit_dof, refit_p = np.nan, np.nan
-    if warranted:
-        refit_dof, refit_p = _refit_test(best.fit, m)
-    if warranted and refit_p < alpha:  # rejected: its constants searched again, globally
-        anew = stages.run(
-            f"{best.name}: constants searched again",
-            stages.key("anew", fit_digest(best.fit)),
-            lambda: searched_anew(model, level, Y, sigma, mu_b, V_b, modes, nominal, best),
+
+        kinds = mode_kinds(model, _paired(nominal, modes))
+        # what the constants can absorb, whitened: projected out of the maps and of the scans
+        P = absorbable_projector(_paired(nominal, modes).sensitivities * nominal.b / sigma[:, None])
+        maps = _maps(physics, model, nominal, modes, sigma, P)
+        region, mirrors = _region(model, maps)
+        located = [int(i) + 1 for i in np.flatnonzero(np.abs(nominal.residual_sigma) > 2.0)]
+
+        coarse_nominal = coarse.solve(nominal.b, int(modes.max()) + 1 + RITZ_EXTRA_MODES)
+        level = {"coarse": coarse, "scale": nominal.eigenvalues / coarse_nominal.eigenvalues[modes],
+                 "margin": refine_margin, "workers": workers,
+                 "coarse_modes": coarse_nominal.vectors, "rough": rough}  # fmt: skip
+        ritz = model.solve(nominal.b, int(modes.max()) + 1 + RITZ_EXTRA_MODES)
+        level["modes"] = ritz.vectors
+        scans = _scans(physics, model, nominal, modes, Y, sigma, P, ritz, workers)
+        ranked = rank(
+            model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics, say, stages
         )
-        if anew is not None:
-            anew = replace(anew, fit=replace(anew.fit, physics=best.fit.physics))
-            stages = stages.then("anew", fit_digest(anew.fit))
-            say(
-                f"{best.name}: refit rejected (p = {refit_p:.2g}); from its constants searched "
-                f"again: chi2 = {anew.fit.chi2:.1f}, evidence gain {anew.log_evidence_gain:+.1f}"
+        better = stages.run(
+            "nominal refit from the candidates' constants",
+            stages.key("improved", [fit_digest(c.fit) for c in ranked]),
+            lambda: improved_nominal(nominal_problem, nominal, ranked, level),
+        )
+        if better is not None:
+            stages = stages.then("improved", fit_digest(better))
+            say(f"nominal fit improved from a candidate's constants: chi2 = {better.chi2:.1f}")
+            shift = better.log_evidence - nominal.log_evidence
+            ranked = [replace(c, log_evidence_gain=c.log_evidence_gain - shift) for c in ranked]
+            earlier = ((nominal.b, nominal.chi2 + nominal.chi2_prior), *nominal.alternatives)
+            nominal = replace(better, alternatives=earlier)  # the other basins stay known
+            dof = max(m - nominal.effective_parameters, 1.0)
+            p_value = float(chi2_dist.sf(nominal.chi2, dof))
+            mode_p = predictive_p_values(nominal, nominal_problem)
+            loose = unidentified(nominal, V_b, unidentified_ratio, basin_margin)
+        best = next((c for c in ranked if c.fit.refined), None)
+        warranted = best is not None and best.log_evidence_gain > evidence_threshold
+        refit_dof, refit_p = np.nan, np.nan
+        if warranted:
+            refit_dof, refit_p = _refit_test(best.fit, m)
+        if warranted and refit_p < alpha:  # rejected: its constants searched again, globally
+            anew = stages.run(
+                f"{best.name}: constants searched again",
+                stages.key("anew", fit_digest(best.fit)),
+                lambda: searched_anew(model, level, Y, sigma, mu_b, V_b, modes, nominal, best),
             )
-            ranked = sorted([anew if c is best else c for c in ranked],
-                            key=lambda r: -r.log_evidence_gain)  # fmt: skip
-            best = anew
-            refit_dof, refit_p = _refit_test(best.fit, m)
-    if warranted and refit_p < alpha and pairs:  # two effects at once
-        two = pairs_with(best, physics, ranked, model, scans)
-        two = rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, two, say, stages)
-        top = next((c for c in two if c.fit.refined), None)
-        if top is not None and top.log_evidence_gain > best.log_evidence_gain + evidence_threshold:
-            best = top
-            refit_dof, refit_p = _refit_test(best.fit, m)
-        ranked = sorted(ranked + two, key=lambda r: -r.log_evidence_gain)
-    if warranted:
-        loose = unidentified(best.fit, V_b, unidentified_ratio)
-    probabilities = model_probabilities([(c.name, c.log_evidence_gain) for c in ranked],
-                                        prior_odds)  # fmt: skip
-    rival, gap = runner_up(best, ranked, probabilities) if warranted else (None, np.inf)
-    outcome, chosen = verdict(p_value, warranted, refit_p, alpha, best, gap, ambiguity_margin)
-    separation = None
-    if outcome == "ambiguous":
-        separation = separate(
-            model, best, rival, modes, float(np.median(sigma_Hz / measured.frequency_Hz))
-        )
-        notes.append(
-            f"{best.name} and {rival.name} fit about equally well (posterior probabilities "
-            f"{probabilities[best.name]:.2f} and {probabilities[rival.name]:.2f}): "
-            + separation.text()
-        )
-    else:
-        rival = None
-    if outcome == "consistent":
-        region, mirrors = None, []
-    if outcome == "unexplained":
-        notes.append(
-            "the recordings disagree with the model beyond their deviations and no candidate "
-            "physics explains the mismatch"
-        )
-    basins = basins_note(nominal, basin_margin)
-    if basins is not None and chosen is None:
-        notes.append(basins)
-    if outcome != "consistent" and region is not None and mirrors:
-        notes.append("the plate's symmetry makes the mirror images of the located region fit "
-                     "equally well from frequencies alone")  # fmt: skip
-    notes += _unsettled_notes(nominal, [c for c in (chosen, rival) if c is not None])
-    say(f"verdict: {outcome}" + (f" ({chosen.name})" if chosen else "")
-        + (f" or {rival.name}" if rival else ""))  # fmt: skip
-    return Diagnosis(
-        outcome, nominal, dof, p_value, mode_p, located, kinds, maps, region, mirrors, ranked,
-        chosen, refit_dof, refit_p, loose, sigma_Hz, err, measured.frequency_Hz, notes, scans,
-        probabilities, rival, separation,
-    )  # fmt: skip
+            if anew is not None:
+                anew = replace(anew, fit=replace(anew.fit, physics=best.fit.physics))
+                stages = stages.then("anew", fit_digest(anew.fit))
+                say(
+                    f"{best.name}: refit rejected (p = {refit_p:.2g}); from its constants "
+                    f"searched again: chi2 = {anew.fit.chi2:.1f}, evidence gain "
+                    f"{anew.log_evidence_gain:+.1f}"
+                )
+                ranked = sorted([anew if c is best else c for c in ranked],
+                                key=lambda r: -r.log_evidence_gain)  # fmt: skip
+                best = anew
+                refit_dof, refit_p = _refit_test(best.fit, m)
+        if warranted and refit_p < alpha and pairs:  # two effects at once
+            two = pairs_with(best, physics, ranked, model, scans)
+            two = rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, two, say, stages)
+            top = next((c for c in two if c.fit.refined), None)
+            if (
+                top is not None
+                and top.log_evidence_gain > best.log_evidence_gain + evidence_threshold
+            ):
+                best = top
+                refit_dof, refit_p = _refit_test(best.fit, m)
+            ranked = sorted(ranked + two, key=lambda r: -r.log_evidence_gain)
+        if warranted:
+            loose = unidentified(best.fit, V_b, unidentified_ratio)
+        probabilities = model_probabilities([(c.name, c.log_evidence_gain) for c in ranked],
+                                            prior_odds)  # fmt: skip
+        rival, gap = runner_up(best, ranked, probabilities) if warranted else (None, np.inf)
+        outcome, chosen = verdict(p_value, warranted, refit_p, alpha, best, gap, ambiguity_margin)
+        separation = None
+        if outcome == "ambiguous":
+            separation = separate(
+                model, best, rival, modes, float(np.median(sigma_Hz / measured.frequency_Hz))
+            )
+            notes.append(
+                f"{best.name} and {rival.name} fit about equally well (posterior probabilities "
+                f"{probabilities[best.name]:.2f} and {probabilities[rival.name]:.2f}): "
+                + separation.text()
+            )
+        else:
+            rival = None
+        if outcome == "consistent":
+            region, mirrors = None, []
+        if outcome == "unexplained":
+            notes.append(
+                "the recordings disagree with the model beyond their deviations and no candidate "
+                "physics explains the mismatch"
+            )
+        basins = basins_note(nominal, basin_margin)
+        if basins is not None and chosen is None:
+            notes.append(basins)
+        if outcome != "consistent" and region is not None and mirrors:
+            notes.append("the plate's symmetry makes the mirror images of the located region fit "
+                         "equally well from frequencies alone")  # fmt: skip
+        notes += _unsettled_notes(nominal, [c for c in (chosen, rival) if c is not None])
+        say(f"verdict: {outcome}" + (f" ({chosen.name})" if chosen else "")
+            + (f" or {rival.name}" if rival else ""))  # fmt: skip
+        return Diagnosis(
+            outcome, nominal, dof, p_value, mode_p, located, kinds, maps, region, mirrors, ranked,
+            chosen, refit_dof, refit_p, loose, sigma_Hz, err, measured.frequency_Hz, notes, scans,
+            probabilities, rival, separation,
+        )  # fmt: skip
+
+    # a second pass starts from the same random state (whether or not the first came from
+    # the store, which leaves the state unused)
+    again = copy.deepcopy(rng)
+    first = one_pass(pairing, rng)
+    if not reassign or pairing.how != "likelihood" or pairing.assignment is None:
+        # paired by order or index as asked, or by shapes (made again by frequency alone
+        # it would ignore them): the assignment is kept
+        return first
+    return _made_again(first, lambda p: one_pass(p, again), model, pairing, case.measured,
+                       (mu_b, V_b), say)  # fmt: skip
+
+
+def _verdict_fit(d):
+    """The fit the verdict rests on, and its label."""
+    if d.chosen is not None:
+        return d.chosen.fit, d.chosen.name
+    return d.nominal, "the nominal fit"
+
+
+def _made_again(first, one_pass, model, pairing, measured, prior, say):
+    """The assignment made again at the verdict's fit; further passes where it differs.
+
+    See :mod:`.reassign`: a pass whose verdict fit prefers another assignment is followed by
+    one with it, up to :data:`MAX_PASSES` passes (a fit a wrong assignment pulled away
+    may need two to let go of it) or until an assignment comes back; the pass whose verdict
+    fit scores higher on ``ln p(all peaks | model, a)`` is kept, and a note says what was done.
+    """
+    f, s = np.asarray(measured.frequency_Hz), np.asarray(measured.sigma_Hz)
+    current, used = first, reassign.full_modes(pairing, f.size)
+    passes = []  # (diagnosis, assignment used, score, what the check found)
+    while True:
+        fit_, label = _verdict_fit(current)
+        change, terms, best = reassign.check(model, fit_, label, used, f, s, prior)
+        passes.append((current, used, reassign.score(fit_, terms), change))
+        tried = [p[1] for p in passes]
+        if (not change.changed or len(passes) == MAX_PASSES
+                or any(np.array_equal(best.modes, t) for t in tried)):  # fmt: skip
+            break
+        say(f"assignment made again: {change.describe()}; diagnosing again with it")
+        current, used = one_pass(reassign.pairing_of(best, pairing.how)), best.modes
+    if len(passes) == 1:
+        note = (f"assignment made again at {label}'s constants: the most probable one is "
+                "the one used")  # fmt: skip
+        return replace(first, notes=[*first.notes, note], peak_modes=used)
+    k = int(np.argmax([p[2] for p in passes]))
+    kept, peaks = passes[k][0], passes[k][1]
+    story = "; ".join(f"pass {i + 1} ({p[0].verdict}): ln p(all peaks) {p[2]:.1f}"
+                      for i, p in enumerate(passes))  # fmt: skip
+    say(f"assignment: {story}; pass {k + 1} kept")
+    note = (f"assignment made again at the verdict's fit ({passes[0][3].describe()}) and "
+            f"diagnosed with it, {len(passes)} passes in all; {story} (ln p(all peaks | the "
+            f"verdict's model, assignment)); pass {k + 1} kept (the best of these "
+            "assignments, not a sum over all)")  # fmt: skip
+    return replace(kept, notes=[*kept.notes, note], peak_modes=peaks)
 
 
 def _refit_test(fit_, m):

@@ -473,4 +473,8 @@ def diagnosis_to_dict(d):
         "rival": _rival(d),
         "unidentified": d.unidentified,
         "notes": d.notes,
+        # the computed mode (1-based) of every measured peak, null where left out as
+        # spurious; present when the assignment was made again at the verdict's fit
+        "peak_modes": None if getattr(d, "peak_modes", None) is None
+        else [None if j < 0 else int(j) + 1 for j in d.peak_modes],
     }

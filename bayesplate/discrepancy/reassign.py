@@ -1,0 +1,192 @@
+"""Each model under its own best assignment of the same measured peaks.
+
+Without measured shapes (or with them), which computed mode explains which peak is settled
+once, by B under the nominal model (:func:`bayesplate.estimators.settle_pairing`). A plate
+with an effect the nominal model leaves out may order its modes differently: the model
+that explains the recordings may explain them under another assignment. So, after a pass,
+the assignment is made again (:func:`bayesplate.assignment.most_probable`) at the fit the
+verdict rests on; where it differs, diagnose runs a second pass with it, and the two passes are
+compared on one scale: the evidence of every measured peak, paired or spurious,
+
+``ln p(all peaks | model, a) = ln f(Y_paired | model)              (Laplace, the fits')``
+``    + n_paired ln(1 - p_s) + n_spurious (ln p_s - ln lambda_B)``
+``    + sum over the model's computed modes in the band [ln(1 - p_u) if observed, else ln p_u]``,
+
+the terms of :mod:`bayesplate.assignment`'s model with the pairs' Gaussian densities left to
+the Laplace evidence (in eigenvalues, as the fits' data are): a spurious peak is uniform over
+``[0, lambda_B]``, ``lambda_B`` the eigenvalue of the band's upper end. The pass whose
+verdict model scores higher is kept (the maximum over the two assignments, not a sum over
+all of them). Pure computation on fits and arrays; one full solve per fit checked.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..assignment import P_SPURIOUS, P_UNOBSERVED, most_probable
+from ..pairing import Pairing
+from ..quantities import eigenvalue_from_hz
+
+__all__ = [
+    "EXTRA_MODES",
+    "Reassignment",
+    "assignment_log_prior",
+    "check",
+    "fitted_assignment",
+    "full_modes",
+    "pairing_of",
+    "score",
+]
+
+#: Computed modes beyond the highest paired one that the assignment may use.
+EXTRA_MODES = 2
+
+
+@dataclass(frozen=True)
+class Reassignment:
+    """The assignment made again at a fit, and how it compares with the one used.
+
+    Attributes
+    ----------
+    label : str
+        Which fit (``"the nominal fit"``, a candidate's name).
+    used, best : numpy.ndarray of int, shape (m,)
+        0-based computed mode of every measured peak (-1: spurious): the assignment the pass
+        used, and the most probable one at the fit.
+    """
+
+    label: str
+    used: np.ndarray
+    best: np.ndarray
+
+    @property
+    def changed(self):
+        """Whether the fit's own best assignment differs from the one used."""
+        return not np.array_equal(self.used, self.best)
+
+    def describe(self):
+        """One sentence: the peaks whose assignment differs (1-based numbers)."""
+        moved = np.flatnonzero(self.used != self.best)
+        parts = [f"peak {i + 1}: {_name(self.used[i])} -> {_name(self.best[i])}" for i in moved]
+        return f"under {self.label}, " + ("; ".join(parts) if parts else "the same assignment")
+
+
+def _name(mode):
+    return "spurious" if mode < 0 else f"mode {mode + 1}"
+
+
+def full_modes(pairing, m):
+    """The computed mode of every measured peak, -1 where it is left out, shape (m,)."""
+    out = np.full(m, -1)
+    measured = np.arange(len(pairing.modes)) if pairing.measured is None else pairing.measured
+    out[measured] = pairing.modes
+    return out
+
+
+def pairing_of(assignment, how):
+    """The :class:`~bayesplate.pairing.Pairing` of an assignment (its spurious peaks left out)."""
+    paired = assignment.paired
+    measured = None if np.array_equal(paired, np.arange(assignment.modes.size)) else paired
+    return Pairing(assignment.modes[paired], how=how, measured=measured, assignment=assignment)
+
+
+def fitted_assignment(model, fit, measured_Hz, sigma_Hz, n_modes, prior, start=None):
+    """The most probable assignment under a fit's plate, and its computed frequencies (Hz).
+
+    :func:`bayesplate.assignment.most_probable` at the fit: the plate's eigenvalues are
+    linearised at the fit's constants, which are integrated out under the prior (so that a
+    fit that a wrong assignment pulled away does not hold the assignment where it is), the
+    fit's physics parameters held at their values.
+
+    Parameters
+    ----------
+    model : PlateModel
+        The nominal plate; the fit's physics, if any, is applied to it.
+    fit : JointFit
+    measured_Hz, sigma_Hz : numpy.ndarray, shape (m,)
+        Every measured peak (the spurious ones too) and its deviation.
+    n_modes : int
+        Computed modes to assign from.
+    prior : tuple of numpy.ndarray
+        ``(mu_b, V_b)``, Pa and Pa^2.
+    start : numpy.ndarray of int, shape (m,), optional
+        The assignment in use, searched from as well.
+
+    Returns
+    -------
+    assignment : bayesplate.assignment.Assignment
+    computed_Hz : numpy.ndarray, shape (n_modes,)
+    """
+    plate = model if fit.physics is None else fit.physics.apply(model, fit.theta)
+    modal = plate.solve(fit.b, n_modes)
+    mu_b, V_b = prior
+    found = most_probable(measured_Hz, sigma_Hz, modal.eigenvalues, modal.sensitivities, fit.b,
+                          mu_b, V_b, start=start)  # fmt: skip
+    return found, modal.frequency_Hz
+
+
+def assignment_log_prior(modes, computed_Hz, band_Hz, p_unobserved=P_UNOBSERVED,
+                         p_spurious=P_SPURIOUS, measured_Hz=None):  # fmt: skip
+    """The assignment's terms of ``ln p(all peaks | model, a)`` (module docstring), nats.
+
+    Parameters
+    ----------
+    modes : numpy.ndarray of int, shape (m,)
+        0-based computed mode of every measured peak; -1 spurious.
+    computed_Hz : numpy.ndarray, shape (n,)
+        The model's computed frequencies at its fit, ascending, Hz.
+    band_Hz : float
+        Upper end of a spurious peak's range (:func:`bayesplate.assignment.spurious_band_Hz`).
+    p_unobserved, p_spurious : float
+    measured_Hz : numpy.ndarray, shape (m,)
+        The measured frequencies: a computed mode is in the band up to the highest of them.
+
+    Returns
+    -------
+    float
+    """
+    modes = np.asarray(modes)
+    computed_Hz = np.asarray(computed_Hz, dtype=float)
+    in_band = np.flatnonzero(computed_Hz <= np.max(measured_Hz))
+    paired = modes[modes >= 0]
+    n_spurious = int(np.count_nonzero(modes < 0))
+    observed = np.isin(in_band, paired)
+    log_band = np.log(eigenvalue_from_hz(band_Hz))
+    return float(
+        paired.size * np.log1p(-p_spurious)
+        + n_spurious * (np.log(p_spurious) - log_band)
+        + np.count_nonzero(observed) * np.log1p(-p_unobserved)
+        + np.count_nonzero(~observed) * np.log(p_unobserved)
+    )
+
+
+def check(model, fit, label, used, measured_Hz, sigma_Hz, prior):
+    """The assignment at `fit` against the one `used`, and the fit's scale term.
+
+    Parameters
+    ----------
+    model, fit, measured_Hz, sigma_Hz, prior
+        As for :func:`fitted_assignment`.
+    label : str
+    used : numpy.ndarray of int, shape (m,)
+        The assignment in use (:func:`full_modes`).
+
+    Returns
+    -------
+    Reassignment
+    log_prior : float
+        :func:`assignment_log_prior` of `used` under this fit's plate.
+    assignment : bayesplate.assignment.Assignment
+        The fit's own most probable one.
+    """
+    n = int(max(used.max(), len(used) - 1)) + 1 + EXTRA_MODES
+    best, computed = fitted_assignment(model, fit, measured_Hz, sigma_Hz, n, prior, start=used)
+    prior_terms = assignment_log_prior(used, computed, best.band_Hz, measured_Hz=measured_Hz)
+    return Reassignment(label, used, best.modes), prior_terms, best
+
+
+def score(fit, log_prior):
+    """``ln p(all peaks | model, a)``: the fit's Laplace evidence plus the assignment's terms."""
+    return float(fit.log_evidence + log_prior)
