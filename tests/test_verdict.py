@@ -241,3 +241,23 @@ def test_two_concealed_effects_are_named_as_a_pair(model, b):
               [15.0, 150.0, 70.0, -0.15]]  # fmt: skip
     near = min(images, key=lambda t: np.hypot(*(got[1:3] - np.asarray(t)[1:3])))
     assert np.all(np.abs(got - near) < 3 * sd + np.array([0.5, 3.0, 3.0, 0.01]))
+
+
+def test_mirror_images_count_as_posterior_modes():
+    # two equal Gaussian modes at +-mu (unit deviations): their integral against the Laplace
+    # approximation at the highest point (its height and curvature), computed numerically
+    from bayesplate.discrepancy.probabilities import images_log_weight
+
+    assert images_log_weight(np.array([3.0]), np.eye(1), []) == 0.0
+    far = [np.array([300.0]), np.array([-300.0])]
+    assert images_log_weight(np.array([0.0]), np.eye(1), far) == pytest.approx(np.log(3))
+    x = np.linspace(-20.0, 20.0, 200001)
+    for mu in (0.25, 0.5, 1.5, 2.0, 3.0, 6.0):
+        both = np.exp(-0.5 * (x - mu) ** 2) + np.exp(-0.5 * (x + mu) ** 2)
+        i, log_both = int(np.argmax(both)), np.log(both)
+        curvature = -(log_both[i + 1] - 2 * log_both[i] + log_both[i - 1]) / (x[1] - x[0]) ** 2
+        laplace = both[i] * np.sqrt(2 * np.pi / curvature)
+        exact = np.log(np.trapezoid(both, x) / laplace)
+        # the fit sits at the highest point; its image is the mirror of it
+        weight = images_log_weight(np.array([x[i]]), np.eye(1) / curvature, [np.array([-x[i]])])
+        assert weight == pytest.approx(exact, abs=0.03), mu

@@ -459,10 +459,10 @@ def diagnose(
 
 
 def _verdict_fit(d):
-    """The fit the verdict rests on, and its label."""
+    """The fit the verdict rests on, its label and its log-evidence (mirror images counted)."""
     if d.chosen is not None:
-        return d.chosen.fit, d.chosen.name
-    return d.nominal, "the nominal fit"
+        return d.chosen.fit, d.chosen.name, d.nominal.log_evidence + d.chosen.log_evidence_gain
+    return d.nominal, "the nominal fit", d.nominal.log_evidence
 
 
 def _made_again(first, one_pass, model, pairing, measured, prior, say):
@@ -477,9 +477,9 @@ def _made_again(first, one_pass, model, pairing, measured, prior, say):
     current, used = first, reassign.full_modes(pairing, f.size)
     passes = []  # (diagnosis, assignment used, score, what the check found)
     while True:
-        fit_, label = _verdict_fit(current)
+        fit_, label, log_evidence = _verdict_fit(current)
         change, terms, best = reassign.check(model, fit_, label, used, f, s, prior)
-        passes.append((current, used, reassign.score(fit_, terms), change))
+        passes.append((current, used, log_evidence + terms, change))
         tried = [p[1] for p in passes]
         if (not change.changed or len(passes) == MAX_PASSES
                 or any(np.array_equal(best.modes, t) for t in tried)):  # fmt: skip

@@ -19,6 +19,11 @@ are keyed by candidate name. (A pair of effects, :mod:`.pair`, is a candidate of
 named ``first+second``.)
 
 Prior odds are equal (odds 1 for every candidate against the nominal model) unless given.
+
+Mirror images. A candidate's gain counts every posterior mode its mirror images make
+(:func:`images_log_weight`), since the Laplace evidence at one fit counts one: without it a
+located candidate on a symmetric plate lost up to ``ln 4`` (1.4 nats) against one without
+images (a point support against a foundation).
 """
 
 from __future__ import annotations
@@ -26,7 +31,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.special import logsumexp
 
-__all__ = ["NOMINAL", "model_probabilities"]
+__all__ = ["NOMINAL", "images_log_weight", "model_probabilities"]
 
 #: Key of "nothing left out" (the nominal model) among the probabilities.
 NOMINAL = "nominal"
@@ -78,3 +83,41 @@ def model_probabilities(results, prior_odds=None, nominal=0.0):
         by_name[n] = by_name.get(n, 0.0) + float(value)
     order = sorted(by_name, key=lambda n: -by_name[n])  # sorted() is stable: ties keep order
     return {NOMINAL: float(p[0]), **{n: by_name[n] for n in order}}
+
+
+def images_log_weight(theta, covariance, images):
+    """``ln`` of the posterior modes a fit's mirror images add to its Laplace evidence.
+
+    A located effect on a symmetric plate (a mass at ``(x, y)`` or at ``(a - x, y)``), a
+    taper of either sign, a misalignment of either sign: the frequencies and the prior are
+    the same at every mirror image, so the posterior has a mode at each, and the evidence is
+    their sum, where the Laplace approximation at one fit counts one. An image far from the
+    fit (many posterior deviations) adds one whole mode; one on top of it (a point on a line
+    of symmetry, a taper of size zero) is the same mode and adds nothing. Between, each image
+    adds ``1 - exp(-d^2 / 4)``, ``d`` its Mahalanobis distance from the fit under the fit's
+    posterior covariance of the parameters (0.63 at 2 deviations, 0.98 at 4): a smooth
+    stand-in for two equal Gaussian modes, within 0.03 nats of their integral against the
+    Laplace approximation at the higher point, at every separation tried
+    (``tests/test_verdict.py``).
+
+    Parameters
+    ----------
+    theta : numpy.ndarray, shape (k,)
+        The fit's parameters.
+    covariance : numpy.ndarray, shape (k, k)
+        Their posterior (Laplace) covariance.
+    images : sequence of numpy.ndarray, shape (k,)
+        The mirror images of ``theta`` (:meth:`~.base.Physics.mirror_images`).
+
+    Returns
+    -------
+    float
+        ``ln(1 + sum_images (1 - exp(-d^2 / 4)))``, in [0, ln(1 + len(images))], nats.
+    """
+    theta = np.asarray(theta, dtype=float)
+    if not len(images) or theta.size == 0:
+        return 0.0
+    C = np.asarray(covariance, dtype=float)
+    steps = np.array([np.asarray(t, dtype=float) - theta for t in images])
+    d2 = np.einsum("ik,ik->i", steps, np.linalg.lstsq(C, steps.T, rcond=None)[0].T)
+    return float(np.log1p(np.sum(-np.expm1(-np.maximum(d2, 0.0) / 4.0))))

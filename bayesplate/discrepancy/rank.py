@@ -26,6 +26,7 @@ from .local import DISTINCT
 from .nominal import nominal_polisher
 from .pencil import candidate_pencil
 from .polish import polish_and_finish
+from .probabilities import images_log_weight
 from .store import fit_digest
 
 __all__ = ["CandidateResult", "improved_nominal", "rank", "searched_anew"]
@@ -286,8 +287,10 @@ def _result(physics, model, nominal, fitted):
     sds = physics.labelled(model, nominal.b, fitted.theta_sd)
     mirrors = []
     if fitted.refined:  # (a pair's images cost full solves: for the refined fits only)
-        mirrors = [physics.labelled(model, nominal.b, t)
-                   for t in physics.mirror_images(model, fitted.theta)]  # fmt: skip
+        images = physics.mirror_images(model, fitted.theta)
+        mirrors = [physics.labelled(model, nominal.b, t) for t in images]
+        # every image is a posterior mode of its own (probabilities.images_log_weight)
+        gain += images_log_weight(fitted.theta, fitted.covariance[6:, 6:], images)
     return CandidateResult(physics.name, fitted, gain, params, sds, mirrors)
 
 

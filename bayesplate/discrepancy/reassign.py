@@ -8,14 +8,14 @@ the assignment is made again (:func:`bayesplate.assignment.most_probable`) at th
 verdict rests on; where it differs, diagnose runs a second pass with it, and the two passes are
 compared on one scale: the evidence of every measured peak, paired or spurious,
 
-``ln p(all peaks | model, a) = ln f(Y_paired | model)              (Laplace, the fits')``
+``ln p(all peaks | model, a) = ln f(Y_paired | model)   (Laplace, the fits', images counted)``
 ``    + n_paired ln(1 - p_s) + n_spurious (ln p_s - ln lambda_B)``
 ``    + sum over the model's computed modes in the band [ln(1 - p_u) if observed, else ln p_u]``,
 
 the terms of :mod:`bayesplate.assignment`'s model with the pairs' Gaussian densities left to
 the Laplace evidence (in eigenvalues, as the fits' data are): a spurious peak is uniform over
 ``[0, lambda_B]``, ``lambda_B`` the eigenvalue of the band's upper end. The pass whose
-verdict model scores higher is kept (the maximum over the two assignments, not a sum over
+verdict model scores higher is kept (the maximum over the assignments tried, not a sum over
 all of them). Pure computation on fits and arrays; one full solve per fit checked.
 """
 
@@ -37,7 +37,6 @@ __all__ = [
     "fitted_assignment",
     "full_modes",
     "pairing_of",
-    "score",
 ]
 
 #: Computed modes beyond the highest paired one that the assignment may use.
@@ -185,8 +184,3 @@ def check(model, fit, label, used, measured_Hz, sigma_Hz, prior):
     best, computed = fitted_assignment(model, fit, measured_Hz, sigma_Hz, n, prior, start=used)
     prior_terms = assignment_log_prior(used, computed, best.band_Hz, measured_Hz=measured_Hz)
     return Reassignment(label, used, best.modes), prior_terms, best
-
-
-def score(fit, log_prior):
-    """``ln p(all peaks | model, a)``: the fit's Laplace evidence plus the assignment's terms."""
-    return float(fit.log_evidence + log_prior)
