@@ -91,6 +91,11 @@ N_CONSTANTS = 6  # the constants diagnose fits (its stiffness coefficients)
 #: Rows of these code versions are kept in the cache but not counted: diagnose has changed
 #: since in ways that change its answers (its label: why).
 RETIRED = {
+    "65fcabd": (
+        "made on 2026-11-26 by the code of 65fcabd: since then a candidate's evidence gain "
+        "counts the posterior modes its mirror images make (up to ln 4 for a located "
+        "candidate), and diagnose makes a likelihood assignment again at its verdict's fit"
+    ),
     **dict.fromkeys(
         ("1a9717d", "369bb3e"),
         (

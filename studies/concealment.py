@@ -54,6 +54,8 @@ RETIRED = {
     "settled on reduced models, the new candidates (cutout, point support) competing, and "
     "the foundation's and point support's priors on the Rayleigh bound of the lowest "
     "eigenvalue",
+    "65fcabd": "made on 2026-11-26 by the code of 65fcabd: since then a candidate's evidence "
+    "gain counts the posterior modes its mirror images make (up to ln 4 for a located one)",
 }
 
 
