@@ -12,10 +12,9 @@ import copy
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg
 import scipy.sparse as sp
 
-from . import laminate
+from . import laminate, plate_bounds
 from .fem.assembly import Assembler
 from .fem.eigen import lowest_modes
 from .fem.element import TSDTRectangle
@@ -282,39 +281,14 @@ class PlateModel:
         return -0.1 * (np.pi / span) ** 4 * min(D[0, 0], D[1, 1], D[2, 2]) / I0
 
     def lowest_eigenvalue_bound(self, b):
-        """Rayleigh-Ritz bound of the lowest elastic eigenvalue (rad^2/s^2), no solve.
+        """Rayleigh-Ritz bound of the lowest elastic eigenvalue, rad^2/s^2, no solve.
 
-        Kirchhoff trial shapes with exact integrals, curvatures ``kappa = (w_xx, w_yy,
-        2 w_xy)`` against the bending stiffness ``D* = D - B A^-1 B`` (in-plane strains
-        free to relax; ``D* = D`` for a symmetric layup), ``I0`` the mass per area:
-
-        - free plate: the least of a Ritz over the constant-curvature shapes
-          ``x^2 - a^2/12``, ``xy``, ``y^2 - b^2/12`` (centred; orthogonal to the rigid-body
-          motions; the twist alone gives ``576 D66 / (I0 a^2 b^2)``, the saddle the lowest
-          mode of a +-45 laminate) and the free-free beam's first shape along ``x`` and
-          along ``y``, ``(4.730 / a)^4 D*11 / I0`` and ``(4.730 / b)^4 D*22 / I0``;
-        - simply supported: ``w = sin(pi x / a) sin(pi y / b)``,
-          ``pi^4 (D11 / a^4 + 2 (D12 + 2 D66) / (a^2 b^2) + D22 / b^4) / I0``.
-
-        Shear deformation only lowers the true value, so the bound lies above it: 9-20 %
-        above the computed value on every bundled case at its prior mean (2026-11-26).
-        Candidate priors scale on it (:mod:`bayesplate.discrepancy`), where the estimate
-        behind :meth:`spectral_shift`, 5-38 times low there, would shrink them.
+        :func:`bayesplate.plate_bounds.lowest_eigenvalue_bound` of this plate.
         """
-        lam = self.laminate(b)
-        A, B, D = lam.Cf[0], lam.Cf[1], lam.Cf[2]
-        D = D - B @ np.linalg.solve(A, B)
-        I0 = laminate.inertias(self.density, self.ply_thickness)[0]
-        a, w = self.mesh.a, self.mesh.b
-        if self.boundary == "simply_supported":
-            terms = D[0, 0] / a**4 + 2.0 * (D[0, 1] + 2.0 * D[2, 2]) / (a * w) ** 2 + D[1, 1] / w**4
-            return np.pi**4 * terms / I0
-        curvatures = np.array([[2.0, 0.0, 0.0], [0.0, 0.0, 2.0], [0.0, 2.0, 0.0]])  # columns
-        stiffness = curvatures.T @ D @ curvatures  # per unit area
-        mass = I0 * np.diag([a**4 / 180.0, (a * w) ** 2 / 144.0, w**4 / 180.0])  # per unit area
-        quadratic = scipy.linalg.eigh(stiffness, mass, eigvals_only=True)[0]
-        beam = 4.730040745**4  # first root of cos(x) cosh(x) = 1, to the fourth
-        return min(quadratic, beam * D[0, 0] / (I0 * a**4), beam * D[1, 1] / (I0 * w**4))
+        return plate_bounds.lowest_eigenvalue_bound(
+            self.laminate(b), laminate.inertias(self.density, self.ply_thickness)[0],
+            self.mesh.a, self.mesh.b, self.boundary,
+        )  # fmt: skip
 
     def solve(self, b, n_modes=14, method="block"):
         """Lowest ``n_modes`` elastic modes and their sensitivities.

@@ -16,7 +16,9 @@ EDGE = ("io", "case", "importers", "plots", "report", "batch", "cli")
 NUMERICS = (
     "quantities",
     "laminate",
+    "parallel",
     "fem",
+    "plate_bounds",
     "model",
     "forward",
     "pairing",

@@ -45,18 +45,25 @@ from ..parallel import fork_map
 from ..posterior import observed_eigenvalues, prior_in_stiffness
 from ..quantities import hz_from_eigenvalue
 from . import candidates as all_candidates
-from . import reassign
-from .base import mirror_positions
 from .fit import JointFit, JointProblem
-from .locate import absorbable_projector, mode_kinds
+from .locate import absorbable_projector, best_region, mode_kinds
 from .nominal import N_STARTS, check_fast, fit_nominal, nominal_reduced, nominal_stage
 from .pair import pairs_with
 from .probabilities import model_probabilities
 from .rank import CandidateResult, improved_nominal, rank, searched_anew
+from .reassign import made_again
 from .scan import RitzBasis
 from .separate import Separation, separate
 from .store import Stages, digest, fit_digest, plate_digest
-from .verdict import basins_note, predictive_p_values, runner_up, unidentified, verdict
+from .verdict import (
+    basins_note,
+    predictive_p_values,
+    refit_test,
+    runner_up,
+    unidentified,
+    unsettled_notes,
+    verdict,
+)
 
 __all__ = [
     "CandidateResult",
@@ -87,8 +94,6 @@ DEFAULTS = {
 }
 """Default values of :func:`diagnose`'s keyword-only options (their single source)."""
 
-#: Passes of diagnose at most when the assignment is made again at each verdict's fit.
-MAX_PASSES = 3
 #: Elastic modes of the Ritz basis of the scans beyond the highest paired one.
 RITZ_EXTRA_MODES = 20
 
@@ -343,7 +348,7 @@ def diagnose(
         # what the constants can absorb, whitened: projected out of the maps and of the scans
         P = absorbable_projector(_paired(nominal, modes).sensitivities * nominal.b / sigma[:, None])
         maps = _maps(physics, model, nominal, modes, sigma, P)
-        region, mirrors = _region(model, maps)
+        region, mirrors = best_region(model, maps)
         located = [int(i) + 1 for i in np.flatnonzero(np.abs(nominal.residual_sigma) > 2.0)]
 
         coarse_nominal = coarse.solve(nominal.b, int(modes.max()) + 1 + RITZ_EXTRA_MODES)
@@ -376,7 +381,7 @@ def diagnose(
         warranted = best is not None and best.log_evidence_gain > evidence_threshold
         refit_dof, refit_p = np.nan, np.nan
         if warranted:
-            refit_dof, refit_p = _refit_test(best.fit, m)
+            refit_dof, refit_p = refit_test(best.fit, m)
         if warranted and refit_p < alpha:  # rejected: its constants searched again, globally
             anew = stages.run(
                 f"{best.name}: constants searched again",
@@ -394,7 +399,7 @@ def diagnose(
                 ranked = sorted([anew if c is best else c for c in ranked],
                                 key=lambda r: -r.log_evidence_gain)  # fmt: skip
                 best = anew
-                refit_dof, refit_p = _refit_test(best.fit, m)
+                refit_dof, refit_p = refit_test(best.fit, m)
         if warranted and refit_p < alpha and pairs:  # two effects at once
             two = pairs_with(best, physics, ranked, model, scans)
             two = rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, two, say, stages)
@@ -404,7 +409,7 @@ def diagnose(
                 and top.log_evidence_gain > best.log_evidence_gain + evidence_threshold
             ):
                 best = top
-                refit_dof, refit_p = _refit_test(best.fit, m)
+                refit_dof, refit_p = refit_test(best.fit, m)
             ranked = sorted(ranked + two, key=lambda r: -r.log_evidence_gain)
         if warranted:
             loose = unidentified(best.fit, V_b, unidentified_ratio)
@@ -437,7 +442,7 @@ def diagnose(
         if outcome != "consistent" and region is not None and mirrors:
             notes.append("the plate's symmetry makes the mirror images of the located region fit "
                          "equally well from frequencies alone")  # fmt: skip
-        notes += _unsettled_notes(nominal, [c for c in (chosen, rival) if c is not None])
+        notes += unsettled_notes(nominal, [c for c in (chosen, rival) if c is not None])
         say(f"verdict: {outcome}" + (f" ({chosen.name})" if chosen else "")
             + (f" or {rival.name}" if rival else ""))  # fmt: skip
         return Diagnosis(
@@ -454,72 +459,8 @@ def diagnose(
         # paired by order or index as asked, or by shapes (made again by frequency alone
         # it would ignore them): the assignment is kept
         return first
-    return _made_again(first, lambda p: one_pass(p, again), model, pairing, case.measured,
-                       (mu_b, V_b), say)  # fmt: skip
-
-
-def _verdict_fit(d):
-    """The fit the verdict rests on, its label and its log-evidence (mirror images counted)."""
-    if d.chosen is not None:
-        return d.chosen.fit, d.chosen.name, d.nominal.log_evidence + d.chosen.log_evidence_gain
-    return d.nominal, "the nominal fit", d.nominal.log_evidence
-
-
-def _made_again(first, one_pass, model, pairing, measured, prior, say):
-    """The assignment made again at the verdict's fit; further passes where it differs.
-
-    See :mod:`.reassign`: a pass whose verdict fit prefers another assignment is followed by
-    one with it, up to :data:`MAX_PASSES` passes (a fit a wrong assignment pulled away
-    may need two to let go of it) or until an assignment comes back; the pass whose verdict
-    fit scores higher on ``ln p(all peaks | model, a)`` is kept, and a note says what was done.
-    """
-    f, s = np.asarray(measured.frequency_Hz), np.asarray(measured.sigma_Hz)
-    current, used = first, reassign.full_modes(pairing, f.size)
-    passes = []  # (diagnosis, assignment used, score, what the check found)
-    while True:
-        fit_, label, log_evidence = _verdict_fit(current)
-        change, terms, best = reassign.check(model, fit_, label, used, f, s, prior)
-        passes.append((current, used, log_evidence + terms, change))
-        tried = [p[1] for p in passes]
-        if (not change.changed or len(passes) == MAX_PASSES
-                or any(np.array_equal(best.modes, t) for t in tried)):  # fmt: skip
-            break
-        say(f"assignment made again: {change.describe()}; diagnosing again with it")
-        current, used = one_pass(reassign.pairing_of(best, pairing.how)), best.modes
-    if len(passes) == 1:
-        note = (f"assignment made again at {label}'s constants: the most probable one is "
-                "the one used")  # fmt: skip
-        return replace(first, notes=[*first.notes, note], peak_modes=used)
-    k = int(np.argmax([p[2] for p in passes]))
-    kept, peaks = passes[k][0], passes[k][1]
-    story = "; ".join(f"pass {i + 1} ({p[0].verdict}): ln p(all peaks) {p[2]:.1f}"
-                      for i, p in enumerate(passes))  # fmt: skip
-    say(f"assignment: {story}; pass {k + 1} kept")
-    note = (f"assignment made again at the verdict's fit ({passes[0][3].describe()}) and "
-            f"diagnosed with it, {len(passes)} passes in all; {story} (ln p(all peaks | the "
-            f"verdict's model, assignment)); pass {k + 1} kept (the best of these "
-            "assignments, not a sum over all)")  # fmt: skip
-    return replace(kept, notes=[*kept.notes, note], peak_modes=peaks)
-
-
-def _refit_test(fit_, m):
-    """``(dof, p)``: the chi-square test of a candidate's refit on ``m`` frequencies."""
-    dof = max(m - fit_.effective_parameters, 1.0)
-    return dof, float(chi2_dist.sf(fit_.chi2, dof))
-
-
-def _unsettled_notes(nominal, named):
-    """A note for each fit the verdict rests on whose full-model check did not settle."""
-    notes = []
-    for label, fit_ in [("the nominal fit", nominal), *((c.name, c.fit) for c in named)]:
-        check = fit_.check
-        if check is not None and not check.settled:
-            notes.append(
-                f"{label}: the full model's objective {check.full_objective:.4g} could still "
-                f"fall by {check.decrement:.2g} (a Newton step) after {check.rounds} rounds on "
-                "reduced models; its numbers are those of the last round"
-            )
-    return notes
+    return made_again(first, lambda p: one_pass(p, again), model, pairing, case.measured,
+                      (mu_b, V_b), say)  # fmt: skip
 
 
 def _paired(fit_, modes):
@@ -539,18 +480,6 @@ def _maps(physics_list, model, nominal, modes, sigma, P):
         if location is not None:
             maps[physics.name] = location
     return maps
-
-
-def _region(model, maps):
-    """The best located place over all maps, with its mirror images."""
-    best = None
-    for m in maps.values():
-        i = m.best()
-        if i is not None and (best is None or m.chi2_drop[i] > best[0]):
-            best = (m.chi2_drop[i], tuple(float(v) for v in m.points_mm[i]))
-    if best is None:
-        return None, []
-    return best[1], [tuple(float(v) for v in p) for p in mirror_positions(model, *best[1])]
 
 
 def _scans(physics_list, model, nominal, modes, Y, sigma, P, ritz, workers=1):

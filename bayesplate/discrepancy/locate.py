@@ -15,9 +15,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .base import mirror_positions
+
 __all__ = [
     "LocationMap",
     "absorbable_projector",
+    "best_region",
     "explained_chi2",
     "effect_map",
     "mode_kinds",
@@ -158,3 +161,15 @@ def effect_map(derivatives, sigma_lambda, residual_whitened, projector, points_m
     effects = derivatives / sigma_lambda[:, None]
     drop, amp = explained_chi2(residual_whitened, effects, projector)
     return LocationMap(points_mm, drop, amp, amp > 0, shape)
+
+
+def best_region(model, maps):
+    """The best located place over all maps (mm), with its mirror images; ``(None, [])``."""
+    best = None
+    for m in maps.values():
+        i = m.best()
+        if i is not None and (best is None or m.chi2_drop[i] > best[0]):
+            best = (m.chi2_drop[i], tuple(float(v) for v in m.points_mm[i]))
+    if best is None:
+        return None, []
+    return best[1], [tuple(float(v) for v in p) for p in mirror_positions(model, *best[1])]

@@ -16,12 +16,13 @@ the terms of :mod:`bayesplate.assignment`'s model with the pairs' Gaussian densi
 the Laplace evidence (in eigenvalues, as the fits' data are): a spurious peak is uniform over
 ``[0, lambda_B]``, ``lambda_B`` the eigenvalue of the band's upper end. The pass whose
 verdict model scores higher is kept (the maximum over the assignments tried, not a sum over
-all of them). Pure computation on fits and arrays; one full solve per fit checked.
+all of them). Pure computation on fits and arrays; one full solve per fit checked; the
+passes themselves are diagnose's (:func:`made_again` is handed them).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -31,16 +32,21 @@ from ..quantities import eigenvalue_from_hz
 
 __all__ = [
     "EXTRA_MODES",
+    "MAX_PASSES",
     "Reassignment",
     "assignment_log_prior",
     "check",
     "fitted_assignment",
     "full_modes",
+    "made_again",
     "pairing_of",
+    "verdict_fit",
 ]
 
 #: Computed modes beyond the highest paired one that the assignment may use.
 EXTRA_MODES = 2
+#: Passes of diagnose at most when the assignment is made again at each verdict's fit.
+MAX_PASSES = 3
 
 
 @dataclass(frozen=True)
@@ -184,3 +190,67 @@ def check(model, fit, label, used, measured_Hz, sigma_Hz, prior):
     best, computed = fitted_assignment(model, fit, measured_Hz, sigma_Hz, n, prior, start=used)
     prior_terms = assignment_log_prior(used, computed, best.band_Hz, measured_Hz=measured_Hz)
     return Reassignment(label, used, best.modes), prior_terms, best
+
+
+def verdict_fit(d):
+    """The fit the verdict rests on, its label and its log-evidence (mirror images counted)."""
+    if d.chosen is not None:
+        return d.chosen.fit, d.chosen.name, d.nominal.log_evidence + d.chosen.log_evidence_gain
+    return d.nominal, "the nominal fit", d.nominal.log_evidence
+
+
+def made_again(first, one_pass, model, pairing, measured, prior, say):
+    """The assignment made again at the verdict's fit; further passes where it differs.
+
+    A pass whose verdict fit prefers another assignment is followed by one with it, up to
+    :data:`MAX_PASSES` passes (a fit a wrong assignment pulled away may need two to let go
+    of it) or until an assignment comes back; the pass whose verdict fit scores higher on
+    ``ln p(all peaks | model, a)`` is kept, and a note says what was done.
+
+    Parameters
+    ----------
+    first : Diagnosis
+        The pass with the assignment settled at the start.
+    one_pass : callable
+        ``one_pass(pairing) -> Diagnosis``: diagnose again with another assignment.
+    model : PlateModel
+    pairing : bayesplate.pairing.Pairing
+        The settled assignment (``how == "likelihood"``).
+    measured : Measurement
+        Every measured peak and its deviation (Hz).
+    prior : tuple of numpy.ndarray
+        ``(mu_b, V_b)``.
+    say : callable
+
+    Returns
+    -------
+    Diagnosis
+        The pass kept, with a note and its ``peak_modes``.
+    """
+    f, s = np.asarray(measured.frequency_Hz), np.asarray(measured.sigma_Hz)
+    current, used = first, full_modes(pairing, f.size)
+    passes = []  # (diagnosis, assignment used, score, what the check found)
+    while True:
+        fit_, label, log_evidence = verdict_fit(current)
+        change, terms, best = check(model, fit_, label, used, f, s, prior)
+        passes.append((current, used, log_evidence + terms, change))
+        tried = [p[1] for p in passes]
+        if (not change.changed or len(passes) == MAX_PASSES
+                or any(np.array_equal(best.modes, t) for t in tried)):  # fmt: skip
+            break
+        say(f"assignment made again: {change.describe()}; diagnosing again with it")
+        current, used = one_pass(pairing_of(best, pairing.how)), best.modes
+    if len(passes) == 1:
+        note = (f"assignment made again at {label}'s constants: the most probable one is "
+                "the one used")  # fmt: skip
+        return replace(first, notes=[*first.notes, note], peak_modes=used)
+    k = int(np.argmax([p[2] for p in passes]))
+    kept, peaks = passes[k][0], passes[k][1]
+    story = "; ".join(f"pass {i + 1} ({p[0].verdict}): ln p(all peaks) {p[2]:.1f}"
+                      for i, p in enumerate(passes))  # fmt: skip
+    say(f"assignment: {story}; pass {k + 1} kept")
+    note = (f"assignment made again at the verdict's fit ({passes[0][3].describe()}) and "
+            f"diagnosed with it, {len(passes)} passes in all; {story} (ln p(all peaks | the "
+            f"verdict's model, assignment)); pass {k + 1} kept (the best of these "
+            "assignments, not a sum over all)")  # fmt: skip
+    return replace(kept, notes=[*kept.notes, note], peak_modes=peaks)

@@ -8,6 +8,7 @@ verdicts. Pure computation on :class:`.fit.JointFit` results.
 from __future__ import annotations
 
 import numpy as np
+from scipy.stats import chi2 as chi2_dist
 from scipy.stats import norm
 
 from .. import laminate
@@ -16,9 +17,11 @@ from ..quantities import ENGINEERING_NAMES, engineering_covariance
 __all__ = [
     "basins_note",
     "predictive_p_values",
+    "refit_test",
     "rival_optima",
     "runner_up",
     "unidentified",
+    "unsettled_notes",
     "verdict",
 ]
 
@@ -167,3 +170,23 @@ def basins_note(fit_, margin):
 def _case_units(name, e):
     i = ENGINEERING_NAMES.index(name)
     return f"{e[i]:.3g}" if name == "nu12" else f"{1e-9 * e[i]:.3g} GPa"
+
+
+def refit_test(fit_, m):
+    """``(dof, p)``: the chi-square test of a candidate's refit on ``m`` frequencies."""
+    dof = max(m - fit_.effective_parameters, 1.0)
+    return dof, float(chi2_dist.sf(fit_.chi2, dof))
+
+
+def unsettled_notes(nominal, named):
+    """A note for each fit the verdict rests on whose full-model check did not settle."""
+    notes = []
+    for label, fit_ in [("the nominal fit", nominal), *((c.name, c.fit) for c in named)]:
+        check = fit_.check
+        if check is not None and not check.settled:
+            notes.append(
+                f"{label}: the full model's objective {check.full_objective:.4g} could still "
+                f"fall by {check.decrement:.2g} (a Newton step) after {check.rounds} rounds on "
+                "reduced models; its numbers are those of the last round"
+            )
+    return notes
