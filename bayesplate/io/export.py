@@ -10,6 +10,7 @@
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import pathlib
@@ -28,6 +29,7 @@ __all__ = [
     "diagnosis_to_dict",
     "error_scale_to_dict",
     "estimate_to_dict",
+    "figure_png",
     "input_certificate_to_dict",
     "input_posterior_to_dict",
     "jsonable",
@@ -65,6 +67,13 @@ def atomic_write_text(path, text):
 def save_figure(fig, path, dpi=120):
     """Write a matplotlib figure as PNG whole or not at all."""
     atomic_write(path, lambda h: fig.savefig(h, format="png", dpi=dpi, bbox_inches="tight"), "wb")
+
+
+def figure_png(fig, dpi=120):
+    """A matplotlib figure rendered as PNG bytes, as :func:`save_figure` writes it."""
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=dpi, bbox_inches="tight")
+    return buffer.getvalue()
 
 
 def write_netcdf(idata, path):

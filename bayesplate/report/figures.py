@@ -16,7 +16,7 @@ from ..model import ModalResult
 from ..quantities import ENGINEERING_NAMES, ENGINEERING_UNITS, to_case_units
 from .data import ESTIMATORS, _estimate_for_modes
 
-__all__ = ["report_figures"]
+__all__ = ["figure_groups", "report_figures"]
 
 _SHAPE_GRID = (81, 41)  # points along the long and short side (interpolation is per point)
 _SHORT_KINDS = {"bending along x": "bend x", "bending along y": "bend y"}
@@ -24,31 +24,57 @@ _SHORT_KINDS = {"bending along x": "bend x", "bending along y": "bend y"}
 
 def report_figures(data):
     """The figures of a report: ``{name: matplotlib Figure}``, in the order shown."""
-    from .. import plots
+    figs = {}
+    for group in figure_groups(data):
+        figs.update(group())
+    return figs
 
-    r, figs = data.results, {}
+
+def figure_groups(data):
+    """The report's figures in independent groups, in the order shown.
+
+    Returns
+    -------
+    list of callable
+        Each ``group() -> {name: matplotlib Figure}``; they share nothing, so they may be
+        drawn in separate processes (:func:`bayesplate.report.writer.write_report`).
+    """
+    from .. import plots  # imported here, before any fork: the workers inherit it
+
+    r = data.results
+    groups = [lambda: {**_residuals_figure(data, plots), **_modes_figures(data, plots)}]
+    if "sample" in r:
+        groups.append(lambda: _sample_figures(r["sample"], plots))
+    if "diagnose" in r:
+
+        def diagnosis():
+            view = _diagnosis_view(r["diagnose"])
+            found = plots.diagnosis_figures(data.plate_model(), view)
+            return {f"diagnose_{name}": fig for name, fig in found.items()}
+
+        groups.append(diagnosis)
+    return groups
+
+
+def _residuals_figure(data, plots):
+    """The measured frequencies' residuals at each estimate that has them all."""
+    r = data.results
     kept = data.pairing().kept(data.case.measured.size)
     series = {
         m: r[m]["frequency_Hz"]
         for m in ESTIMATORS
         if m in r and np.all(np.isfinite(r[m]["frequency_Hz"]))
     }
-    if series:
-        figs["residuals"] = plots.estimate_residuals(
-            data.case.measured.frequency_Hz[kept],
-            data.case.measured.sigma_Hz[kept],
-            series,
-            labels=[str(i + 1) for i in kept],
-            title="residuals at each estimate",
-        )
-    figs.update(_modes_figures(data, plots))
-    if "sample" in r:
-        figs.update(_sample_figures(r["sample"], plots))
-    if "diagnose" in r:
-        view = _diagnosis_view(r["diagnose"])
-        for name, fig in plots.diagnosis_figures(data.plate_model(), view).items():
-            figs[f"diagnose_{name}"] = fig
-    return figs
+    if not series:
+        return {}
+    fig = plots.estimate_residuals(
+        data.case.measured.frequency_Hz[kept],
+        data.case.measured.sigma_Hz[kept],
+        series,
+        labels=[str(i + 1) for i in kept],
+        title="residuals at each estimate",
+    )
+    return {"residuals": fig}
 
 
 def _modes_figures(data, plots):

@@ -8,8 +8,9 @@ from __future__ import annotations
 
 import pathlib
 
-from ..io import atomic_write_text, save_figure
-from .figures import report_figures
+from ..io import atomic_write, atomic_write_text, figure_png
+from ..parallel import available_cores, fork_map
+from .figures import figure_groups
 from .markdown import render_markdown
 from .progress import _Progress
 from .runner import compute_report
@@ -20,7 +21,8 @@ __all__ = ["make_report", "write_report"]
 def write_report(data, out_dir, progress=None):
     """Draw the figures and write them and ``report.md`` into `out_dir`.
 
-    Each figure is written whole (temporary name, then rename); ``report.md`` last.
+    Each figure is written whole (temporary name, then rename); ``report.md`` last. The
+    figures are drawn and rendered in groups on forked workers (the same bytes as in turn).
 
     Returns
     -------
@@ -29,15 +31,31 @@ def write_report(data, out_dir, progress=None):
     """
     out = pathlib.Path(out_dir)
     say = progress or (lambda line: None)
+    groups = figure_groups(data)
+    # drawn and rendered on every core (forked workers, each a group); written here, in
+    # order, each whole: a failure anywhere writes no figure and no report.md
+    rendered = fork_map(_rendered, groups, min(available_cores(), len(groups)))
     figures = {}
-    for name, fig in report_figures(data).items():
-        save_figure(fig, out / f"{name}.png")
-        figures[name] = f"{name}.png"
+    for group in rendered:
+        for name, png in group.items():
+            atomic_write(out / f"{name}.png", lambda handle, png=png: handle.write(png), "wb")
+            figures[name] = f"{name}.png"
     say(f"{len(figures)} figures written")
     path = out / "report.md"
     text = render_markdown(data, figures)
     atomic_write_text(path, text)
     return path
+
+
+def _rendered(group):
+    """``{name: PNG bytes}`` of one group of figures, each closed once rendered."""
+    import matplotlib.pyplot as plt
+
+    out = {}
+    for name, fig in group().items():
+        out[name] = figure_png(fig)
+        plt.close(fig)
+    return out
 
 
 def make_report(case_file, out_dir, options=None, progress=None, label=None):
