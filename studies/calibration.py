@@ -91,6 +91,11 @@ N_CONSTANTS = 6  # the constants diagnose fits (its stiffness coefficients)
 #: Rows of these code versions are kept in the cache but not counted: diagnose has changed
 #: since in ways that change its answers (its label: why).
 RETIRED = {
+    "7d8ca6b": (
+        "made on 2026-11-26 by the code of 7d8ca6b: since then the rivals of a candidate "
+        "that may be named are refined when their coarse gain is within 10 nats (a point "
+        "support left on its coarse model was named a foundation)"
+    ),
     "65fcabd": (
         "made on 2026-11-26 by the code of 65fcabd: since then a candidate's evidence gain "
         "counts the posterior modes its mirror images make (up to ln 4 for a located "

@@ -56,6 +56,8 @@ RETIRED = {
     "eigenvalue",
     "65fcabd": "made on 2026-11-26 by the code of 65fcabd: since then a candidate's evidence "
     "gain counts the posterior modes its mirror images make (up to ln 4 for a located one)",
+    "7d8ca6b": "made on 2026-11-26 by the code of 7d8ca6b: since then the rivals of a "
+    "candidate that may be named are refined when their coarse gain is within 10 nats",
 }
 
 
@@ -121,7 +123,7 @@ def run_scenario(index, quick=False):
     return row
 
 
-def main(out_dir="reports", quick=False, workers=1, scheduler=None):
+def main(out_dir="reports", quick=False, workers=1, scheduler=None, first=()):
     """Run every scenario and write ``concealment.md``; returns the rows.
 
     The scenarios run as independent tasks (:func:`bayesplate.batch.map_tasks`): in this
@@ -129,11 +131,13 @@ def main(out_dir="reports", quick=False, workers=1, scheduler=None):
     Dask scheduler at `scheduler`; each row is the same wherever it ran.
 
     Finished rows are kept in ``out_dir/.cache/`` and reused when the study is run again.
+    ``first``: indices of scenarios to run before the others (the table keeps its order).
     """
     cache = Path(out_dir) / ".cache" / f"concealment{'-quick' if quick else ''}.json"
     done = json.loads(cache.read_text()) if cache.exists() else {}
     done = {k: row for k, row in done.items() if row.get("code") not in RETIRED}
     todo = [i for i in range(len(scenarios(quick))) if str(i) not in done]
+    todo = [i for i in first if i in todo] + [i for i in todo if i not in first]
     print(f"{len(todo)} scenarios to run ({len(done)} cached)", flush=True)
 
     def keep(position, row):  # each row stored as it comes: an interrupted run resumes
@@ -347,5 +351,7 @@ if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="two scenarios on a 12 x 6 mesh")
     parser.add_argument("--workers", type=int, default=2, help="processes (default 2)")
+    parser.add_argument("--first", default="", help="scenario indices to run first: 12,13,14")
     args = parser.parse_args()
-    main(quick=args.quick, workers=args.workers)
+    first = tuple(int(i) for i in args.first.split(",") if i.strip())
+    main(quick=args.quick, workers=args.workers, first=first)

@@ -261,3 +261,20 @@ def test_mirror_images_count_as_posterior_modes():
         # the fit sits at the highest point; its image is the mirror of it
         weight = images_log_weight(np.array([x[i]]), np.eye(1) / curvature, [np.array([-x[i]])])
         assert weight == pytest.approx(exact, abs=0.03), mu
+
+
+def test_a_named_candidates_rivals_left_on_the_coarse_model_are_refined():
+    # rank's phase 2b: once a refined candidate may be named (gain over the threshold), the
+    # unrefined ones within RIVAL_REACH of it are refined too; none when nothing may be named
+    from types import SimpleNamespace
+
+    from bayesplate.discrepancy.rank import RIVAL_REACH, _rivals
+
+    def result(gain, refined):
+        return SimpleNamespace(log_evidence_gain=gain, fit=SimpleNamespace(refined=refined))
+
+    results = [result(3.5, True), result(-0.7, False), result(3.5 - RIVAL_REACH - 0.1, False),
+               result(2.0, True)]  # fmt: skip
+    assert _rivals(results, threshold=3.0) == [1]
+    assert _rivals(results, threshold=4.0) == []  # the best may not be named: no rivals
+    assert _rivals([result(-0.7, False)], threshold=3.0) == []

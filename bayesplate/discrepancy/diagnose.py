@@ -353,7 +353,7 @@ def diagnose(
 
         coarse_nominal = coarse.solve(nominal.b, int(modes.max()) + 1 + RITZ_EXTRA_MODES)
         level = {"coarse": coarse, "scale": nominal.eigenvalues / coarse_nominal.eigenvalues[modes],
-                 "margin": refine_margin, "workers": workers,
+                 "margin": refine_margin, "workers": workers, "threshold": evidence_threshold,
                  "coarse_modes": coarse_nominal.vectors, "rough": rough}  # fmt: skip
         ritz = model.solve(nominal.b, int(modes.max()) + 1 + RITZ_EXTRA_MODES)
         level["modes"] = ritz.vectors
