@@ -56,6 +56,7 @@ __all__ = [
     "Assignment",
     "assign",
     "assign_with_shapes",
+    "assignment_terms",
     "best_assignment",
     "spurious_band_Hz",
     "most_probable",
@@ -329,14 +330,39 @@ def _log_evidence(modes, Y, V_Y, g, S, shift, V_b, in_band, p_unobserved, p_spur
     L = np.linalg.cholesky(C)
     z = np.linalg.solve(L, r)
     log_n = -0.5 * (z @ z) - np.sum(np.log(np.diag(L))) - 0.5 * paired.size * np.log(2 * np.pi)
-    n_spurious = modes.size - paired.size
-    seen_in_band = np.count_nonzero(in_band[j])
+    return float(log_n + assignment_terms(modes, in_band, log_B, p_unobserved, p_spurious))
+
+
+def assignment_terms(modes, in_band, log_B, p_unobserved=P_UNOBSERVED, p_spurious=P_SPURIOUS):
+    """The terms of ``log P(a)`` that are the assignment's own, the pairs' densities apart.
+
+    ``n_paired log(1 - p_s) + n_spurious (log p_s - log B)`` and, over the computed modes in
+    the band, ``log(1 - p_u)`` for each one observed and ``log p_u`` for each one not.
+
+    Parameters
+    ----------
+    modes : numpy.ndarray of int, shape (m,)
+        0-based computed mode of each peak; -1 spurious.
+    in_band : numpy.ndarray of bool, shape (n,)
+        Which computed modes lie in the band (up to the highest peak).
+    log_B : float
+        ``log`` of the range a spurious peak is uniform over, in the units of the pairs'
+        densities (Hz, or rad^2/s^2 for densities in eigenvalues).
+    p_unobserved, p_spurious : float
+
+    Returns
+    -------
+    float
+    """
+    modes = np.asarray(modes)
+    in_band = np.asarray(in_band, dtype=bool)
+    j = modes[modes >= 0]
+    seen = np.count_nonzero(in_band[j])
     return float(
-        log_n
-        + paired.size * np.log1p(-p_spurious)
-        + n_spurious * (np.log(p_spurious) - log_B)
-        + seen_in_band * np.log1p(-p_unobserved)
-        + (np.count_nonzero(in_band) - seen_in_band) * np.log(p_unobserved)
+        j.size * np.log1p(-p_spurious)
+        + (modes.size - j.size) * (np.log(p_spurious) - log_B)
+        + seen * np.log1p(-p_unobserved)
+        + (np.count_nonzero(in_band) - seen) * np.log(p_unobserved)
     )
 
 

@@ -298,6 +298,7 @@ def diagnose(
         from ..estimators import settle_pairing
 
         pairing, _ = settle_pairing(case, model, pairing, tol=1e-2)
+    coarse = coarse_model(model)  # the same in every pass
 
     def one_pass(pairing, rng):
         """Steps 1-5 with one assignment of the peaks to the computed modes."""
@@ -309,7 +310,6 @@ def diagnose(
                          "the declared deviations (s = 1), so a misfit the scale would absorb "
                          "shows here as a mismatch")  # fmt: skip
 
-        coarse = coarse_model(model)
         n_solve = int(modes.max()) + 1
         fine_lam = model.solve(mu_b, n_solve).eigenvalues
         coarse_at_mean = coarse.solve(mu_b, n_solve).eigenvalues

@@ -277,6 +277,11 @@ def _phase(stages, name, compute, items, results, hits, workers):
             stages.put(key(physics, earlier), value)
 
 
+def _best_refined(results):
+    """The best evidence gain among the refined fits (-inf if none)."""
+    return max((r.log_evidence_gain for r in results if r.fit.refined), default=-np.inf)
+
+
 def _rivals(results, threshold):
     """Indices of the rough fits to refine because a refined one may be named (phase 2b).
 
@@ -288,8 +293,7 @@ def _rivals(results, threshold):
     gained -0.7 on its coarse model, +1.7 refined, against +3.5 for the foundation: named a
     foundation, where refined it is ``ambiguous`` with the truth among the two.
     """
-    refined = [r.log_evidence_gain for r in results if r.fit.refined]
-    best = max(refined, default=-np.inf)
+    best = _best_refined(results)
     if best <= threshold:
         return []
     return [i for i, r in enumerate(results)
@@ -304,7 +308,7 @@ def _unsettled_leaders(results):
     :func:`rank`); the others are reported as they stopped, flagged.
     """
     refined = [i for i, r in enumerate(results) if r.fit.refined]
-    best = max((results[i].log_evidence_gain for i in refined), default=-np.inf)
+    best = _best_refined(results)
     return [i for i in refined if results[i].fit.check is not None
             and not results[i].fit.check.settled
             and results[i].log_evidence_gain >= best - LEADERS]  # fmt: skip

@@ -26,7 +26,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..assignment import P_SPURIOUS, P_UNOBSERVED, most_probable
+from ..assignment import P_SPURIOUS, P_UNOBSERVED, assignment_terms, most_probable
 from ..pairing import Pairing
 from ..quantities import eigenvalue_from_hz
 
@@ -136,6 +136,9 @@ def assignment_log_prior(modes, computed_Hz, band_Hz, p_unobserved=P_UNOBSERVED,
                          p_spurious=P_SPURIOUS, measured_Hz=None):  # fmt: skip
     """The assignment's terms of ``ln p(all peaks | model, a)`` (module docstring), nats.
 
+    :func:`bayesplate.assignment.assignment_terms` with the model's computed modes in the
+    band and a spurious peak's range in eigenvalues.
+
     Parameters
     ----------
     modes : numpy.ndarray of int, shape (m,)
@@ -152,19 +155,9 @@ def assignment_log_prior(modes, computed_Hz, band_Hz, p_unobserved=P_UNOBSERVED,
     -------
     float
     """
-    modes = np.asarray(modes)
-    computed_Hz = np.asarray(computed_Hz, dtype=float)
-    in_band = np.flatnonzero(computed_Hz <= np.max(measured_Hz))
-    paired = modes[modes >= 0]
-    n_spurious = int(np.count_nonzero(modes < 0))
-    observed = np.isin(in_band, paired)
-    log_band = np.log(eigenvalue_from_hz(band_Hz))
-    return float(
-        paired.size * np.log1p(-p_spurious)
-        + n_spurious * (np.log(p_spurious) - log_band)
-        + np.count_nonzero(observed) * np.log1p(-p_unobserved)
-        + np.count_nonzero(~observed) * np.log(p_unobserved)
-    )
+    in_band = np.asarray(computed_Hz, dtype=float) <= np.max(measured_Hz)
+    log_band = np.log(eigenvalue_from_hz(band_Hz))  # the fits' densities are in eigenvalues
+    return assignment_terms(modes, in_band, log_band, p_unobserved, p_spurious)
 
 
 def check(model, fit, label, used, measured_Hz, sigma_Hz, prior):

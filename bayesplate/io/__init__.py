@@ -51,6 +51,7 @@ from .export import (
     save_figure,
     write_json,
     write_netcdf,
+    write_png,
 )
 from .frf import FRFData
 from .modal_data import ModalData
@@ -96,6 +97,7 @@ __all__ = [
     "write_netcdf",
     "jsonable",
     "write_json",
+    "write_png",
     "constants_json",
     "estimate_to_dict",
     "budget_to_dict",

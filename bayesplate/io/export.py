@@ -35,6 +35,7 @@ __all__ = [
     "jsonable",
     "sampling_to_dict",
     "save_figure",
+    "write_png",
     "write_json",
     "write_netcdf",
 ]
@@ -66,14 +67,19 @@ def atomic_write_text(path, text):
 
 def save_figure(fig, path, dpi=120):
     """Write a matplotlib figure as PNG whole or not at all."""
-    atomic_write(path, lambda h: fig.savefig(h, format="png", dpi=dpi, bbox_inches="tight"), "wb")
+    write_png(path, figure_png(fig, dpi))
 
 
 def figure_png(fig, dpi=120):
-    """A matplotlib figure rendered as PNG bytes, as :func:`save_figure` writes it."""
+    """A matplotlib figure rendered as PNG bytes (the settings of every figure written)."""
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png", dpi=dpi, bbox_inches="tight")
     return buffer.getvalue()
+
+
+def write_png(path, png):
+    """Write PNG bytes (:func:`figure_png`) whole or not at all."""
+    atomic_write(path, lambda handle: handle.write(png), "wb")
 
 
 def write_netcdf(idata, path):

@@ -169,7 +169,5 @@ def _solve_many(model, points, n_modes, workers=None):
     serial). Each solve runs at one BLAS thread in any case, so the results do not depend
     on ``workers`` (default: every available core), to the last bit.
     """
-    points = list(points)
-    if workers is None:
-        workers = available_cores()
+    workers = available_cores() if workers is None else workers
     return fork_map(lambda p: model.solve(p, n_modes), points, workers)

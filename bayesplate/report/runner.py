@@ -90,13 +90,17 @@ class _Runner:
         if data.options.pairing != "auto":  # (the default keeps the caches' keys)
             self.pairing_options["how"] = data.options.pairing
 
+    def _keyed(self, options):
+        """A step's options as its cache entry is keyed: the working mesh added."""
+        return {"mesh": self.data.mesh, **options}
+
     def step(self, name, title, options, compute, optional=False):
         """``compute()`` or its cached result; an optional step may fail (noted)."""
         self.say(f"{title} ...")
         started = time.perf_counter()
         try:
             with self.say.heartbeat(title):
-                result, reused = self.cache.get(name, {"mesh": self.data.mesh, **options}, compute)
+                result, reused = self.cache.get(name, self._keyed(options), compute)
         except Exception as err:
             if not optional:
                 raise
@@ -168,7 +172,7 @@ class _Runner:
         the two run in turn: the sampler's numbers depend only on its seed. One core, a
         cached posterior, or no sampler: in turn.
         """
-        cached = self.cache.load("sample", {"mesh": self.data.mesh, **self._sample_options()})
+        cached = self.cache.load("sample", self._keyed(self._sample_options()))
         if not sampling_available() or cached is not None or available_cores() < 2:
             self.sample()
             self.diagnose()

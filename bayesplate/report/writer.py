@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import pathlib
 
-from ..io import atomic_write, atomic_write_text, figure_png
+from ..io import atomic_write_text, figure_png, write_png
 from ..parallel import available_cores, fork_map
 from .figures import figure_groups
 from .markdown import render_markdown
@@ -34,11 +34,11 @@ def write_report(data, out_dir, progress=None):
     groups = figure_groups(data)
     # drawn and rendered on every core (forked workers, each a group); written here, in
     # order, each whole: a failure anywhere writes no figure and no report.md
-    rendered = fork_map(_rendered, groups, min(available_cores(), len(groups)))
+    rendered = fork_map(_rendered, groups, available_cores())
     figures = {}
     for group in rendered:
         for name, png in group.items():
-            atomic_write(out / f"{name}.png", lambda handle, png=png: handle.write(png), "wb")
+            write_png(out / f"{name}.png", png)
             figures[name] = f"{name}.png"
     say(f"{len(figures)} figures written")
     path = out / "report.md"
