@@ -156,6 +156,20 @@ class PlateModel:
             **kwargs,
         )
 
+    def on_mesh(self, mesh):
+        """The same plate (geometry, layup, density, boundary, element) on ``mesh``.
+
+        Parameters
+        ----------
+        mesh : tuple of int
+            ``(nx, ny)`` elements along the length and the width.
+        """
+        return type(self)(
+            self.mesh.a, self.mesh.b, self.thickness, self.density, self.layup_deg,
+            self.ply_thickness, mesh=mesh, boundary=self.boundary,
+            shear_order=self.element.shear_order,
+        )  # fmt: skip
+
     def laminate(self, b, thickness_scale=1.0, angle_offset_deg=0.0):
         """Laminate integrals of eqs. 24-25 for stiffness coefficients ``b``.
 

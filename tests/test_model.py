@@ -50,6 +50,15 @@ def test_simply_supported_plate_has_no_rigid_modes():
     assert r.n_rigid == 0 and r.eigenvalues[0] > 0
 
 
+def test_the_same_plate_on_another_mesh_keeps_its_boundary_and_element():
+    plate = _model(boundary="simply_supported", layup=[0, 90, 0], mesh=(6, 4))
+    other = plate.on_mesh((4, 2))
+    built = _model(boundary="simply_supported", layup=[0, 90, 0], mesh=(4, 2))
+    assert other.boundary == "simply_supported" and (other.mesh.nx, other.mesh.ny) == (4, 2)
+    np.testing.assert_array_equal(other.solve(B_REF, 5).eigenvalues,
+                                  built.solve(B_REF, 5).eigenvalues)  # fmt: skip
+
+
 def test_rotating_the_plate_by_ninety_degrees_changes_nothing():
     # swap a and b and add 90 degrees to every ply: the same physical plate
     r1 = _model(mesh=(6, 4), a=0.1, b=0.06).solve(B_REF, 12)

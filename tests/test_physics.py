@@ -14,7 +14,9 @@ from bayesplate.discrepancy import (
     ThicknessTaper,
     candidates,
 )
+from bayesplate.discrepancy.base import plate_symmetries
 from bayesplate.discrepancy.local_stiffness_loss import area_fractions
+from bayesplate.discrepancy.pair import Pair
 from bayesplate.model import PlateModel
 
 E_REF = np.array([113e9, 8.5e9, 0.323, 4.45e9, 4.43e9, 2.97e9])
@@ -164,3 +166,39 @@ def test_located_effects_have_mirror_images_with_equal_frequencies():
     assert len(images) == 3
     for image in images:
         np.testing.assert_allclose(_f(pm.apply(model, image)), f0, rtol=1e-8)
+
+
+def _generic_theta(physics, model):
+    """Parameters off every line of symmetry: places at 23 % and 31 % of the sides."""
+    theta = []
+    for p in physics.parameters(model, B_REF):
+        value = np.clip(p.mean + 0.6 * p.sd, p.lower, p.upper)
+        if p.name.endswith("x_mm"):
+            value = 0.23e3 * A
+        elif p.name.endswith("y_mm"):
+            value = 0.31e3 * B
+        theta.append(value)
+    return np.array(theta)
+
+
+@pytest.mark.parametrize("layup, n_symmetries", [((0, 90, 90, 0), 3), ((30, -30, -30, 30), 1)],
+                         ids=["cross-ply", "angle-ply"])  # fmt: skip
+@pytest.mark.parametrize("physics", [*candidates(), Pair(PointMass(), ThicknessTaper("x"), B_REF),
+                                     Pair(PlyMisalignment(), Cutout(), B_REF)],
+                         ids=lambda c: c.name + "".join(f"-{v}" for v in c.settings().values()))
+def test_every_candidates_mirror_images_have_its_frequencies(physics, layup, n_symmetries):
+    # an image under each of the plate's symmetries: the half-turn always (every ply is
+    # its own turned by 180 degrees), the two reflections on a cross-ply only
+    model = _model(layup=layup)
+    theta = _generic_theta(physics, model)
+    assert len(plate_symmetries(model)) == n_symmetries
+    images = physics.mirror_images(model, theta)
+    f0 = _f(physics.apply(model, theta))
+    for image in images:
+        assert not np.allclose(image, theta)
+        np.testing.assert_allclose(_f(physics.apply(model, image)), f0, rtol=1e-8)
+    # distinct images: a located effect (alone or in a pair) one per symmetry; a taper
+    # reversed by two of them, the same one; a misalignment its own under the half-turn,
+    # reversed by either reflection; a foundation is its own image
+    fewer = {"elastic_foundation": 0, "thickness_taper": 1, "ply_misalignment": n_symmetries // 3}
+    assert len(images) == fewer.get(physics.name, n_symmetries), images

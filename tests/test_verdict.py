@@ -209,6 +209,46 @@ def test_a_pairs_ritz_form_reproduces_its_plate_at_a_snapshot(model, b):
                       (10.0, 150.0, 70.0, -0.12)]  # fmt: skip
 
 
+def test_a_pairs_ritz_differences_are_its_matrices_differenced(model, b):
+    # each parameter's difference is its component's own (the mass's exact derivative,
+    # the taper's central difference): against central differences of the pair's matrices
+    # (the mass inside an element: across an element's edge w'' jumps and the central
+    # difference of the slope is off by the step times the jump)
+    pair = Pair(PointMass(), ThicknessTaper("y"), b)
+    theta = np.array([10.0, 53.3, 31.7, 0.12])
+    pencil = candidate_pencil(model, pair, b, [theta], N_MODES)
+    matrices = pencil.matrices
+    for i, h in enumerate([1e-3, 1e-3, 1e-3, 1e-5]):
+        up, down = theta.copy(), theta.copy()
+        up[i] += h
+        down[i] -= h
+        want = [(x - y) / (2 * h) for x, y in zip(matrices(up), matrices(down), strict=True)]
+        got = matrices.difference(theta, i, h)
+        for g, w in zip(got, want, strict=True):
+            scale = max(np.abs(w).max(), 1e-300)
+            np.testing.assert_allclose(g, w, rtol=0, atol=1e-5 * scale)
+
+
+def test_a_pairs_mirror_images_are_told_on_a_small_mesh_as_on_its_own(b):
+    # a mesh finer than the check's: the images are those the plate's symmetry gives (as
+    # above), told apart on the same plate on at most 12 x 12 elements
+    fine = PlateModel.from_case(_plate1_case(), mesh=(20, 10))
+    pair = Pair(PointMass(), ThicknessTaper("y"), b)
+    theta = np.array([10.0, 50.0, 30.0, 0.12])
+    images = sorted(tuple(np.round(t, 9)) for t in pair.mirror_images(fine, theta))
+    assert images == [(10.0, 50.0, 70.0, -0.12), (10.0, 150.0, 30.0, 0.12),
+                      (10.0, 150.0, 70.0, -0.12)]  # fmt: skip
+    # a combination that is no image is told apart on the small mesh too: the same
+    # eigenvalues there only for the images
+    from bayesplate.discrepancy.pair import _check_model
+
+    small = _check_model(fine)
+    assert (small.mesh.nx, small.mesh.ny) == (12, 10)
+    want = pair.apply(small, theta).solve(b, 8).eigenvalues
+    other = pair.apply(small, np.array([10.0, 150.0, 30.0, -0.12])).solve(b, 8).eigenvalues
+    assert np.max(np.abs(other / want - 1.0)) > 1e-4
+
+
 def test_pairs_are_the_best_with_every_other_candidate(model, b):
     physics = [PointMass(), ThicknessTaper("x"), ThicknessTaper("y"), ElasticFoundation()]
     fit = type("Fit", (), {"physics": physics[1], "b": b, "theta": np.array([0.1])})()

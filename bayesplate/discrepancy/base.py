@@ -19,7 +19,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Parameter", "Physics", "mirror_positions", "reflection_symmetric"]
+__all__ = [
+    "Parameter",
+    "Physics",
+    "mirror_position",
+    "mirror_positions",
+    "plate_symmetries",
+    "reflection_symmetric",
+]
 
 
 @dataclass(frozen=True)
@@ -79,12 +86,31 @@ class Physics:
         p = params[0]
         return [np.array([np.clip(p.mean + s * p.sd, p.lower, p.upper)]) for s in (-1.0, 1.0)]
 
+    def image(self, model, theta, symmetry):
+        """``theta``'s image under one of the plate's symmetries (:func:`plate_symmetries`).
+
+        The plate turned by ``symmetry`` with the effect at ``theta`` is the plate with the
+        effect at the image: the same frequencies. Default: None (the candidate does not
+        say; it then has no mirror images). Candidates override this (see :mod:`.point_mass`).
+        """
+        return None
+
     def mirror_images(self, model, theta):
         """Parameter values that the plate's symmetry makes indistinguishable from ``theta``.
 
-        Default: none. Located effects override this (see :mod:`.point_mass`).
+        The distinct images of :meth:`image` under the plate's symmetries, ``theta`` left
+        out (an effect on a line of symmetry is its own image there).
         """
-        return []
+        theta = np.asarray(theta, dtype=float)
+        images = [self.image(model, theta, s) for s in plate_symmetries(model)]
+        if any(t is None for t in images):
+            return []
+        distinct = []
+        for t in images:
+            t = np.asarray(t, dtype=float)
+            if not any(np.allclose(t, q, rtol=1e-9, atol=1e-12) for q in [theta, *distinct]):
+                distinct.append(t)
+        return distinct
 
     def settings(self):
         """Fixed choices of this instance that are not fitted, ``{name: value}``.
@@ -184,6 +210,23 @@ class Physics:
         return {n: float(v) for n, v in zip(names, theta, strict=True)}
 
 
+def plate_symmetries(model):
+    """The symmetries of the plate that leave its layup as it was.
+
+    ``"x"``: the reflection ``x -> a - x``; ``"y"``: ``y -> b - y``; ``"xy"``: both, the
+    half-turn. The half-turn leaves every ply as it was (an angle plus 180 degrees is the
+    same ply); a reflection turns a ply at ``theta`` into one at ``-theta`` and holds only
+    for 0 and 90 degree plies (:func:`reflection_symmetric`).
+    """
+    return ("x", "y", "xy") if reflection_symmetric(model) else ("xy",)
+
+
+def mirror_position(model, x_mm, y_mm, symmetry):
+    """The image of a point under one of :func:`plate_symmetries`, mm."""
+    a_mm, b_mm = 1e3 * model.mesh.a, 1e3 * model.mesh.b
+    return (a_mm - x_mm if "x" in symmetry else x_mm, b_mm - y_mm if "y" in symmetry else y_mm)
+
+
 def mirror_positions(model, x_mm, y_mm):
     """The mirror images of a point under the symmetries of a rectangular plate (mm).
 
@@ -192,11 +235,8 @@ def mirror_positions(model, x_mm, y_mm):
     ``(x, b - y)`` and ``(a - x, b - y)``. Other layups are only symmetric under the
     half-turn ``(a - x, b - y)``.
     """
-    a_mm, b_mm = 1e3 * model.mesh.a, 1e3 * model.mesh.b
-    images = [(a_mm - x_mm, b_mm - y_mm)]
-    if reflection_symmetric(model):
-        images = [(a_mm - x_mm, y_mm), (x_mm, b_mm - y_mm)] + images
-    tol = 1e-6 * max(a_mm, b_mm)
+    images = [mirror_position(model, x_mm, y_mm, s) for s in plate_symmetries(model)]
+    tol = 1e-6 * 1e3 * max(model.mesh.a, model.mesh.b)
     distinct = []
     for p in images:  # a point on a line of symmetry is its own mirror image
         if all(np.hypot(p[0] - q[0], p[1] - q[1]) > tol for q in [(x_mm, y_mm), *distinct]):

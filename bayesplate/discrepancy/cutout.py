@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import Parameter, Physics, mirror_positions
+from .base import Parameter, Physics, mirror_position
 from .local_stiffness_loss import element_energies
 from .locate import effect_map
 from .pencil import RegionProjection, project
@@ -161,9 +161,9 @@ class Cutout(Physics):
         matrices.difference = difference
         return matrices
 
-    def mirror_images(self, model, theta):
-        """The same hole at the mirror positions of its centre."""
-        return [np.array([x, y, theta[2]]) for x, y in mirror_positions(model, *theta[:2])]
+    def image(self, model, theta, symmetry):
+        """The same hole about the mirror position of its centre."""
+        return np.array([*mirror_position(model, theta[0], theta[1], symmetry), theta[2]])
 
     def location_map(self, model, paired, b, residual_whitened, sigma_lambda, projector):
         """A small hole in each element (:func:`cutout_map`)."""

@@ -173,11 +173,7 @@ class Diagnosis:
 
 def coarse_model(model):
     """The same plate on a mesh with half as many elements each way."""
-    mesh = model.mesh
-    return model.__class__(
-        mesh.a, mesh.b, model.thickness, model.density, model.layup_deg, model.ply_thickness,
-        mesh=(max(mesh.nx // 2, 2), max(mesh.ny // 2, 1)),
-    )  # fmt: skip
+    return model.on_mesh((max(model.mesh.nx // 2, 2), max(model.mesh.ny // 2, 1)))
 
 
 def mesh_error(model, b, n_modes, coarse=None):

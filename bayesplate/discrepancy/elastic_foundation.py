@@ -21,6 +21,10 @@ class ElasticFoundation(Physics):
     name = "elastic_foundation"
     description = "a soft elastic support under the whole plate"
 
+    def image(self, model, theta, symmetry):
+        """``k`` itself: a foundation under the whole plate is turned with it."""
+        return np.asarray(theta, dtype=float)
+
     def parameters(self, model, b):
         """``k_N_m3`` >= 0.
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import Parameter, Physics, mirror_positions
+from .base import Parameter, Physics, mirror_position
 from .locate import effect_map
 from .pencil import RegionProjection, project
 from .scan import Scan, misfit
@@ -133,9 +133,9 @@ class LocalStiffnessLoss(Physics):
         matrices.difference = difference
         return matrices
 
-    def mirror_images(self, model, theta):
-        """The same region at the mirror positions of its centre."""
-        return [np.array([x, y, *theta[2:]]) for x, y in mirror_positions(model, *theta[:2])]
+    def image(self, model, theta, symmetry):
+        """The same patch about the mirror position of its centre."""
+        return np.array([*mirror_position(model, theta[0], theta[1], symmetry), *theta[2:]])
 
     def location_map(self, model, paired, b, residual_whitened, sigma_lambda, projector):
         """A small loss at each element (:func:`stiffness_loss_map`)."""

@@ -26,7 +26,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from .base import Physics
+from .base import Physics, plate_symmetries
 from .pencil import _has_ritz, project
 
 __all__ = ["Pair", "pairs_with"]
@@ -36,6 +36,8 @@ __all__ = ["Pair", "pairs_with"]
 _ANY_B = np.ones(6)
 #: Modes compared to tell a true mirror image of a pair from a mere combination of images.
 MIRROR_MODES = 8
+#: Most elements each way of the mesh that tells them apart (see :meth:`Pair.mirror_images`).
+MIRROR_MESH = 12
 
 
 class Pair(Physics):
@@ -104,11 +106,28 @@ class Pair(Physics):
         if ma is None or mb is None:
             return None
         nominal = project(model, basis)
+        k = len(self.first.parameters(model, b))
 
         def matrices(theta):
-            ta, tb = self.split(model, b, theta)
-            return tuple(x + y - z for x, y, z in zip(ma(ta), mb(tb), nominal, strict=True))
+            theta = np.asarray(theta, dtype=float)
+            return tuple(x + y - z for x, y, z in zip(ma(theta[:k]), mb(theta[k:]), nominal,
+                                                      strict=True))  # fmt: skip
 
+        def difference(theta, i, h):
+            # the pair's matrices less its component's do not depend on that component's
+            # parameters: the difference is the component's own (by its cheaper path when
+            # its Ritz form has one)
+            theta = np.asarray(theta, dtype=float)
+            own, t, j = (ma, theta[:k], i) if i < k else (mb, theta[k:], i - k)
+            by_own = getattr(own, "difference", None)
+            if by_own is not None:
+                return by_own(t, j, h)
+            up, down = t.copy(), t.copy()
+            up[j] += h
+            down[j] -= h
+            return tuple((x - y) / (2 * h) for x, y in zip(own(up), own(down), strict=True))
+
+        matrices.difference = difference
         return matrices
 
     def starting_points(self, model, b):
@@ -120,15 +139,29 @@ class Pair(Physics):
         out += [np.concatenate([mean_a, t]) for t in self.second.starting_points(model, b)]
         return out
 
+    def image(self, model, theta, symmetry):
+        """Both components' images under the same symmetry (it moves both effects at once).
+
+        None when either component does not say (:meth:`mirror_images` then tells the
+        images apart by their frequencies).
+        """
+        ta, tb = self.split(model, _ANY_B, theta)
+        ia, ib = self.first.image(model, ta, symmetry), self.second.image(model, tb, symmetry)
+        return None if ia is None or ib is None else np.concatenate([ia, ib])
+
     def mirror_images(self, model, theta):
-        """The combinations of the components' images that the plate's symmetry makes equal.
+        """The pair's images under the plate's symmetries.
 
         A symmetry moves both effects at once (turning the plate end for end moves a mass
-        and reverses a taper along that side): of every combination of the components'
-        images, those whose frequencies at :attr:`b` equal ``theta``'s (relative 1e-8; a
-        mirror image on the symmetric mesh agrees to round-off) are kept. Costs one
-        eigen solve per combination.
+        and reverses a taper along that side): by :meth:`image` when both components
+        give theirs. Otherwise, of every combination of the components' images, those whose
+        frequencies at :attr:`b` equal ``theta``'s (relative 1e-8; a mirror image on a
+        uniform mesh agrees to round-off) are kept: a test of symmetry, not of accuracy,
+        run on the same plate on a mesh of at most :data:`MIRROR_MESH` elements each way,
+        one small eigen solve per combination.
         """
+        if all(self.image(model, theta, s) is not None for s in plate_symmetries(model)):
+            return super().mirror_images(model, theta)
         ta, tb = self.split(model, _ANY_B, theta)
         images_a = [ta, *self.first.mirror_images(model, ta)]
         images_b = [tb, *self.second.mirror_images(model, tb)]
@@ -137,10 +170,26 @@ class Pair(Physics):
                   if (i, j) != (0, 0)]  # fmt: skip
         if not combos:
             return []
+        check = _check_model(model)
         n = MIRROR_MODES
-        want = self.apply(model, theta).solve(self.b, n).eigenvalues
-        return [t for t in combos if np.allclose(self.apply(model, t).solve(self.b, n).eigenvalues,
+        want = self.apply(check, theta).solve(self.b, n).eigenvalues
+        return [t for t in combos if np.allclose(self.apply(check, t).solve(self.b, n).eigenvalues,
                                                  want, rtol=1e-8, atol=0.0)]  # fmt: skip
+
+
+#: The last plate checked for mirror images and its small mesh (kept out of the pairs'
+#: attributes, which key their stored fits).
+_CHECKED = [None, None]
+
+
+def _check_model(model):
+    """``model``'s plate on a mesh of at most :data:`MIRROR_MESH` elements each way."""
+    mesh = (min(model.mesh.nx, MIRROR_MESH), min(model.mesh.ny, MIRROR_MESH))
+    if mesh == (model.mesh.nx, model.mesh.ny):
+        return model
+    if _CHECKED[0] is not model:
+        _CHECKED[:] = [model, model.on_mesh(mesh)]
+    return _CHECKED[1]
 
 
 def pairs_with(best, physics_list, ranked, model, scans, n_places=3):

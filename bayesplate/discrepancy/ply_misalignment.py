@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import Parameter, Physics, reflection_symmetric
+from .base import Parameter, Physics
 from .pencil import interpolated_ritz, local_ritz
 
 __all__ = ["PlyMisalignment"]
@@ -47,6 +47,10 @@ class PlyMisalignment(Physics):
         nodes = np.array([[-40.0], [-20.0], [0.0], [20.0], [40.0]])
         return interpolated_ritz(lambda t: self.apply(model, t), basis, nodes, features)
 
-    def mirror_images(self, model, theta):
-        """``-delta`` when the layup is mirror-symmetric."""
-        return [-np.asarray(theta)] if reflection_symmetric(model) else []
+    def image(self, model, theta, symmetry):
+        """``-delta`` under a reflection, ``delta`` under the half-turn.
+
+        A reflection turns every ply's angle, and so its error, into its negative.
+        """
+        theta = np.asarray(theta, dtype=float)
+        return theta if symmetry == "xy" else -theta

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import Parameter, Physics, mirror_positions
+from .base import Parameter, Physics, mirror_position
 from .locate import effect_map
 from .pencil import RIGID_SHARE, project
 from .point_mass import _rank_one
@@ -97,9 +97,9 @@ class PointSupport(Physics):
         terms, constant, mass = project(model, basis)
         return _rank_one(model, basis, terms, constant, mass, "stiffness")
 
-    def mirror_images(self, model, theta):
-        """The same spring at the mirror positions of ``(x, y)``."""
-        return [np.array([theta[0], x, y]) for x, y in mirror_positions(model, *theta[1:])]
+    def image(self, model, theta, symmetry):
+        """The same support at the mirror position of ``(x, y)``."""
+        return np.array([theta[0], *mirror_position(model, theta[1], theta[2], symmetry)])
 
     def location_map(self, model, paired, b, residual_whitened, sigma_lambda, projector):
         """A weak spring at each node (:func:`point_support_map`)."""

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import Parameter, Physics, reflection_symmetric
+from .base import Parameter, Physics
 from .pencil import interpolated_ritz, local_ritz
 
 __all__ = ["ThicknessTaper"]
@@ -71,6 +71,7 @@ class ThicknessTaper(Physics):
         return interpolated_ritz(lambda t: self.apply(model, t), basis, nodes[:, None],
                                  features)  # fmt: skip
 
-    def mirror_images(self, model, theta):
-        """``-e`` (the plate turned end for end) when the layup is mirror-symmetric."""
-        return [-np.asarray(theta)] if reflection_symmetric(model) else []
+    def image(self, model, theta, symmetry):
+        """``-e`` when the symmetry turns the plate end for end along the taper, else ``e``."""
+        theta = np.asarray(theta, dtype=float)
+        return -theta if self.direction in symmetry else theta
