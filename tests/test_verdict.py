@@ -15,6 +15,7 @@ from test_diagnose import MESH, NOISE, _plate1_case, _recordings
 
 from bayesplate import PlateModel, stiffness_from_engineering
 from bayesplate.discrepancy import ElasticFoundation, PointMass, ThicknessTaper
+from bayesplate.discrepancy.base import mirror_positions
 from bayesplate.discrepancy.diagnose import diagnose
 from bayesplate.discrepancy.pair import Pair, pairs_with
 from bayesplate.discrepancy.pencil import candidate_pencil
@@ -229,11 +230,22 @@ def test_a_pairs_ritz_differences_are_its_matrices_differenced(model, b):
             np.testing.assert_allclose(g, w, rtol=0, atol=1e-5 * scale)
 
 
+class _ImagesOnly(PointMass):
+    """A point mass that lists its mirror images but does not say under which symmetry."""
+
+    def image(self, model, theta, symmetry):
+        return None
+
+    def mirror_images(self, model, theta):
+        return [np.array([theta[0], x, y]) for x, y in mirror_positions(model, *theta[1:])]
+
+
 def test_a_pairs_mirror_images_are_told_on_a_small_mesh_as_on_its_own(b):
-    # a mesh finer than the check's: the images are those the plate's symmetry gives (as
-    # above), told apart on the same plate on at most 12 x 12 elements
+    # a component that does not say its image under each symmetry: the combinations of
+    # its images and the other's are told apart by their frequencies, on a mesh of at
+    # most 12 x 12 elements for a finer one; the images are those above
     fine = PlateModel.from_case(_plate1_case(), mesh=(20, 10))
-    pair = Pair(PointMass(), ThicknessTaper("y"), b)
+    pair = Pair(_ImagesOnly(), ThicknessTaper("y"), b)
     theta = np.array([10.0, 50.0, 30.0, 0.12])
     images = sorted(tuple(np.round(t, 9)) for t in pair.mirror_images(fine, theta))
     assert images == [(10.0, 50.0, 70.0, -0.12), (10.0, 150.0, 30.0, 0.12),
