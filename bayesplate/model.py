@@ -144,26 +144,11 @@ class PlateModel:
     def from_case(cls, case, mesh=None, **kwargs):
         """Model of a :class:`bayesplate.io.Case`, on ``mesh`` or the case's own mesh."""
         p = case.plate
-        mesh = mesh or case.mesh or DEFAULT_MESH
-        return cls(
-            p.length,
-            p.width,
-            p.thickness,
-            p.density,
-            p.layup_deg,
-            p.ply_thickness,
-            mesh=mesh,
-            **kwargs,
-        )
+        return cls(p.length, p.width, p.thickness, p.density, p.layup_deg, p.ply_thickness,
+                   mesh=mesh or case.mesh or DEFAULT_MESH, **kwargs)  # fmt: skip
 
     def on_mesh(self, mesh):
-        """The same plate (geometry, layup, density, boundary, element) on ``mesh``.
-
-        Parameters
-        ----------
-        mesh : tuple of int
-            ``(nx, ny)`` elements along the length and the width.
-        """
+        """The same plate (geometry, layup, density, boundary, element) on ``mesh``, (nx, ny)."""
         return type(self)(
             self.mesh.a, self.mesh.b, self.thickness, self.density, self.layup_deg,
             self.ply_thickness, mesh=mesh, boundary=self.boundary,
