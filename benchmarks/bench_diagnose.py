@@ -6,11 +6,16 @@ a time, with the command line's two workers (``--workers``): wall time, processo
 verdict and chosen candidate. With ``--base TREE`` some recordings are also diagnosed by the
 code of another checkout (``PYTHONPATH=TREE``; e.g. ``git worktree add /tmp/diag-base
 fb3cd20``), in the same run, for the ratio. The scaling rows time one recording on three
-meshes and with three numbers of frequencies.
+meshes and with three numbers of frequencies. The pairs rows (``--pairs``) time the
+recording with two effects at once, whose rejected best single candidate sends diagnose to
+fit every pair, on a 24 x 24 mesh (its 50 x 50 takes the code before the pairs' mirror
+images by symmetry over an hour), by this code and ``--base`` in turn, on one worker.
 
-Writes ``benchmark_diagnose.md`` (and, with ``--scaling``, ``benchmark_diagnose_scaling.md``)
-to ``out_dir``. Run: ``python benchmarks/bench_diagnose.py [--runs 0 3 ...] [--base TREE
---base-runs 0 2] [--scaling]``; ``--runs --scaling`` runs the scaling rows alone.
+Writes ``benchmark_diagnose.md`` (with ``--scaling``, ``benchmark_diagnose_scaling.md``;
+with ``--pairs``, ``benchmark_diagnose_pairs.md``) to ``out_dir``. Run: ``python
+benchmarks/bench_diagnose.py [--runs 0 3 ...] [--base TREE --base-runs 0 2] [--scaling]
+[--pairs N]``; ``--runs --scaling`` runs the scaling rows alone, ``--runs --pairs 1 --base
+TREE`` the pairs rows alone.
 """
 
 from __future__ import annotations
@@ -37,6 +42,9 @@ SCALING_REPORT = "benchmark_diagnose_scaling.md"
 TARGET_MEDIAN_S, TARGET_WORST_S = 30.0, 90.0
 #: The recording, meshes and frequency counts of the scaling rows.
 SCALING_RUN, SCALING_MESHES, SCALING_FREQUENCIES = 2, ((24, 24), (36, 36), (50, 50)), (8, 11, 14)
+PAIRS_REPORT = "benchmark_diagnose_pairs.md"
+#: The recording with two effects (the concealment study's last) and the pairs rows' mesh.
+PAIRS_RUN, PAIRS_MESH = 14, (24, 24)
 
 
 def one(index, workers, quick=False, mesh=None, frequencies=None):
@@ -72,11 +80,15 @@ def one(index, workers, quick=False, mesh=None, frequencies=None):
         chosen = d.chosen.name + "".join(f" ({v})" for v in d.chosen.parameters.values()
                                          if isinstance(v, str))  # fmt: skip
     refined = sum(c.fit.refined for c in d.candidates)
+    best_pair = max((c for c in d.candidates if "+" in c.name), default=None,
+                    key=lambda c: c.log_evidence_gain)  # fmt: skip
     print(json.dumps({"index": index, "effect": label, "size": size, "seconds": seconds,
                       "cpu": cpu, "verdict": d.verdict, "chosen": chosen,
                       "p_value": d.p_value, "refined": refined, "mesh": list(mesh),
                       "frequencies": int(f.size), "workers": workers,
-                      "load": [load, os.getloadavg()[0]]}))  # fmt: skip
+                      "load": [load, os.getloadavg()[0]],
+                      "best_pair": None if best_pair is None else
+                      [best_pair.name, best_pair.log_evidence_gain]}))  # fmt: skip
 
 
 def _cpu():
@@ -186,7 +198,44 @@ def write_scaling(scaling, info, out_dir, started):
     return path
 
 
-def main(out_dir, runs, workers, base=None, base_runs=(), quick=False, scaling=False):
+def write_pairs(rows, info, out_dir, base_label, started):
+    """``benchmark_diagnose_pairs.md``: the recording with two effects, this code and the base."""
+    lines = [
+        f"Made by `python benchmarks/bench_diagnose.py --runs --pairs` on {started}.",
+        "",
+        "# diagnose: the pairs' stage",
+        "",
+        f"Machine: {info['cpu']}, {info['nproc']} processors; {info['platform']}; Python "
+        f"{info['python']}, numpy {info['numpy']}, scipy {info['scipy']}. One worker, each "
+        "run in a fresh process, this code and the base in turn; load = 1-minute load average "
+        "before / after.",
+        "",
+        f"Recording {PAIRS_RUN} of the concealment study (a 1 g mass and a 3 degree ply "
+        f"misalignment at once) diagnosed on {PAIRS_MESH[0]} x {PAIRS_MESH[1]}: the best "
+        "single candidate's refit is rejected and every pair with it is fitted and ranked.",
+        "",
+        "| code | wall (s) | CPU (s) | load | verdict | best pair (gain, nats) |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        best = r["best_pair"]
+        pair = "-" if best is None else f"{best[0]} ({best[1]:+.1f})"
+        lines.append(f"| {r['code']} | {r['seconds']:.0f} | {r['cpu']:.0f} | "
+                     f"{r['load'][0]:.1f} / {r['load'][1]:.1f} | "
+                     f"{r['verdict']} {r['chosen'] or ''} | {pair} |")  # fmt: skip
+    now = [r["seconds"] for r in rows if r["code"] == "this"]
+    then = [r["seconds"] for r in rows if r["code"] != "this"]
+    if now and then:
+        lines += ["", f"Base ({base_label}) / this code, median wall times in this run: "
+                  f"{statistics.median(then) / statistics.median(now):.1f}x."]  # fmt: skip
+    path = pathlib.Path(out_dir) / PAIRS_REPORT
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def main(out_dir, runs, workers, base=None, base_runs=(), quick=False, scaling=False,
+         pairs=0):  # fmt: skip
     started = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     rows, base_rows, scale_rows = [], [], []
     info = _machine.machine()
@@ -204,6 +253,12 @@ def main(out_dir, runs, workers, base=None, base_runs=(), quick=False, scaling=F
                                       frequencies=frequencies))  # fmt: skip
                 print("scaling", json.dumps(scale_rows[-1]), flush=True)
                 write_scaling(scale_rows, info, out_dir, started)
+    pair_rows = []
+    for _ in range(pairs):
+        for code, tree in [("this", ROOT)] + ([(str(base), base)] if base else []):
+            pair_rows.append({**run(PAIRS_RUN, tree, 1, mesh=PAIRS_MESH), "code": code})
+            print("pairs", json.dumps(pair_rows[-1]), flush=True)
+            write_pairs(pair_rows, info, out_dir, str(base), started)
     return rows, base_rows, scale_rows
 
 
@@ -217,6 +272,8 @@ if __name__ == "__main__":
     parser.add_argument("--base", help="another checkout to compare with")
     parser.add_argument("--base-runs", type=int, nargs="*", default=[0, 2])
     parser.add_argument("--scaling", action="store_true", help="the mesh and frequency rows")
+    parser.add_argument("--pairs", type=int, default=0, metavar="N",
+                        help="the two-effect recording N times (with --base: in turn)")
     parser.add_argument("--out", default=ROOT / "reports")
     parser.add_argument("--quick", action="store_true", help="12 x 6 mesh: a regression run")
     args = parser.parse_args()
@@ -229,4 +286,4 @@ if __name__ == "__main__":
 
         runs = args.runs if args.runs is not None else list(range(len(scenarios())))
         main(args.out, runs, args.workers, args.base, args.base_runs, args.quick,
-             args.scaling)  # fmt: skip
+             args.scaling, args.pairs)  # fmt: skip

@@ -93,6 +93,23 @@ def test_benchmark_quick(tmp_path):
     assert "| 8x8 | 648 |" in text
 
 
+def test_benchmark_diagnose_pairs_table_gives_the_ratio_of_medians(tmp_path):
+    # two runs of this code (100 and 120 s) and two of the base (400 and 500 s), made here:
+    # the report's ratio is that of the medians, 450 / 110
+    bench = load_study(ROOT / "benchmarks" / "bench_diagnose.py")
+    info = {"cpu": "test cpu", "nproc": 2, "platform": "p", "python": "3", "numpy": "2",
+            "scipy": "1"}  # fmt: skip
+    rows = [{"code": code, "seconds": t, "cpu": t, "load": [1.0, 1.0], "verdict": "explained",
+             "chosen": "point_mass+ply_misalignment",
+             "best_pair": ["point_mass+ply_misalignment", 12.5]}
+            for code, t in (("this", 100.0), ("/base", 400.0), ("this", 120.0),
+                            ("/base", 500.0))]  # fmt: skip
+    text = bench.write_pairs(rows, info, tmp_path, "/base", "2026-11-26 00:00 UTC").read_text()
+    assert "| this | 100 | 100 | 1.0 / 1.0 | explained point_mass+ply_misalignment | " \
+           "point_mass+ply_misalignment (+12.5) |" in text  # fmt: skip
+    assert f"median wall times in this run: {450 / 110:.1f}x" in text
+
+
 @pytest.mark.slow
 def test_benchmark_diagnose_quick(tmp_path):
     # a control recording of the concealment study on the quick mesh lands in the table with
