@@ -311,7 +311,8 @@ def _provenance(rows):
         out.append(f"Rows made by the code of `{code}` on {', '.join(days) or '?'}, "
                    f"{machine or 'an unrecorded machine'} (2 cores), "
                    f"load average {min(loads):.1f}-{max(loads):.1f} (other work beside): "
-                   f"{len(mine)} rows, {sum(r['seconds'] for r in mine) / 60:.0f} min of "
+                   f"{len(mine)} row{'s' * (len(mine) != 1)}, "
+                   f"{sum(r['seconds'] for r in mine) / 60:.0f} min of "
                    "diagnose." if loads else f"Rows made by `{code}`: {len(mine)}.")  # fmt: skip
     return out
 
@@ -327,6 +328,7 @@ def _findings(rows):
     better = [r for r in named if r["after"] is not None
               and np.abs(r["after"]).max() < np.abs(r["before"]).max()]  # fmt: skip
     within = [r for r in named if recovery_z(r) is not None and recovery_z(r) <= 2.0]
+    missed = [r for r in rejected if r not in named and r not in among]
     return [
         "",
         "## Targets",
@@ -335,7 +337,10 @@ def _findings(rows):
         f" of {len(controls)}",
         f"- effects rejected by the nominal fit (p < 0.01): {len(rejected)}; named correctly: "
         f"{len(named)}; refit consistent: {sum(r['verdict'] == 'explained' for r in named)}; "
-        f"declared `ambiguous` with the truth among the two named: {len(among)}",
+        f"declared `ambiguous` with the truth among the two named: {len(among)}; neither: "
+        f"{len(missed)}"
+        + "".join(f" ({r['effect']} {r['size']}: {r['verdict']}"
+                  + (f", {r['chosen']} named" if r["chosen"] else "") + ")" for r in missed),
         f"- of those named, parameters within 2 reported sd of the truth (or of a mirror "
         f"image of it): {len(within)} of {len(named)} (largest |error| / sd per row: "
         + ", ".join(f"{r['effect']} {r['size']} {recovery_z(r):.1f}" for r in named)

@@ -48,13 +48,13 @@ from . import candidates as all_candidates
 from .fit import JointFit, JointProblem
 from .locate import absorbable_projector, best_region, mode_kinds
 from .nominal import N_STARTS, check_fast, fit_nominal, nominal_reduced, nominal_stage
-from .pair import pairs_with
 from .probabilities import model_probabilities
 from .rank import CandidateResult, improved_nominal, rank, searched_anew
 from .reassign import made_again
 from .scan import RitzBasis
 from .separate import Separation, separate
 from .store import Stages, digest, fit_digest, plate_digest
+from .two_effects import two_effects
 from .verdict import (
     basins_note,
     predictive_p_values,
@@ -397,13 +397,10 @@ def diagnose(
                 best = anew
                 refit_dof, refit_p = refit_test(best.fit, m)
         if warranted and refit_p < alpha and pairs:  # two effects at once
-            two = pairs_with(best, physics, ranked, model, scans)
-            two = rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, two, say, stages)
-            top = next((c for c in two if c.fit.refined), None)
-            if (
-                top is not None
-                and top.log_evidence_gain > best.log_evidence_gain + evidence_threshold
-            ):
+            fitting = dict(model=model, level=level, Y=Y, sigma=sigma, mu_b=mu_b, V_b=V_b,
+                           modes=modes, nominal=nominal, scans=scans, say=say, stages=stages)
+            top, two = two_effects(best, ranked, physics, fitting, evidence_threshold, alpha, m)
+            if top is not None:
                 best = top
                 refit_dof, refit_p = refit_test(best.fit, m)
             ranked = sorted(ranked + two, key=lambda r: -r.log_evidence_gain)

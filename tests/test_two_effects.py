@@ -1,0 +1,115 @@
+"""The pairs' stage: the leading single candidates' pairs in turn, until one explains.
+
+The fits are stand-ins (a gain and a chi-square per pair, set here): what is tested is which
+pairs are fitted and which is chosen, not the fitting, which the slow test of
+``test_verdict.py`` runs on a real plate.
+"""
+
+from dataclasses import dataclass
+
+import pytest
+
+from bayesplate.discrepancy import two_effects as stage
+
+M = 14  # frequencies: a chi-square of 5 is accepted, 80 rejected at alpha = 0.01
+
+
+@dataclass
+class _Physics:
+    name: str
+
+    def settings(self):
+        return {}
+
+
+@dataclass
+class _Pair:
+    first: _Physics
+    second: _Physics
+
+    @property
+    def name(self):
+        return f"{self.first.name}+{self.second.name}"
+
+
+@dataclass
+class _Fit:
+    physics: object
+    chi2: float
+    refined: bool = True
+    effective_parameters: float = 9.0
+
+
+@dataclass
+class _Result:
+    name: str
+    fit: _Fit
+    log_evidence_gain: float
+
+
+SINGLES = {"stiffness_loss": 565.0, "point_mass": 530.0, "cutout": 513.0, "misalignment": 143.0}
+
+
+def _singles():
+    physics = [_Physics(n) for n in SINGLES]
+    ranked = [_Result(p.name, _Fit(p, 400.0), SINGLES[p.name]) for p in physics]
+    return physics, ranked
+
+
+def _run(monkeypatch, pairs_gain_chi2):
+    """two_effects with stand-in fits; returns (chosen, pairs, names fitted per turn)."""
+    turns = []
+
+    def pairs_with(leader, physics, ranked, model, scans):
+        first = leader.fit.physics
+        return [_Pair(first, p) for p in physics if p.name != first.name]
+
+    def rank(physics_list, **_):
+        turns.append(sorted(frozenset((p.first.name, p.second.name)) for p in physics_list))
+        out = []
+        for p in physics_list:
+            gain, chi2 = pairs_gain_chi2[frozenset((p.first.name, p.second.name))]
+            out.append(_Result(p.name, _Fit(p, chi2), gain))
+        return sorted(out, key=lambda c: -c.log_evidence_gain)
+
+    monkeypatch.setattr(stage, "pairs_with", pairs_with)
+    monkeypatch.setattr(stage, "rank", rank)
+    physics, ranked = _singles()
+    said = []
+    fitting = dict(model=None, scans={}, say=said.append)
+    chosen, pairs = stage.two_effects(ranked[0], ranked, physics, fitting, 3.0, 0.01, M)
+    return chosen, pairs, turns, said
+
+
+def _table(good):
+    """Every pair of the singles: gain 600 and rejected, but ``good`` (gain 700, accepted)."""
+    names = list(SINGLES)
+    table = {frozenset((a, b)): (600.0, 80.0) for a in names for b in names if a != b}
+    table[frozenset(good)] = (700.0, 5.0)
+    return table
+
+
+def test_the_best_ones_pairs_alone_when_one_of_them_explains(monkeypatch):
+    chosen, pairs, turns, said = _run(monkeypatch, _table(("stiffness_loss", "misalignment")))
+    assert len(turns) == 1 and len(pairs) == 3 and said == []
+    assert chosen.name == "stiffness_loss+misalignment"
+
+
+def test_the_runner_ups_pairs_when_none_with_the_best_explains(monkeypatch):
+    # the recording of a mass and a misalignment whose best single fit is a stiffness loss
+    chosen, pairs, turns, said = _run(monkeypatch, _table(("point_mass", "misalignment")))
+    assert len(turns) == 2 and said == [
+        "no pair with stiffness_loss explains: point_mass paired as well"
+    ]
+    # the pair of the two leaders is fitted once, not again in the second turn
+    assert frozenset(("stiffness_loss", "point_mass")) not in turns[1]
+    assert len(pairs) == 3 + 2
+    assert chosen.name == "point_mass+misalignment"
+
+
+@pytest.mark.parametrize("leaders", [1, 2])
+def test_no_more_than_the_leaders_and_none_chosen_when_none_gains(monkeypatch, leaders):
+    table = {k: (560.0, 80.0) for k in _table(("point_mass", "cutout"))}  # below the best
+    monkeypatch.setattr(stage, "LEADERS", leaders)
+    chosen, pairs, turns, _ = _run(monkeypatch, table)
+    assert chosen is None and len(turns) == stage.LEADERS
