@@ -198,6 +198,13 @@ def write_scaling(scaling, info, out_dir, started):
     return path
 
 
+def _commit(tree):
+    """The commit a checkout is at (short), or "?"."""
+    done = subprocess.run(["git", "-C", str(tree), "rev-parse", "--short", "HEAD"],
+                          capture_output=True, text=True)  # fmt: skip
+    return done.stdout.strip() or "?"
+
+
 def write_pairs(rows, info, out_dir, base_label, started):
     """``benchmark_diagnose_pairs.md``: the recording with two effects, this code and the base."""
     lines = [
@@ -223,8 +230,8 @@ def write_pairs(rows, info, out_dir, base_label, started):
         lines.append(f"| {r['code']} | {r['seconds']:.0f} | {r['cpu']:.0f} | "
                      f"{r['load'][0]:.1f} / {r['load'][1]:.1f} | "
                      f"{r['verdict']} {r['chosen'] or ''} | {pair} |")  # fmt: skip
-    now = [r["seconds"] for r in rows if r["code"] == "this"]
-    then = [r["seconds"] for r in rows if r["code"] != "this"]
+    now = [r["seconds"] for r in rows if r["code"].startswith("this")]
+    then = [r["seconds"] for r in rows if not r["code"].startswith("this")]
     if now and then:
         lines += ["", f"Base ({base_label}) / this code, median wall times in this run: "
                   f"{statistics.median(then) / statistics.median(now):.1f}x."]  # fmt: skip
@@ -256,7 +263,8 @@ def main(out_dir, runs, workers, base=None, base_runs=(), quick=False, scaling=F
     pair_rows = []
     for _ in range(pairs):
         for code, tree in [("this", ROOT)] + ([(str(base), base)] if base else []):
-            pair_rows.append({**run(PAIRS_RUN, tree, 1, mesh=PAIRS_MESH), "code": code})
+            pair_rows.append({**run(PAIRS_RUN, tree, 1, mesh=PAIRS_MESH),
+                              "code": f"{code} ({_commit(tree)})"})  # fmt: skip
             print("pairs", json.dumps(pair_rows[-1]), flush=True)
             write_pairs(pair_rows, info, out_dir, str(base), started)
     return rows, base_rows, scale_rows
