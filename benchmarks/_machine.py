@@ -15,7 +15,7 @@ import tempfile
 
 import numpy as np
 
-__all__ = ["add_base_arguments", "base_checkout", "machine"]
+__all__ = ["add_base_arguments", "base_checkout", "commit", "machine"]
 
 
 def _proc_field(path, key):
@@ -54,6 +54,12 @@ def machine(*libraries):
     for name in ("numpy", "scipy", *libraries):
         info[name] = importlib.import_module(name).__version__
     return info
+
+
+def commit(tree):
+    """The commit a checkout is at, short (raises if git cannot read it)."""
+    rev = ["git", "-C", str(tree), "rev-parse", "--short", "HEAD"]
+    return subprocess.run(rev, check=True, capture_output=True, text=True).stdout.strip()
 
 
 @contextlib.contextmanager

@@ -198,13 +198,6 @@ def write_scaling(scaling, info, out_dir, started):
     return path
 
 
-def _commit(tree):
-    """The commit a checkout is at (short), or "?"."""
-    done = subprocess.run(["git", "-C", str(tree), "rev-parse", "--short", "HEAD"],
-                          capture_output=True, text=True)  # fmt: skip
-    return done.stdout.strip() or "?"
-
-
 def write_pairs(rows, info, out_dir, base_label, started):
     """``benchmark_diagnose_pairs.md``: the recording with two effects, this code and the base."""
     lines = [
@@ -263,8 +256,8 @@ def main(out_dir, runs, workers, base=None, base_runs=(), quick=False, scaling=F
     pair_rows = []
     for _ in range(pairs):
         for code, tree in [("this", ROOT)] + ([(str(base), base)] if base else []):
-            pair_rows.append({**run(PAIRS_RUN, tree, 1, mesh=PAIRS_MESH),
-                              "code": f"{code} ({_commit(tree)})"})  # fmt: skip
+            label = f"{code} ({_machine.commit(tree)})"  # before the run: a bad tree stops at once
+            pair_rows.append({**run(PAIRS_RUN, tree, 1, mesh=PAIRS_MESH), "code": label})
             print("pairs", json.dumps(pair_rows[-1]), flush=True)
             write_pairs(pair_rows, info, out_dir, str(base), started)
     return rows, base_rows, scale_rows

@@ -161,8 +161,7 @@ def main(argv=None):
         bench = run_benchmark(args.runs)
     else:
         with _machine.base_checkout(args.base_rev, args.base_dir, "bench-startup-") as base:
-            rev = ["git", "-C", str(base), "rev-parse", "--short", "HEAD"]
-            head = subprocess.run(rev, check=True, capture_output=True, text=True).stdout.strip()
+            head = _machine.commit(base)
             bench = run_benchmark(args.runs, base)
     base_rev = None if args.no_base else head
     path = write_report(bench, info, args.out, base_rev=base_rev)

@@ -22,6 +22,7 @@ import numpy as np
 __all__ = [
     "Parameter",
     "Physics",
+    "distinct_images",
     "mirror_position",
     "mirror_positions",
     "plate_symmetries",
@@ -101,16 +102,8 @@ class Physics:
         The distinct images of :meth:`image` under the plate's symmetries, ``theta`` left
         out (an effect on a line of symmetry is its own image there).
         """
-        theta = np.asarray(theta, dtype=float)
         images = [self.image(model, theta, s) for s in plate_symmetries(model)]
-        if any(t is None for t in images):
-            return []
-        distinct = []
-        for t in images:
-            t = np.asarray(t, dtype=float)
-            if not any(np.allclose(t, q, rtol=1e-9, atol=1e-12) for q in [theta, *distinct]):
-                distinct.append(t)
-        return distinct
+        return [] if any(t is None for t in images) else distinct_images(theta, images)
 
     def settings(self):
         """Fixed choices of this instance that are not fitted, ``{name: value}``.
@@ -208,6 +201,17 @@ class Physics:
         """``{name: value}`` of a parameter vector, for reports and JSON."""
         names = [p.name for p in self.parameters(model, b)]
         return {n: float(v) for n, v in zip(names, theta, strict=True)}
+
+
+def distinct_images(theta, images):
+    """The ``images`` that differ from ``theta`` and from each other (relative 1e-9)."""
+    theta = np.asarray(theta, dtype=float)
+    distinct = []
+    for t in images:
+        t = np.asarray(t, dtype=float)
+        if not any(np.allclose(t, q, rtol=1e-9, atol=1e-12) for q in [theta, *distinct]):
+            distinct.append(t)
+    return distinct
 
 
 def plate_symmetries(model):

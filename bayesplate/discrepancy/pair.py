@@ -26,7 +26,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from .base import Physics, plate_symmetries
+from .base import Physics, distinct_images, plate_symmetries
 from .pencil import _has_ritz, project
 
 __all__ = ["Pair", "pairs_with"]
@@ -160,8 +160,9 @@ class Pair(Physics):
         run on the same plate on a mesh of at most :data:`MIRROR_MESH` elements each way,
         one small eigen solve per combination.
         """
-        if all(self.image(model, theta, s) is not None for s in plate_symmetries(model)):
-            return super().mirror_images(model, theta)
+        images = [self.image(model, theta, s) for s in plate_symmetries(model)]
+        if all(t is not None for t in images):
+            return distinct_images(theta, images)
         ta, tb = self.split(model, _ANY_B, theta)
         images_a = [ta, *self.first.mirror_images(model, ta)]
         images_b = [tb, *self.second.mirror_images(model, tb)]
