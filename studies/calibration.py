@@ -118,6 +118,17 @@ RETIRED = {
         "nominal fit's global stage shares its first round (9433d2b)"
     ),
 }
+#: Rows of one candidate made by these code versions, kept but not counted, and why.
+RETIRED_EFFECT = {
+    "point_support": (
+        ("3b28b25", "b9a300c", "7d51a9c"),
+        "made on 2026-11-26 by the code of 3b28b25, b9a300c or 7d51a9c: since then a rival that "
+        "fits the recordings as well as the best candidate and lies within 4 nats of it makes "
+        "the verdict ambiguous (three point supports had been named a foundation by its prior "
+        "volume alone); rows of other candidates are kept, as the change can only turn an "
+        "explained verdict ambiguous",
+    ),
+}
 LEGACY_CODE = "2026-11-25 (b454113-6b495b0)"  # the label of rows stored without one
 FAMILIES = {"frederiksen_t300": (40, 20), "crossply": (32, 16)}  # diagnose's mesh
 QUICK_FAMILIES = {"frederiksen_t300": (6, 3), "crossply": (8, 4)}
@@ -445,6 +456,7 @@ def run_task(task, quick=False):
         "rival": d.rival.name if d.rival is not None else None,
         "p_value": float(d.p_value), "refit_p": float(d.refit_p_value),
         "gains": {c.name: float(c.log_evidence_gain) for c in d.candidates},
+        "chi2": {c.name: float(c.fit.chi2) for c in d.candidates},
         "probabilities": {k: float(v) for k, v in d.probabilities.items()},
         "ideal_chi2": ideal_chi2, "m": int(f.size),
         "ideal_lambda": noncentrality(f_true, f0),
@@ -575,6 +587,9 @@ def migrate(stored):
         key = _row_key(row)
         row["key"] = key
         why = RETIRED.get(row["code"])
+        codes, because = RETIRED_EFFECT.get(row.get("effect"), ((), None))
+        if why is None and row["code"] in codes:
+            why = because
         if why is None and row["kind"] == "power":
             label = labels.get((row["effect"], size_key(row["size"])))
             if label is None:
@@ -593,8 +608,11 @@ def _now():
     return datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
 
 
-def main(out_dir="reports", quick=False, workers=None, report_only=False):
-    """Run what is not in the cache, write the report and figure; return the report's path."""
+def main(out_dir="reports", quick=False, workers=None, report_only=False, effects=None):
+    """Run what is not in the cache, write the report and figure; return the report's path.
+
+    ``effects``: run only the power replicates of these candidates (default: every replicate).
+    """
     logging.getLogger("bayesplate").setLevel(logging.ERROR)
     workers = workers or (1 if quick else 2)
     stored = load(out_dir, quick)
@@ -607,7 +625,8 @@ def main(out_dir="reports", quick=False, workers=None, report_only=False):
         if not report_only:
             atomic_write_text(path, json.dumps(stored))
     todo = [] if report_only else [t for t in tasks(stored["sizes"], quick)
-                                   if task_key(t) not in stored["rows"]]  # fmt: skip
+                                   if task_key(t) not in stored["rows"]
+                                   and (effects is None or t[2] in effects)]  # fmt: skip
     print(f"{len(todo)} replicates to run ({len(stored['rows'])} cached)", flush=True)
     start, base = time.perf_counter(), stored.get("seconds", 0.0)
     code = code_version()
@@ -1116,5 +1135,7 @@ if __name__ == "__main__":
     parser.add_argument("--workers", type=int, default=None)
     parser.add_argument("--out", default="reports")
     parser.add_argument("--report-only", action="store_true")
+    parser.add_argument("--effect", action="append", choices=list(EFFECTS), default=None,
+                        help="run only this candidate's power replicates (repeatable)")
     args = parser.parse_args()
-    print(main(args.out, args.quick, args.workers, args.report_only))
+    print(main(args.out, args.quick, args.workers, args.report_only, args.effect))

@@ -201,6 +201,22 @@ def test_rows_stored_without_a_code_are_the_retired_legacy_rows():
     assert stored["seconds"] == 0.0 and stored["retired_seconds"] == {cal.LEGACY_CODE: 2770.0}
 
 
+def test_one_candidates_rows_of_a_retired_code_are_set_aside_with_their_reason():
+    (effect, (codes, why)), = cal.RETIRED_EFFECT.items()
+    other = next(name for name in cal.EFFECTS if name != effect)
+    rows = [_row("power", effect, 0, 48000.0, 0, code=codes[0]),
+            _row("power", other, 0, 0.14, 0, code=codes[0]),
+            _row("clean", None, None, None, 0, code=codes[0])]  # fmt: skip
+    table = {**_table(), effect: {"sizes": [48000.0, None, None, None]}}
+    stored = {"sizes": table, "rows": {r["key"]: r for r in rows}, "seconds": 60.0}
+    cal.migrate(stored)
+    assert {r["effect"] for r in stored["rows"].values()} == {other, None}
+    (gone,) = stored["retired"].values()
+    assert gone["effect"] == effect and gone["retired"] == why
+    todo = [t for t in cal.tasks(stored["sizes"]) if cal.task_key(t) not in stored["rows"]]
+    assert any(t[2] == effect for t in todo)  # run again by the current code
+
+
 def test_tasks_run_the_fitted_size_first_with_clean_replicates_between_its_rounds():
     tasks = cal.tasks(_table())
     labels = [t[3] for t in tasks if t[0] == "power"]

@@ -250,7 +250,11 @@ def test_a_taper_across_the_width_is_named_with_its_direction():
     f = plate.solve(stiffness_from_engineering(case.reference), 14).frequency_Hz
     f = np.sort(f * (1 + NOISE * np.random.default_rng(7).standard_normal(f.size)))
     d = diagnose(case.with_measured(frequency_Hz=f, sigma_Hz=NOISE * f), model=model, rng=0)
-    assert d.verdict == "explained" and d.chosen.name == "thickness_taper"
+    # A local stiffness loss (five parameters) fits these recordings about as well (chi2 3.0
+    # against 1.4 on 2026-11-27): the taper is the more probable by its prior volume, and the
+    # verdict may say the tie (verdict.runner_up), the taper named first.
+    assert d.verdict in ("explained", "ambiguous") and d.chosen.name == "thickness_taper"
+    assert d.probabilities["thickness_taper"] > 0.9
     assert d.chosen.parameters["direction"] == "y"
     assert (
         abs(abs(d.chosen.parameters["ratio"]) - 0.15) < 3 * d.chosen.parameters_sd["ratio"] + 0.02

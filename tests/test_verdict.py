@@ -90,24 +90,48 @@ def test_variants_share_their_candidate_prior_and_are_summed():
 class _Result:
     """What the verdict reads of a CandidateResult."""
 
-    def __init__(self, name, gain, refined=True):
+    def __init__(self, name, gain, refined=True, chi2=10.0):
         self.name, self.log_evidence_gain = name, gain
-        self.fit = type("Fit", (), {"refined": refined})()
+        self.fit = type("Fit", (), {"refined": refined, "chi2": chi2})()
 
 
 def test_a_runner_up_within_two_nats_makes_an_explained_mismatch_ambiguous():
     ranked = [_Result("thickness_taper", 3.2), _Result("thickness_taper", 3.1),
               _Result("local_stiffness_loss", 2.6), _Result("point_mass", 0.5)]  # fmt: skip
     p = model_probabilities([(c.name, c.log_evidence_gain) for c in ranked])
-    rival, gap = runner_up(ranked[0], ranked, p)
-    assert rival is ranked[2]  # the other taper direction is a variant, not a rival
+    rival, gap, tie = runner_up(ranked[0], ranked, p)
+    assert (rival, tie) == (ranked[2], "odds")  # the other taper direction: a variant, no rival
     # odds of the taper (its two directions, each half its prior) against the loss
     assert gap == pytest.approx(np.log(0.5 * (np.exp(3.2) + np.exp(3.1)) / np.exp(2.6)))
     assert verdict(1e-6, True, 0.5, 0.01, ranked[0], gap) == ("ambiguous", ranked[0])
     assert verdict(1e-6, True, 0.5, 0.01, ranked[0], 2.5) == ("explained", ranked[0])
     assert verdict(1e-6, True, 1e-4, 0.01, ranked[0], gap) == ("unexplained", None)
     alone = [ranked[0], _Result("point_mass", 3.0, refined=False)]  # not refined: no rival
-    assert runner_up(ranked[0], alone, p) == (None, np.inf)
+    assert runner_up(ranked[0], alone, p) == (None, np.inf, None)
+
+
+def test_a_rival_that_fits_as_well_ties_within_the_prior_margin():
+    """A point support named a foundation on a calibration replicate (chi2 0.7 against 1.6,
+    gains +18.5 and +22.2): the odds, 3.7 nats, were the Occam factors' alone."""
+    ranked = [_Result("elastic_foundation", 22.2, chi2=1.6),
+              _Result("point_support", 18.5, chi2=0.7),
+              _Result("local_stiffness_loss", 9.0, chi2=16.0)]  # fmt: skip
+    p = model_probabilities([(c.name, c.log_evidence_gain) for c in ranked])
+    rival, gap, tie = runner_up(ranked[0], ranked, p, 2.0, 4.0)
+    assert (rival, tie) == (ranked[1], "fit") and gap == pytest.approx(3.7)
+    assert verdict(1e-6, True, 0.5, 0.01, ranked[0], gap, 2.0, tie == "fit")[0] == "ambiguous"
+    # a preference beyond the prior margin is the evidence's: explained, the rival kept
+    assert runner_up(ranked[0], ranked, p, 2.0, 3.5) == (ranked[1], pytest.approx(3.7), None)
+    # one that fits worse by more than the margin (chi2 + 4.1) is no tie however close
+    worse = [ranked[0], _Result("point_support", 19.5, chi2=5.7), ranked[2]]
+    p = model_probabilities([(c.name, c.log_evidence_gain) for c in worse])
+    assert runner_up(worse[0], worse, p, 2.0, 4.0)[2] is None
+    # the first rival not tying, a lower one that fits as well is the rival
+    lower = [ranked[0], _Result("local_stiffness_loss", 20.0, chi2=9.0),
+             _Result("point_support", 18.5, chi2=2.0)]  # fmt: skip
+    p = model_probabilities([(c.name, c.log_evidence_gain) for c in lower])
+    rival, gap, tie = runner_up(lower[0], lower, p, 2.0, 4.0)
+    assert (rival, tie) == (lower[2], "fit")
 
 
 class _Twin(PointMass):

@@ -16,8 +16,9 @@
    the best single candidate's refit is still rejected, two effects at once: the best one
    paired with every other candidate (:mod:`.pair`), ranked on the same evidence scale.
 5. Verdict: ``consistent``, ``explained``, ``ambiguous`` (the refit is consistent but a
-   different candidate's posterior odds are within ``ambiguity_margin``: both are named,
-   and the measurement that would tell them apart, :mod:`.separate`) or ``unexplained``
+   different candidate's posterior odds are within ``ambiguity_margin``, or within
+   ``prior_margin`` while it fits the recordings as well: both are named, and the
+   measurement that would tell them apart, :mod:`.separate`) or ``unexplained``
    (:mod:`.verdict`), with the posterior probability of every model
    (:mod:`.probabilities`).
 
@@ -60,6 +61,7 @@ from .verdict import (
     predictive_p_values,
     refit_test,
     runner_up,
+    tie_text,
     unidentified,
     unsettled_notes,
     verdict,
@@ -89,6 +91,7 @@ DEFAULTS = {
     "basin_margin": 2.0,  # chi2 + chi2_prior: another nominal optimum this close fits as well
     "workers": 1,  # processes for independent fits (fork); the CLI uses 2
     "ambiguity_margin": 2.0,  # nats (odds about 7:1): a different candidate this close ties
+    "prior_margin": 4.0,  # nats (odds about 55:1): one that fits as well this close ties too
     "pairs": True,  # fit two effects at once when the best single one is rejected
     "reassign": True,  # the assignment made again at the verdict's fit (not by order/index)
 }
@@ -209,6 +212,7 @@ def diagnose(
     basin_margin=DEFAULTS["basin_margin"],
     workers=DEFAULTS["workers"],
     ambiguity_margin=DEFAULTS["ambiguity_margin"],
+    prior_margin=DEFAULTS["prior_margin"],
     pairs=DEFAULTS["pairs"],
     reassign=DEFAULTS["reassign"],
     prior_odds=None,
@@ -255,7 +259,12 @@ def diagnose(
         Processes for the independent fits (fork); the results do not depend on it.
     ambiguity_margin : float
         Posterior log-odds of the best candidate against a different one under which the
-        verdict is ``ambiguous``, nats (2: about 7 to 1).
+        verdict is ``ambiguous``, nats (2: about 7 to 1); also the log-likelihood margin of
+        a rival that fits as well.
+    prior_margin : float
+        Log-odds under which a different candidate that fits the recordings as well makes
+        the verdict ``ambiguous``: the odds are then its prior volume's alone, nats (4:
+        about 55 to 1; :func:`.verdict.runner_up`).
     pairs : bool
         Fit two effects at once when the best single candidate's refit is rejected.
     reassign : bool
@@ -325,7 +334,8 @@ def diagnose(
 
         nominal_problem = JointProblem(model, Y, sigma, mu_b, V_b, modes)
         options = (alpha, evidence_threshold, n_starts, unidentified_ratio, mesh_error_ratio,
-                   refine_margin, basin_margin, ambiguity_margin, pairs, prior_odds)  # fmt: skip
+                   refine_margin, basin_margin, ambiguity_margin, prior_margin, pairs,
+                   prior_odds)  # fmt: skip
         stages = Stages(store, digest(Y, sigma, measured.frequency_Hz, modes, mu_b, V_b, options,
                                       plate_digest(model), physics, fast), say)  # fmt: skip
         rough, nominal = nominal_stage(nominal_problem, (mu_b, V_b), coarse,
@@ -408,18 +418,16 @@ def diagnose(
             loose = unidentified(best.fit, V_b, unidentified_ratio)
         probabilities = model_probabilities([(c.name, c.log_evidence_gain) for c in ranked],
                                             prior_odds)  # fmt: skip
-        rival, gap = runner_up(best, ranked, probabilities) if warranted else (None, np.inf)
-        outcome, chosen = verdict(p_value, warranted, refit_p, alpha, best, gap, ambiguity_margin)
+        rival, gap, tie = (runner_up(best, ranked, probabilities, ambiguity_margin, prior_margin)
+                           if warranted else (None, np.inf, None))  # fmt: skip
+        outcome, chosen = verdict(p_value, warranted, refit_p, alpha, best, gap,
+                                  ambiguity_margin, tie == "fit")  # fmt: skip
         separation = None
         if outcome == "ambiguous":
             separation = separate(
                 model, best, rival, modes, float(np.median(sigma_Hz / measured.frequency_Hz))
             )
-            notes.append(
-                f"{best.name} and {rival.name} fit about equally well (posterior probabilities "
-                f"{probabilities[best.name]:.2f} and {probabilities[rival.name]:.2f}): "
-                + separation.text()
-            )
+            notes.append(tie_text(best, rival, probabilities, tie) + separation.text())
         else:
             rival = None
         if outcome == "consistent":

@@ -20,13 +20,14 @@ __all__ = [
     "refit_test",
     "rival_optima",
     "runner_up",
+    "tie_text",
     "unidentified",
     "unsettled_notes",
     "verdict",
 ]
 
 
-def verdict(p_value, warranted, refit_p, alpha, best, gap=np.inf, margin=2.0):
+def verdict(p_value, warranted, refit_p, alpha, best, gap=np.inf, margin=2.0, tied=False):
     """The verdicts of the issue.
 
     Parameters
@@ -46,6 +47,9 @@ def verdict(p_value, warranted, refit_p, alpha, best, gap=np.inf, margin=2.0):
     margin : float
         A ``gap`` under this many nats makes an explained mismatch ``ambiguous`` (2 nats:
         odds under about 7 to 1).
+    tied : bool
+        The runner-up fits the recordings as well as ``best`` (:func:`runner_up`'s ``"fit"``
+        tie): an explained mismatch is ``ambiguous`` whatever the gap.
 
     Returns
     -------
@@ -54,14 +58,26 @@ def verdict(p_value, warranted, refit_p, alpha, best, gap=np.inf, margin=2.0):
         ``best`` when explained or ambiguous (its fit is the refit).
     """
     if warranted and refit_p >= alpha:
-        return ("ambiguous" if gap < margin else "explained"), best
+        return ("ambiguous" if gap < margin or tied else "explained"), best
     if p_value >= alpha and not warranted:
         return "consistent", None
     return "unexplained", None
 
 
-def runner_up(best, ranked, probabilities):
-    """The best refined candidate of another name than ``best``, and the log-odds between.
+def runner_up(best, ranked, probabilities, margin=2.0, prior_margin=np.inf):
+    """The rival of ``best``, a refined candidate of another name; the log-odds between.
+
+    Two kinds of tie make a rival:
+
+    - ``"odds"``: the best refined candidate of another name is within ``margin`` nats of
+      ``best`` in posterior log-odds (the issue's rule);
+    - ``"fit"``: a lower one fits the recordings as well as ``best`` (its best fit's
+      log-likelihood ``-chi2 / 2`` no more than ``margin`` below ``best``'s) and lies within
+      ``prior_margin`` nats. The odds between the two then come from their Occam factors
+      alone, the prior volume of parameters the recordings hardly fix (a point support's
+      position, say, against a foundation's one stiffness): a factor of two in the prior
+      widths of two or three such parameters moves them by 1.4-2 nats, so a preference of a
+      few nats is the priors' and not the recordings', and is said as a tie.
 
     Parameters
     ----------
@@ -70,19 +86,49 @@ def runner_up(best, ranked, probabilities):
         Best first.
     probabilities : dict
         ``{name: posterior probability}`` (:func:`.probabilities.model_probabilities`).
+    margin : float
+        Nats, both in log-odds and in log-likelihood.
+    prior_margin : float
+        Nats of log-odds within which a rival that fits as well ties (default: none does).
 
     Returns
     -------
     rival : CandidateResult or None
         Another variant of ``best``'s candidate (a taper along the other side) is no rival.
+        The best refined candidate of another name, unless it does not tie and a lower one
+        ties by its fit.
     gap : float
         ``ln P(best's name) - ln P(rival's name)``, nats; ``inf`` without a rival.
+    tie : {"odds", "fit"} or None
+        Why ``rival`` ties; None when it does not.
     """
-    rival = next((c for c in ranked if c.fit.refined and c.name != best.name), None)
-    if rival is None:
-        return None, np.inf
-    with np.errstate(divide="ignore"):
-        return rival, float(np.log(probabilities[best.name]) - np.log(probabilities[rival.name]))
+    others = [c for c in ranked if c.fit.refined and c.name != best.name]
+    if not others:
+        return None, np.inf, None
+
+    def gap_to(c):
+        with np.errstate(divide="ignore"):
+            return float(np.log(probabilities[best.name]) - np.log(probabilities[c.name]))
+
+    first = others[0]
+    if gap_to(first) < margin:
+        return first, gap_to(first), "odds"
+    for c in others:
+        if 0.5 * (c.fit.chi2 - best.fit.chi2) <= margin and gap_to(c) < prior_margin:
+            return c, gap_to(c), "fit"
+    return first, gap_to(first), None
+
+
+def tie_text(best, rival, probabilities, tie):
+    """The note's sentence on why ``best`` and ``rival`` tie (:func:`runner_up`'s ``tie``)."""
+    odds = (f"posterior probabilities {probabilities[best.name]:.2f} and "
+            f"{probabilities[rival.name]:.2f}")  # fmt: skip
+    if tie == "fit":
+        return (f"{best.name} and {rival.name} fit the recordings about equally well (chi2 "
+                f"{best.fit.chi2:.1f} and {rival.fit.chi2:.1f}); {best.name} is the more "
+                f"probable ({odds}) by its prior volume alone, not by the recordings: "
+                )  # fmt: skip
+    return f"{best.name} and {rival.name} fit about equally well ({odds}): "
 
 
 def predictive_p_values(fit_, problem):
