@@ -189,6 +189,15 @@ def test_concealment_quick(tmp_path):
     assert (tmp_path / "concealment.md").read_text().count("| control |") == 1
 
 
+def test_concealment_runs_again_a_single_retired_row_and_no_other():
+    study = load_study(ROOT / "studies" / "concealment.py")
+    ((code, key), why), = study.RETIRED_ROWS.items()
+    assert study._retired(key, {"code": code}) == why
+    assert study._retired(str(int(key) + 1), {"code": code}) is None  # its neighbour is kept
+    old = next(c for c in study.RETIRED if c is not None)
+    assert study._retired(key, {"code": old}) == study.RETIRED[old]  # a whole code's rows
+
+
 @pytest.mark.slow
 def test_diagnose_frederiksen_quick(tmp_path):
     # The measured plate on half the mesh: Frederiksen's own constants reproduce every
