@@ -74,10 +74,12 @@ def runner_up(best, ranked, probabilities, margin=2.0, prior_margin=np.inf):
     - ``"fit"``: a lower one fits the recordings as well as ``best`` (its best fit's
       log-likelihood ``-chi2 / 2`` no more than ``margin`` below ``best``'s) and lies within
       ``prior_margin`` nats. The odds between the two then come from their Occam factors
-      alone, the prior volume of parameters the recordings hardly fix (a point support's
-      position, say, against a foundation's one stiffness): a factor of two in the prior
-      widths of two or three such parameters moves them by 1.4-2 nats, so a preference of a
-      few nats is the priors' and not the recordings', and is said as a tie.
+      alone, ``ln(prior width / posterior width)`` of each parameter the recordings hardly
+      fix (a point support's position, say, against a foundation's one stiffness). Those
+      prior widths are conventions (a position uniform over the plate, a stiffness over
+      decades), not knowledge: halving or doubling one moves the odds by ln 2 = 0.7 nats,
+      and two candidates differ by two to five such parameters (1.4-3.5 nats). A preference
+      of a few nats is then the priors' and not the recordings', and is said as a tie.
 
     Parameters
     ----------
