@@ -326,6 +326,8 @@ def _provenance(rows):
                    f"{len(mine)} row{'s' * (len(mine) != 1)}, "
                    f"{sum(r['seconds'] for r in mine) / 60:.0f} min of "
                    "diagnose." if loads else f"Rows made by `{code}`: {len(mine)}.")  # fmt: skip
+    for (code, key), why in RETIRED_ROWS.items():
+        out.append(f"Scenario {key}'s row of `{code}` was run again ({why}).")
     return out
 
 
