@@ -454,6 +454,7 @@ def run_task(task, quick=False):
         "size_label": label, "size": size, "rep": rep, "verdict": d.verdict,
         "chosen": d.chosen.name if d.chosen else None,
         "rival": d.rival.name if d.rival is not None else None,
+        "also": [c.name for c in d.also_tied],
         "p_value": float(d.p_value), "refit_p": float(d.refit_p_value),
         "gains": {c.name: float(c.log_evidence_gain) for c in d.candidates},
         "chi2": {c.name: float(c.fit.chi2) for c in d.candidates},
@@ -479,8 +480,8 @@ def named(row):
     """Whether diagnose named the concealed effect: explained with it, or ambiguous with it."""
     if row["verdict"] == "explained":
         return row["chosen"] == row["effect"]
-    if row["verdict"] == "ambiguous":
-        return row["effect"] in (row["chosen"], row["rival"])
+    if row["verdict"] == "ambiguous":  # every candidate named (rows before "also" name two)
+        return row["effect"] in (row["chosen"], row["rival"], *row.get("also", []))
     return False
 
 
@@ -490,8 +491,8 @@ def wrong_name(row):
 
 
 def wrong_pair(row):
-    """An ``ambiguous`` verdict whose two named candidates are both not the concealed one."""
-    return row["verdict"] == "ambiguous" and row["effect"] not in (row["chosen"], row["rival"])
+    """An ``ambiguous`` verdict none of whose named candidates is the concealed one."""
+    return row["verdict"] == "ambiguous" and not named(row)
 
 
 def covered(row):

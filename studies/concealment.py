@@ -222,6 +222,7 @@ def _row(label, physics, size, theta, d, case, model, seconds):
         "effect": label, "size": size, "p_value": d.p_value, "verdict": d.verdict,
         "chosen": d.chosen.name if d.chosen else None, "recovered": recovered,
         "rival": d.rival.name if getattr(d, "rival", None) is not None else None,
+        "also": [c.name for c in getattr(d, "also_tied", [])],
         "truth": truth_params, "before": before, "after": after, "seconds": seconds,
         "mirrors": d.chosen.mirror_images if d.chosen else [],
         "gains": {c.name: c.log_evidence_gain for c in d.candidates},
@@ -336,9 +337,10 @@ def _findings(rows):
     controls = [r for r in rows if r["effect"] == "control"]
     rejected = [r for r in rows if r["effect"] != "control" and r["p_value"] < 0.01]
     named = [r for r in rejected if same(r["chosen"], r["effect"])]
-    # `ambiguous` names two: right when the truth is one of them
+    # `ambiguous` names two or more: right when the truth is one of them
     among = [r for r in rejected if r["verdict"] == "ambiguous"
-             and (same(r["chosen"], r["effect"]) or same(r.get("rival"), r["effect"]))]  # fmt: skip
+             and any(same(name, r["effect"])
+                     for name in (r["chosen"], r.get("rival"), *r.get("also", [])))]  # fmt: skip
     better = [r for r in named if r["after"] is not None
               and np.abs(r["after"]).max() < np.abs(r["before"]).max()]  # fmt: skip
     within = [r for r in named if recovery_z(r) is not None and recovery_z(r) <= 2.0]

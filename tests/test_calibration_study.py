@@ -53,6 +53,10 @@ def test_a_name_counts_when_explained_or_among_the_two_ambiguous_ones():
     assert not cal.named(row) and cal.wrong_name(row)
     row = {**row, "verdict": "ambiguous", "rival": "cutout"}
     assert cal.named(row) and not cal.wrong_name(row)
+    # a third candidate that ties as well is named too
+    third = {**row, "rival": "point_mass", "also": ["cutout"]}
+    assert cal.named(third) and not cal.wrong_pair(third)
+    assert cal.wrong_pair({**third, "also": []}) and not cal.named({**third, "also": []})
     for verdict in ("consistent", "unexplained"):
         row = {**row, "verdict": verdict, "chosen": None, "rival": None}
         assert not cal.named(row) and not cal.wrong_name(row)

@@ -14,6 +14,7 @@ from scipy.special import expit
 from test_diagnose import MESH, NOISE, _plate1_case, _recordings
 
 from bayesplate import PlateModel, stiffness_from_engineering
+from bayesplate.cli.diagnose import diagnosis_text
 from bayesplate.discrepancy import ElasticFoundation, PointMass, ThicknessTaper
 from bayesplate.discrepancy.base import mirror_positions
 from bayesplate.discrepancy.diagnose import diagnose
@@ -21,7 +22,7 @@ from bayesplate.discrepancy.pair import Pair, pairs_with
 from bayesplate.discrepancy.pencil import candidate_pencil
 from bayesplate.discrepancy.probabilities import NOMINAL, model_probabilities
 from bayesplate.discrepancy.separate import separate
-from bayesplate.discrepancy.verdict import runner_up, verdict
+from bayesplate.discrepancy.verdict import runner_up, tie_text, ties, verdict
 from bayesplate.io import diagnosis_to_dict
 
 N_MODES = 12
@@ -126,6 +127,20 @@ def test_a_rival_that_fits_as_well_ties_within_the_prior_margin():
     worse = [ranked[0], _Result("point_support", 19.5, chi2=5.7), ranked[2]]
     p = model_probabilities([(c.name, c.log_evidence_gain) for c in worse])
     assert runner_up(worse[0], worse, p, 2.0, 4.0)[2] is None
+    # three that tie (a calibration replicate: a point support of 32,000 N/m, 2026-11-27): all
+    # are named, each name once, best first
+    three = [_Result("elastic_foundation", 4.08, chi2=2.69),
+             _Result("local_stiffness_loss", 1.88, chi2=2.82),
+             _Result("point_support", 1.03, chi2=3.14),
+             _Result("thickness_taper", 0.0, chi2=13.8), _Result("thickness_taper", -0.5),
+             _Result("point_mass", -1.19, chi2=2.90)]  # fmt: skip
+    p = model_probabilities([(c.name, c.log_evidence_gain) for c in three])
+    tied = ties(three[0], three, p, 2.0, 4.0)
+    assert [(c.name, kind) for c, kind in tied] == [
+        ("local_stiffness_loss", "fit"), ("point_support", "fit")]  # point mass: 5.3 nats
+    assert runner_up(three[0], three, p, 2.0, 4.0)[0] is three[1]
+    text = tie_text(three[0], tied, p)
+    assert "local_stiffness_loss" in text and "so does point_support (chi2 3.1" in text
     # the first rival not tying, a lower one that fits as well is the rival
     lower = [ranked[0], _Result("local_stiffness_loss", 20.0, chi2=9.0),
              _Result("point_support", 18.5, chi2=2.0)]  # fmt: skip
@@ -140,12 +155,20 @@ class _Twin(PointMass):
     name = "point_mass_twin"
 
 
-def test_a_constructed_tie_is_ambiguous_and_names_both(model):
+class _Triplet(PointMass):
+    name = "point_mass_triplet"
+
+
+def test_a_constructed_tie_is_ambiguous_and_names_all(model):
     truth = np.array([15.0, 50.0, 30.0])  # as tests/test_diagnose.py: 15 g at (50, 30) mm
     case = _recordings(_plate1_case(), PointMass(), truth, seed=2)
-    d = diagnose(case, model=model, rng=0, n_starts=1, physics=[PointMass(), _Twin()])
+    d = diagnose(case, model=model, rng=0, n_starts=1,
+                 physics=[PointMass(), _Twin(), _Triplet()])  # fmt: skip
     assert d.verdict == "ambiguous"
-    assert {d.chosen.name, d.rival.name} == {"point_mass", "point_mass_twin"}
+    named = [d.chosen.name, d.rival.name, *(c.name for c in d.also_tied)]
+    assert sorted(named) == ["point_mass", "point_mass_triplet", "point_mass_twin"]
+    assert all(f"or {name}" in diagnosis_text(d) for name in named[1:])
+    assert diagnosis_to_dict(d)["also_tied"] == named[2:]
     # the same physics: equal evidence, equal probabilities, nothing would separate them
     assert d.chosen.log_evidence_gain == pytest.approx(d.rival.log_evidence_gain, abs=1e-6)
     assert d.probabilities["point_mass"] == pytest.approx(d.probabilities["point_mass_twin"])

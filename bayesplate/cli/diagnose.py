@@ -77,9 +77,9 @@ def run(args):
 def diagnosis_text(d):
     """Human-readable summary of a diagnosis."""
     rival = getattr(d, "rival", None)
+    others = "".join(f" or {c.name}" for c in [rival, *getattr(d, "also_tied", [])] if c)
     lines = [
-        f"verdict: {d.verdict}"
-        + (f" ({d.chosen.name}" + (f" or {rival.name})" if rival else ")") if d.chosen else ""),
+        f"verdict: {d.verdict}" + (f" ({d.chosen.name}{others})" if d.chosen else ""),
         f"nominal fit: chi2 = {d.nominal.chi2:.1f} on {d.dof:.1f} dof, p = {d.p_value:.3g}",
     ]
     if d.located_modes:
@@ -118,8 +118,8 @@ def register(sub):
         "candidate physics (point_mass, thickness_taper, ply_misalignment, "
         "elastic_foundation, local_stiffness_loss, cutout, point_support) and, when the best "
         "single one is still rejected, pairs of them by Laplace evidence, refit, and give a "
-        "verdict: consistent, explained, ambiguous (two candidates fit about equally: both named, "
-        "with the measurement that would tell them apart) or unexplained.",
+        "verdict: consistent, explained, ambiguous (two or more candidates fit about equally: all "
+        "named, with the measurement that would tell the first two apart) or unexplained.",
     )
     add_case_argument(p)
     add_mesh_option(p)

@@ -60,8 +60,8 @@ from .verdict import (
     basins_note,
     predictive_p_values,
     refit_test,
-    runner_up,
     tie_text,
+    ties,
     unidentified,
     unsettled_notes,
     verdict,
@@ -142,6 +142,8 @@ class Diagnosis:
         When ``ambiguous``: the runner-up, a different candidate.
     separation : Separation or None
         When ``ambiguous``: the measurement that would tell ``chosen`` from ``rival``.
+    also_tied : list of CandidateResult
+        When ``ambiguous``: the further candidates that tie with ``chosen`` as well.
     peak_modes : numpy.ndarray of int, shape (m_all,), or None
         The computed mode (0-based) of every measured peak in the pass kept, -1 where it was
         left out as spurious; set when the assignment was made again at the verdict's fit
@@ -172,6 +174,7 @@ class Diagnosis:
     rival: CandidateResult | None = None
     separation: Separation | None = None
     peak_modes: np.ndarray | None = None
+    also_tied: list = field(default_factory=list, repr=False)
 
 
 def coarse_model(model):
@@ -421,18 +424,15 @@ def diagnose(
             loose = unidentified(best.fit, V_b, unidentified_ratio)
         probabilities = model_probabilities([(c.name, c.log_evidence_gain) for c in ranked],
                                             prior_odds)  # fmt: skip
-        rival, gap, tie = (runner_up(best, ranked, probabilities, ambiguity_margin, prior_margin)
-                           if warranted else (None, np.inf, None))  # fmt: skip
-        outcome, chosen = verdict(p_value, warranted, refit_p, alpha, best, gap,
-                                  ambiguity_margin, tie == "fit")  # fmt: skip
-        separation = None
+        tied = (ties(best, ranked, probabilities, ambiguity_margin, prior_margin)
+                if warranted else [])  # fmt: skip
+        outcome, chosen = verdict(p_value, warranted, refit_p, alpha, best, tied=bool(tied))
+        rival, separation = (tied[0][0] if outcome == "ambiguous" else None), None
         if outcome == "ambiguous":
             separation = separate(
                 model, best, rival, modes, float(np.median(sigma_Hz / measured.frequency_Hz))
             )
-            notes.append(tie_text(best, rival, probabilities, tie) + separation.text())
-        else:
-            rival = None
+            notes.append(tie_text(best, tied, probabilities) + separation.text())
         if outcome == "consistent":
             region, mirrors = None, []
         if outcome == "unexplained":
@@ -452,7 +452,7 @@ def diagnose(
         return Diagnosis(
             outcome, nominal, dof, p_value, mode_p, located, kinds, maps, region, mirrors, ranked,
             chosen, refit_dof, refit_p, loose, sigma_Hz, err, measured.frequency_Hz, notes, scans,
-            probabilities, rival, separation,
+            probabilities, rival, separation, also_tied=[c for c, _ in tied[1:]] if rival else [],
         )  # fmt: skip
 
     # a second pass starts from the same random state (whether or not the first came from

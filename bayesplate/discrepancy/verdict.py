@@ -21,6 +21,7 @@ __all__ = [
     "rival_optima",
     "runner_up",
     "tie_text",
+    "ties",
     "unidentified",
     "unsettled_notes",
     "verdict",
@@ -69,8 +70,8 @@ def runner_up(best, ranked, probabilities, margin=2.0, prior_margin=np.inf):
 
     Two kinds of tie make a rival:
 
-    - ``"odds"``: the best refined candidate of another name is within ``margin`` nats of
-      ``best`` in posterior log-odds (the issue's rule);
+    - ``"odds"``: a refined candidate of another name is within ``margin`` nats of ``best``
+      in posterior log-odds (the issue's rule);
     - ``"fit"``: a lower one fits the recordings as well as ``best`` (its best fit's
       log-likelihood ``-chi2 / 2`` no more than ``margin`` below ``best``'s) and lies within
       ``prior_margin`` nats. The odds between the two then come from their Occam factors
@@ -97,8 +98,8 @@ def runner_up(best, ranked, probabilities, margin=2.0, prior_margin=np.inf):
     -------
     rival : CandidateResult or None
         Another variant of ``best``'s candidate (a taper along the other side) is no rival.
-        The best refined candidate of another name, unless it does not tie and a lower one
-        ties by its fit.
+        The first candidate that ties (:func:`ties`), else the best refined one of another
+        name.
     gap : float
         ``ln P(best's name) - ln P(rival's name)``, nats; ``inf`` without a rival.
     tie : {"odds", "fit"} or None
@@ -107,30 +108,58 @@ def runner_up(best, ranked, probabilities, margin=2.0, prior_margin=np.inf):
     others = [c for c in ranked if c.fit.refined and c.name != best.name]
     if not others:
         return None, np.inf, None
-
-    def gap_to(c):
-        with np.errstate(divide="ignore"):
-            return float(np.log(probabilities[best.name]) - np.log(probabilities[c.name]))
-
-    first = others[0]
-    if gap_to(first) < margin:
-        return first, gap_to(first), "odds"
-    for c in others:
-        if 0.5 * (c.fit.chi2 - best.fit.chi2) <= margin and gap_to(c) < prior_margin:
-            return c, gap_to(c), "fit"
-    return first, gap_to(first), None
+    tied = ties(best, ranked, probabilities, margin, prior_margin)
+    rival, tie = tied[0] if tied else (others[0], None)
+    return rival, _gap(best, rival, probabilities), tie
 
 
-def tie_text(best, rival, probabilities, tie):
-    """The note's sentence on why ``best`` and ``rival`` tie (:func:`runner_up`'s ``tie``)."""
+def ties(best, ranked, probabilities, margin=2.0, prior_margin=np.inf):
+    """Every refined candidate of another name that ties with ``best``, best first.
+
+    The ties of :func:`runner_up`; each name once, its best refined variant. An ``ambiguous``
+    verdict names them all: when a third candidate ties as well, naming two would leave out
+    one the recordings do not rule out.
+
+    Returns
+    -------
+    list of (CandidateResult, str)
+        Each with its kind of tie, ``"odds"`` or ``"fit"``.
+    """
+    out, seen = [], {best.name}
+    for c in ranked:
+        if not c.fit.refined or c.name in seen:
+            continue
+        seen.add(c.name)
+        gap = _gap(best, c, probabilities)
+        if gap < margin:
+            out.append((c, "odds"))
+        elif 0.5 * (c.fit.chi2 - best.fit.chi2) <= margin and gap < prior_margin:
+            out.append((c, "fit"))
+    return out
+
+
+def _gap(best, c, probabilities):
+    """``ln P(best's name) - ln P(c's name)``, nats."""
+    with np.errstate(divide="ignore"):
+        return float(np.log(probabilities[best.name]) - np.log(probabilities[c.name]))
+
+
+def tie_text(best, tied, probabilities):
+    """The note's sentence on why ``best`` and the candidates ``tied`` (:func:`ties`) tie."""
+    rival, tie = tied[0]
     odds = (f"posterior probabilities {probabilities[best.name]:.2f} and "
             f"{probabilities[rival.name]:.2f}")  # fmt: skip
     if tie == "fit":
-        return (f"{best.name} and {rival.name} fit the recordings about equally well (chi2 "
+        text = (f"{best.name} and {rival.name} fit the recordings about equally well (chi2 "
                 f"{best.fit.chi2:.1f} and {rival.fit.chi2:.1f}); {best.name} is the more "
-                f"probable ({odds}) by its prior volume alone, not by the recordings: "
-                )  # fmt: skip
-    return f"{best.name} and {rival.name} fit about equally well ({odds}): "
+                f"probable ({odds}) by its prior volume alone, not by the recordings")  # fmt: skip
+    else:
+        text = f"{best.name} and {rival.name} fit about equally well ({odds})"
+    if len(tied) > 1:
+        more = ", ".join(f"{c.name} (chi2 {c.fit.chi2:.1f}, probability "
+                         f"{probabilities[c.name]:.2f})" for c, _ in tied[1:])  # fmt: skip
+        text += f"; so {'does' if len(tied) == 2 else 'do'} {more}"
+    return text + ": "
 
 
 def predictive_p_values(fit_, problem):

@@ -486,6 +486,7 @@ def diagnosis_to_dict(d):
         "refit": refit,
         "probabilities": dict(getattr(d, "probabilities", {})),
         "rival": _rival(d),
+        "also_tied": [c.name for c in getattr(d, "also_tied", [])],
         "unidentified": d.unidentified,
         "notes": d.notes,
         # the computed mode (1-based) of every measured peak, null where left out as

@@ -334,6 +334,7 @@ def _diagnose_section(data, figures):
         f"**Verdict: {d['verdict']}**"
         + (f" ({d['chosen']}" if d["chosen"] else "")
         + (f" or {d['rival']['physics']}" if d.get("rival") else "")
+        + "".join(f" or {name}" for name in d.get("also_tied") or [])
         + (")" if d["chosen"] else ""),
         "",
         f"- Nominal fit: chi-square {nominal['chi2']:.1f} on {nominal['dof']:.1f} degrees of "
