@@ -221,6 +221,19 @@ def test_one_candidates_rows_of_a_retired_code_are_set_aside_with_their_reason()
     assert any(t[2] == effect for t in todo)  # run again by the current code
 
 
+def test_a_single_row_set_aside_is_the_only_one_of_its_code_run_again():
+    ((code, key), why), = cal.RETIRED_ROWS.items()
+    effect, size, rep = key.split("/")[2], float(key.split("/")[3]), int(key.split("/")[4])
+    rows = [_row("power", effect, 0, size, rep, code=code),
+            _row("power", effect, 0, size, rep + 1, code=code)]  # fmt: skip
+    table = {**_table(), effect: {"sizes": [size, None, None, None]}}
+    stored = {"sizes": table, "rows": {r["key"]: r for r in rows}, "seconds": 60.0}
+    cal.migrate(stored)
+    assert list(stored["rows"]) == [key.replace(f"/{rep}", f"/{rep + 1}")]
+    (gone,) = stored["retired"].values()
+    assert gone["key"] == key and gone["retired"] == why
+
+
 def test_tasks_run_the_fitted_size_first_with_clean_replicates_between_its_rounds():
     tasks = cal.tasks(_table())
     labels = [t[3] for t in tasks if t[0] == "power"]
