@@ -11,7 +11,7 @@ with their 0.2 % deviation; diagnose runs blind on the nominal case, pairing by 
   verdict other than ``consistent`` is a false alarm.
 - **Power**: each candidate concealed in the Frederiksen plate at three sizes, ``N_POWER``
   replicates each: how often diagnose names it (``explained`` with it, or ``ambiguous`` with it
-  among the two named), against the ideal test: the chi-square of the recordings against the
+  among those named), against the ideal test: the chi-square of the recordings against the
   nominal plate on the recordings' own mesh at the *true* constants, ``m = 14`` degrees of
   freedom, rejecting at the diagnosis's 1 %. The sizes (``SIZES``) are those at which the
   ideal test rejects with probability 0.5 and 0.9, and three times the latter: its
@@ -829,9 +829,9 @@ def report(rows, stored, quick, workers):
               "log-log interpolation), rounded to two digits; `fitted P(reject)` and `ideal "
               "P(reject)` are then computed at the rounded size. `ideal rejects`: the ideal "
               "test's count on the replicates' recordings. `named right`: `explained` with the "
-              "concealed candidate, or `ambiguous` with it among the two. `wrong names`: "
-              "`explained` with another candidate, and (after the +) `ambiguous` between two "
-              "others. `fitted, 1 dof`: the most powerful test of the fitted nominal model, "
+              "concealed candidate, or `ambiguous` with it among those named. `wrong names`: "
+              "`explained` with another candidate, and (after the +) `ambiguous` among "
+              "others only. `fitted, 1 dof`: the most powerful test of the fitted nominal model, "
               "aimed at the effect (below); `fitted, diagnose's deviations`: the fitted test "
               "with the deviations diagnose tests against (below); `nominal rejected`: "
               "diagnose's own nominal chi-square at 1 % (p < 0.01; it names a candidate whose "
@@ -1071,7 +1071,7 @@ def _targets(rows, cells, size_table, left, inside, quick):
     pair = sum(wrong_pair(r) for r in power)
     out.append(
         f"- wrong names: {wrong} `explained` with another candidate and {pair} `ambiguous` "
-        f"between two others, of {len(power)} power replicates run (target: none)"
+        f"among others only, of {len(power)} power replicates run (target: none)"
     )
     if inside:
         out.append(
