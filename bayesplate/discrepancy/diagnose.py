@@ -17,8 +17,8 @@
    paired with every other candidate (:mod:`.pair`), ranked on the same evidence scale.
 5. Verdict: ``consistent``, ``explained``, ``ambiguous`` (the refit is consistent but a
    different candidate's posterior odds are within ``ambiguity_margin``, or within
-   ``prior_margin`` while it fits the recordings as well: both are named, and the
-   measurement that would tell them apart, :mod:`.separate`) or ``unexplained``
+   ``prior_margin`` while it fits the recordings as well: all that tie are named, and the
+   measurement that would tell the first two apart, :mod:`.separate`) or ``unexplained``
    (:mod:`.verdict`), with the posterior probability of every model
    (:mod:`.probabilities`).
 
