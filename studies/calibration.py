@@ -597,11 +597,7 @@ def migrate(stored):
             row.pop("size_index")
         key = _row_key(row)
         row["key"] = key
-        why = RETIRED.get(row["code"])
-        codes, because = RETIRED_EFFECT.get(row.get("effect"), ((), None))
-        if why is None and row["code"] in codes:
-            why = because
-        why = why or RETIRED_ROWS.get((row["code"], key))
+        why = _retired(row, key)
         if why is None and row["kind"] == "power":
             label = labels.get((row["effect"], size_key(row["size"])))
             if label is None:
@@ -614,6 +610,14 @@ def migrate(stored):
             retired[f"{row['code']}|{key}"] = {**row, "retired": why}
     stored["rows"] = kept
     return stored
+
+
+def _retired(row, key):
+    """Why a cached row is set aside (its code, its candidate's rows of that code, or it
+    alone), or None."""
+    codes, because = RETIRED_EFFECT.get(row.get("effect"), ((), None))
+    return (RETIRED.get(row["code"]) or (because if row["code"] in codes else None)
+            or RETIRED_ROWS.get((row["code"], key)))  # fmt: skip
 
 
 def _now():

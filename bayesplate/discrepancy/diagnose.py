@@ -267,7 +267,7 @@ def diagnose(
     prior_margin : float
         Log-odds under which a different candidate that fits the recordings as well makes
         the verdict ``ambiguous``: the odds are then its prior volume's alone, nats (4:
-        about 55 to 1; :func:`.verdict.runner_up`).
+        about 55 to 1; :func:`.verdict.ties`).
     pairs : bool
         Fit two effects at once when the best single candidate's refit is rejected.
     reassign : bool

@@ -49,8 +49,8 @@ def verdict(p_value, warranted, refit_p, alpha, best, gap=np.inf, margin=2.0, ti
         A ``gap`` under this many nats makes an explained mismatch ``ambiguous`` (2 nats:
         odds under about 7 to 1).
     tied : bool
-        The runner-up fits the recordings as well as ``best`` (:func:`runner_up`'s ``"fit"``
-        tie): an explained mismatch is ``ambiguous`` whatever the gap.
+        Another candidate ties with ``best`` (:func:`ties`, of either kind): an explained
+        mismatch is ``ambiguous`` whatever ``gap``.
 
     Returns
     -------
