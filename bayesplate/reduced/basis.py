@@ -18,6 +18,12 @@ from .symmetry import _SIGN_SEED, _by_class
 # a mode in the other symmetry classes, the remainder of a mode already in the basis) are
 # rounding noise; they are left out of the compression.
 _NEGLIGIBLE = 1e-2
+# A class's part of a snapshot whose energy before the projection is below this fraction of
+# the negligible energy is noise the projection cannot lift above it: it is set aside before
+# any product with the model's matrices. (Taking out its M-projection on the basis raises a
+# part's energy by at most (1 + sqrt(lambda_max / lambda_1))**2 of the basis, a few hundred
+# for the modes of a fast model; the modes' parts in other classes lie 1e-16-1e-12 below.)
+_UNLIFTABLE = 1e-4
 
 
 def _rigid_basis(model, symmetries):
@@ -70,8 +76,15 @@ def _grow(model, symmetries, basis, classes, terms, constant, snapshots, referen
     constant : numpy.ndarray, shape (r + q, r + q), or None
     """
     new, labels = [], []
-    for label, part in _by_class(_energy_normalised(model, snapshots, reference), symmetries):
-        D = _new_directions(model, basis[:, classes == label], part, reference, rank_tol)
+    K = model.stiffness(reference)
+    S, KS = _energy_normalised(K, snapshots)
+    # a symmetry commutes with K: the class parts of K S are K times the class parts of S,
+    # and the energies of the parts of one snapshot add up to its own
+    for (label, part), (_, k_part) in zip(
+        _by_class(S, symmetries), _by_class(KS, symmetries), strict=True
+    ):
+        live = np.einsum("di,di->i", part, k_part) > _UNLIFTABLE * _NEGLIGIBLE * rank_tol**2
+        D = _new_directions(model, K, basis[:, classes == label], part[:, live], rank_tol)
         new.append(D)
         labels += [label] * D.shape[1]
     new = np.hstack(new)
@@ -83,24 +96,25 @@ def _grow(model, symmetries, basis, classes, terms, constant, snapshots, referen
     return basis, classes, terms, constant
 
 
-def _energy_normalised(model, snapshots, reference):
-    """Snapshots scaled to unit strain energy at ``reference``."""
-    K = model.stiffness(reference)
-    return snapshots / np.sqrt(np.einsum("di,di->i", snapshots, K @ snapshots))
+def _energy_normalised(K, snapshots):
+    """Snapshots scaled to unit strain energy ``s^T K s``, and ``K`` times them."""
+    KS = K @ snapshots
+    scale = 1.0 / np.sqrt(np.einsum("di,di->i", snapshots, KS))
+    return snapshots * scale, KS * scale
 
 
-def _new_directions(model, V, S, reference, rank_tol):
+def _new_directions(model, K, V, S, rank_tol):
     """New M-orthonormal basis vectors of one class, compressed in the energy norm.
 
     Parameters
     ----------
     model : PlateModel
+    K : scipy.sparse matrix, shape (n_dofs, n_dofs)
+        The stiffness of the energy inner product (at the basis's reference ``b``).
     V : numpy.ndarray, shape (n_dofs, r_c)
         The M-orthonormal basis vectors of the class so far.
     S : numpy.ndarray, shape (n_dofs, k)
         The class's parts of snapshots of unit strain energy.
-    reference : numpy.ndarray, shape (6,)
-        ``b`` of the energy inner product.
     rank_tol : float
         Directions with less than ``rank_tol**2`` of a snapshot's energy are dropped.
 
@@ -108,7 +122,9 @@ def _new_directions(model, V, S, reference, rank_tol):
     -------
     numpy.ndarray, shape (n_dofs, q)
     """
-    M, K = model.mass, model.stiffness(reference)
+    M = model.mass
+    if S.shape[1] == 0:
+        return np.zeros((V.shape[0], 0))
     S = _project_out(M, V, S)
     KS = K @ S
     keep = np.einsum("di,di->i", S, KS) > _NEGLIGIBLE * rank_tol**2
