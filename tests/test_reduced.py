@@ -362,3 +362,32 @@ def test_frederiksen_50x50_build_certify_and_speed(record_property):
     print("\n" + summary)
     assert fast.certified
     assert full / reduced > 100
+
+
+def test_parts_set_aside_before_the_products_change_nothing(monkeypatch):
+    # a snapshot's parts in the symmetry classes it does not belong to are rounding noise,
+    # set aside by their energy before any product with M or K: the basis spans the same
+    # space (same size, the same Ritz values to rounding) as when every part is carried
+    # through the projection and dropped after it, with several times fewer columns carried
+    from bayesplate.reduced import basis as growth
+
+    model, mean_b, box = _setup("frederiksen_t300", mesh=(12, 6))
+    carried = []
+    inner = growth._new_directions
+
+    def counted(model, K, V, S, rank_tol):
+        carried[-1] += S.shape[1]
+        return inner(model, K, V, S, rank_tol)
+
+    monkeypatch.setattr(growth, "_new_directions", counted)
+    built = []
+    for factor in (growth._UNLIFTABLE, 0.0):  # the default, then every part carried
+        monkeypatch.setattr(growth, "_UNLIFTABLE", factor)
+        carried.append(0)
+        built.append(ReducedModel.build(model, mean_b, box, 10, n_snapshots=4, rng=SEED))
+    kept, every = built
+    assert kept.size == every.size
+    # every class but one of each mode carries noise only
+    assert 0 < carried[0] and carried[0] * 3 < carried[1]
+    for b in box.sample(5, np.random.default_rng(SEED)):
+        np.testing.assert_allclose(kept.eigenvalues(b, 10), every.eigenvalues(b, 10), rtol=1e-9)
