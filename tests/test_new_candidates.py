@@ -13,7 +13,7 @@ import scipy.linalg
 
 from bayesplate import laminate
 from bayesplate.discrepancy import Cutout, PointSupport
-from bayesplate.discrepancy.cutout import RESIDUAL, cutout_map, disc_fractions
+from bayesplate.discrepancy.cutout import RESIDUAL, cutout_map, disc_fractions, discs_fractions
 from bayesplate.discrepancy.point_support import point_support_map, reference_stiffness
 from bayesplate.model import PlateModel
 
@@ -53,6 +53,21 @@ def test_disc_fractions_add_up_to_the_disc_area(rng):
     # a disc holding an element whole (10 mm x 8.8 mm, centred): all of it
     e = 3 * mesh.nx + 4
     assert disc_fractions(mesh, mesh.centroids[e], 0.0135)[e] == pytest.approx(1.0, abs=1e-14)
+
+
+def test_discs_at_many_centres_are_the_single_discs(rng):
+    # the scan's path (every centre at once, each over the window of elements around its
+    # bounding square) against one disc at a time, centres anywhere (off the plate too)
+    mesh = _model().mesh
+    centres = rng.uniform([-0.01, -0.01], [A + 0.01, B + 0.01], size=(40, 2))
+    for d in (0.004, 0.02, 0.06):
+        many = discs_fractions(mesh, centres, d)
+        assert many.shape == (40, mesh.n_elements)
+        for c, row in zip(centres, many, strict=True):
+            np.testing.assert_allclose(row, disc_fractions(mesh, c, d), rtol=0, atol=1e-12)
+    # a disc larger than the plate: its window is the whole mesh, every element whole (to
+    # the round-off of four areas of order d^2 differenced over one element's)
+    np.testing.assert_allclose(discs_fractions(mesh, [[A / 2, B / 2]], 4 * A), 1.0, atol=1e-12)
 
 
 def test_zero_diameter_is_the_nominal_plate():
