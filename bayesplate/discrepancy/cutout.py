@@ -103,8 +103,9 @@ def discs_fractions(mesh, centres, diameter):
     lo = (mesh.centroids - size / 2)[window] - centres[:, None]  # (c, wy wx, 2)
     hi = lo + size
     (x0, y0), (x1, y1) = np.moveaxis(lo, -1, 0), np.moveaxis(hi, -1, 0)
-    area = (_quadrant_area(x1, y1, r) - _quadrant_area(x0, y1, r)
-            - _quadrant_area(x1, y0, r) + _quadrant_area(x0, y0, r))  # fmt: skip
+    # the four corners' quadrants in one call (a few dozen array operations, not four times)
+    q = _quadrant_area(np.stack([x1, x0, x1, x0]), np.stack([y1, y1, y0, y0]), r)
+    area = q[0] - q[1] - q[2] + q[3]
     np.put_along_axis(out, window, np.clip(area / (mesh.dx * mesh.dy), 0.0, 1.0), axis=1)
     return out
 
