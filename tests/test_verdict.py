@@ -377,3 +377,25 @@ def test_a_named_candidates_rivals_left_on_the_coarse_model_are_refined():
     assert _rivals(results, threshold=3.0) == [1]
     assert _rivals(results, threshold=4.0) == []  # the best may not be named: no rivals
     assert _rivals([result(-0.7, False)], threshold=3.0) == []
+
+
+def test_every_named_fit_not_settled_gets_its_note():
+    # an ambiguous verdict names the best and every candidate tied with it: a note for each
+    # fit among them (and the nominal one) whose full-model check did not settle, none else
+    from types import SimpleNamespace
+
+    from bayesplate.discrepancy.polish import FitCheck
+    from bayesplate.discrepancy.verdict import unsettled_notes
+
+    def fitted(name, settled, objective=10.0):
+        check = FitCheck(objective, objective, 1e-6, 0.0 if settled else 2.5, 6, 6, settled)
+        return SimpleNamespace(name=name, fit=SimpleNamespace(check=check))
+
+    nominal = fitted("nominal", True).fit
+    best, second, third = fitted("a", False, 12.0), fitted("b", True), fitted("c", False, 14.0)
+    notes = unsettled_notes(nominal, best, [(second, "fit"), (third, "odds")])
+    assert len(notes) == 2
+    assert notes[0].startswith("a: the full model's objective 12 could still fall by 2.5")
+    assert notes[1].startswith("c: the full model's objective 14 could still fall by 2.5")
+    assert unsettled_notes(nominal, None) == []
+    assert len(unsettled_notes(fitted("nominal", False).fit, None)) == 1

@@ -446,7 +446,7 @@ def diagnose(
         if outcome != "consistent" and region is not None and mirrors:
             notes.append("the plate's symmetry makes the mirror images of the located region fit "
                          "equally well from frequencies alone")  # fmt: skip
-        notes += unsettled_notes(nominal, [c for c in (chosen, rival) if c is not None])
+        notes += unsettled_notes(nominal, chosen, tied if rival else [])
         say(f"verdict: {outcome}" + (f" ({chosen.name})" if chosen else "")
             + (f" or {rival.name}" if rival else ""))  # fmt: skip
         return Diagnosis(

@@ -255,8 +255,14 @@ def refit_test(fit_, m):
     return dof, float(chi2_dist.sf(fit_.chi2, dof))
 
 
-def unsettled_notes(nominal, named):
-    """A note for each fit the verdict rests on whose full-model check did not settle."""
+def unsettled_notes(nominal, chosen, tied=()):
+    """A note for each fit the verdict rests on whose full-model check did not settle.
+
+    The nominal fit, the named candidate ``chosen`` (or None) and, for an ``ambiguous``
+    verdict, every candidate ``tied`` with it (``(candidate, kind)`` pairs, as
+    :func:`ties` gives them).
+    """
+    named = [c for c in (chosen, *(t for t, _ in tied)) if c is not None]
     notes = []
     for label, fit_ in [("the nominal fit", nominal), *((c.name, c.fit) for c in named)]:
         check = fit_.check
