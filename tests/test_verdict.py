@@ -104,9 +104,15 @@ def test_a_runner_up_within_two_nats_makes_an_explained_mismatch_ambiguous():
     assert (rival, tie) == (ranked[2], "odds")  # the other taper direction: a variant, no rival
     # odds of the taper (its two directions, each half its prior) against the loss
     assert gap == pytest.approx(np.log(0.5 * (np.exp(3.2) + np.exp(3.1)) / np.exp(2.6)))
-    assert verdict(1e-6, True, 0.5, 0.01, ranked[0], gap) == ("ambiguous", ranked[0])
-    assert verdict(1e-6, True, 0.5, 0.01, ranked[0], 2.5) == ("explained", ranked[0])
-    assert verdict(1e-6, True, 1e-4, 0.01, ranked[0], gap) == ("unexplained", None)
+    assert verdict(1e-6, True, 0.5, 0.01, ranked[0], tie is not None) == ("ambiguous", ranked[0])
+    # a rival 2.5 nats below that fits worse (chi2 + 8) is no tie: explained
+    apart = [_Result("thickness_taper", 3.2, chi2=1.0),
+             _Result("local_stiffness_loss", 0.7, chi2=9.0)]  # fmt: skip
+    q = model_probabilities([(c.name, c.log_evidence_gain) for c in apart])
+    assert runner_up(apart[0], apart, q)[1:] == (pytest.approx(2.5), None)
+    assert ties(apart[0], apart, q) == []
+    assert verdict(1e-6, True, 0.5, 0.01, apart[0], False) == ("explained", apart[0])
+    assert verdict(1e-6, True, 1e-4, 0.01, ranked[0], tie is not None) == ("unexplained", None)
     alone = [ranked[0], _Result("point_mass", 3.0, refined=False)]  # not refined: no rival
     assert runner_up(ranked[0], alone, p) == (None, np.inf, None)
 
@@ -120,7 +126,7 @@ def test_a_rival_that_fits_as_well_ties_within_the_prior_margin():
     p = model_probabilities([(c.name, c.log_evidence_gain) for c in ranked])
     rival, gap, tie = runner_up(ranked[0], ranked, p, 2.0, 4.0)
     assert (rival, tie) == (ranked[1], "fit") and gap == pytest.approx(3.7)
-    assert verdict(1e-6, True, 0.5, 0.01, ranked[0], gap, 2.0, tie == "fit")[0] == "ambiguous"
+    assert verdict(1e-6, True, 0.5, 0.01, ranked[0], tie is not None)[0] == "ambiguous"
     # a preference beyond the prior margin is the evidence's: explained, the rival kept
     assert runner_up(ranked[0], ranked, p, 2.0, 3.5) == (ranked[1], pytest.approx(3.7), None)
     # one that fits worse by more than the margin (chi2 + 4.1) is no tie however close

@@ -28,7 +28,7 @@ __all__ = [
 ]
 
 
-def verdict(p_value, warranted, refit_p, alpha, best, gap=np.inf, margin=2.0, tied=False):
+def verdict(p_value, warranted, refit_p, alpha, best, tied=False):
     """The verdicts of the issue.
 
     Parameters
@@ -42,15 +42,10 @@ def verdict(p_value, warranted, refit_p, alpha, best, gap=np.inf, margin=2.0, ti
     alpha : float
         Significance of the tests.
     best : CandidateResult or None
-    gap : float
-        Posterior log-odds of ``best`` against the runner-up, a *different* candidate
-        (another name, not another variant), nats; ``inf`` when there is none.
-    margin : float
-        A ``gap`` under this many nats makes an explained mismatch ``ambiguous`` (2 nats:
-        odds under about 7 to 1).
     tied : bool
-        Another candidate ties with ``best`` (:func:`ties`, of either kind): an explained
-        mismatch is ``ambiguous`` whatever ``gap``.
+        Another candidate ties with ``best`` (:func:`ties`: within the ambiguity margin of
+        log-odds, or fitting as well within the prior margin): an explained mismatch is
+        ``ambiguous``.
 
     Returns
     -------
@@ -59,7 +54,7 @@ def verdict(p_value, warranted, refit_p, alpha, best, gap=np.inf, margin=2.0, ti
         ``best`` when explained or ambiguous (its fit is the refit).
     """
     if warranted and refit_p >= alpha:
-        return ("ambiguous" if gap < margin or tied else "explained"), best
+        return ("ambiguous" if tied else "explained"), best
     if p_value >= alpha and not warranted:
         return "consistent", None
     return "unexplained", None
