@@ -18,7 +18,7 @@ __all__ = ["Cutout", "cutout_map", "cutout_scan", "disc_fractions", "discs_fract
 #: own (its modes are those of a patch the size of the hole, held by the plate around it).
 RESIDUAL = 1e-4
 #: Elements times centres of the discs of one call of :func:`discs_fractions` in the scan
-#: (a few arrays of this many floats at a time).
+#: (the size of the fractions it returns; what it computes is the windows' share of that).
 _SCAN_CHUNK = 2**18
 
 

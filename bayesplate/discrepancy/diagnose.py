@@ -448,7 +448,7 @@ def diagnose(
                          "equally well from frequencies alone")  # fmt: skip
         notes += unsettled_notes(nominal, chosen, tied if rival else [])
         say(f"verdict: {outcome}" + (f" ({chosen.name})" if chosen else "")
-            + (f" or {rival.name}" if rival else ""))  # fmt: skip
+            + "".join(f" or {c.name}" for c, _ in (tied if rival else [])))  # fmt: skip
         return Diagnosis(
             outcome, nominal, dof, p_value, mode_p, located, kinds, maps, region, mirrors, ranked,
             chosen, refit_dof, refit_p, loose, sigma_Hz, err, measured.frequency_Hz, notes, scans,
