@@ -8,8 +8,11 @@ measurement points against every measured shape (MAC), scored with the frequency
 (:func:`bayesplate.assignment.assign_with_shapes`), one-to-one by the Hungarian method over
 more computed modes than measured, so that a mode missing from the test or an extra one is
 tolerated; a measured mode that no computed mode resembles is left unpaired and dropped.
-Without shapes or mode numbers the default is pairing by order, the paper's; the most
-probable assignment of frequencies (:mod:`bayesplate.assignment`) is an option. While an
+Without shapes or mode numbers the default is pairing by order, the paper's, *checked*
+(:func:`checks_order`): the most probable assignment of frequencies
+(:mod:`bayesplate.assignment`) is made again at the answer, and where it is not the order
+(a mode the test missed, a spurious peak) the answer is made by that assignment instead;
+the assignment by likelihood throughout is an option. While an
 estimator iterates, the computed modes can change order
 (two close frequencies cross); :func:`track` follows them from one iterate to the next by the
 modal assurance criterion (MAC) of successive eigenvectors.
@@ -41,6 +44,8 @@ __all__ = [
     "pair_by_order",
     "pair_by_index",
     "assign_by_mac",
+    "checks_order",
+    "assignment_at",
     "track",
     "pair_measured",
     "resolve_pairing",
@@ -275,6 +280,8 @@ class Pairing:
         m = self.modes.size if m is None and self.measured is None else m
         if self.how == "order":
             text = "by order: the i-th measured frequency with the i-th computed elastic mode"
+            if self.assignment is not None:
+                text += " (checked: the most probable assignment of the frequencies)"
         elif self.how == "index":
             text = "by the mode numbers the case file gives (measured.mode)"
         elif self.how == "likelihood":
@@ -328,6 +335,66 @@ def resolve_pairing(measured, how="auto"):
     if measured.shapes is not None and measured.points is not None:
         return "mac"
     return "order" if measured.mode is None else "index"
+
+
+def checks_order(measured, how):
+    """Whether `how` asks for pairing by order checked by the most probable assignment.
+
+    ``"auto"`` on a measurement with neither shapes nor mode numbers: the paper's pairing
+    by order is used, and the assignment by likelihood made again at the answer (the
+    estimate, the sampler's MAP, diagnose's verdict fit) decides whether it stands. Order
+    alone cannot see a mode the test missed or a peak that is not a bending mode; the
+    assignment alone, made before the fit, can explain a concealed defect away as missed
+    modes and spurious peaks. Checked at the answer, a complete test keeps its order
+    results to the bit.
+
+    Parameters
+    ----------
+    measured : bayesplate.io.Measurement
+    how : str or Pairing
+        A pairing's name or a :class:`Pairing` (never checked: it is fixed).
+
+    Returns
+    -------
+    bool
+    """
+    if not isinstance(how, str) or how != "auto":
+        return False
+    return resolve_pairing(measured, how) == "order"
+
+
+def assignment_at(case, model, b, covariance_b, pairing, modal=None):
+    """The most probable assignment at `b`, over a fixed pairing's modes, searched from it.
+
+    What checks a pairing by order at an answer (:func:`checks_order`): the assignment by
+    likelihood (:func:`bayesplate.assignment.most_probable`) over the ``pairing.n_modes()``
+    lowest computed modes (all that a fast model made for that pairing holds), the constants
+    integrated out over `covariance_b` centred at `b`.
+
+    Parameters
+    ----------
+    case : bayesplate.io.Case
+    model : ForwardModel
+        Anything with ``solve(b, n_modes)`` (the full model or a fast one); one solve.
+    b : array_like, shape (6,)
+        The answer, Pa.
+    covariance_b : array_like, shape (6, 6)
+        The prior's covariance of ``b``, Pa^2.
+    pairing : Pairing
+        The pairing in use.
+    modal : ModalResult, optional
+        The modes at `b` if already computed (then no solve; ``pairing.n_modes()`` of them
+        are used).
+
+    Returns
+    -------
+    bayesplate.assignment.Assignment
+    """
+    b = np.asarray(b, dtype=float)
+    extra = pairing.n_modes() - case.measured.size
+    again = pair_measured(case, model, b, "likelihood", extra_modes=extra, modal=modal,
+                          prior=(b, covariance_b), start=pairing)  # fmt: skip
+    return again.assignment
 
 
 def shape_mac(measurement, model, vectors):
@@ -397,7 +464,8 @@ def pair_measured(
         ("likelihood") and that sets the computed frequencies' predictive deviations
         ("mac"); default ``b`` and the covariance of the case's prior (first order).
     start : Pairing, optional
-        ``how == "likelihood"``: a pairing in use, searched from as well.
+        ``how == "likelihood"``: a pairing in use (an assignment, or a fixed pairing such as
+        by order), searched from as well.
 
     Returns
     -------
@@ -449,17 +517,21 @@ def _pair_by_likelihood(measured, model, b, extra_modes, modal, prior, start):
     """:func:`pair_measured` by the most probable assignment of frequencies."""
     m = measured.size
     b = np.asarray(b, dtype=float)
+    n = m + int(extra_modes)
     if modal is None:
-        modal = model.solve(b, m + int(extra_modes))
+        modal = model.solve(b, n)
     mu_b, V_b = prior
     initial = None
     if start is not None and start.assignment is not None:
         initial = start.assignment.modes
+    elif start is not None:  # a fixed pairing (by order, say): its peaks' modes, -1 left out
+        initial = np.full(m, -1)
+        initial[start.kept(m)] = start.modes
     a = most_probable(
         measured.frequency_Hz,
         measured.sigma_Hz,
-        modal.eigenvalues,
-        modal.sensitivities,
+        modal.eigenvalues[:n],
+        modal.sensitivities[:n],
         b,
         mu_b,
         V_b,

@@ -41,7 +41,7 @@ import numpy as np
 from scipy.stats import chi2 as chi2_dist
 
 from ..model import PlateModel
-from ..pairing import Pairing
+from ..pairing import Pairing, checks_order
 from ..parallel import fork_map
 from ..posterior import observed_eigenvalues, prior_in_stiffness
 from ..quantities import hz_from_eigenvalue
@@ -240,7 +240,8 @@ def diagnose(
     pairing : {"auto", "mac", "likelihood", "index", "order"} or Pairing
         Measured-to-computed modes (:func:`bayesplate.pairing.pair_measured` at the prior
         mean, as :func:`bayesplate.estimators.estimate` takes it): "auto" pairs by shape
-        and frequency when the case has shapes, else by mode numbers if any, else by order;
+        and frequency when the case has shapes, else by mode numbers if any, else by order
+        checked (the assignment made again at the verdict's fit: `reassign`);
         "likelihood" takes the assignment B settles on (on `model`). Unpaired measured modes
         (spurious peaks) are left out.
     alpha : float
@@ -271,11 +272,10 @@ def diagnose(
     pairs : bool
         Fit two effects at once when the best single candidate's refit is rejected.
     reassign : bool
-        When the pairing is the assignment by likelihood: make it again at the fit the
-        verdict rests on and, where it differs, diagnose again with it, and keep the pass
-        that explains all peaks best (:mod:`.reassign`). Pairing by order or index is kept
-        as asked, and pairing by shapes too (made again from frequencies alone it would
-        ignore them).
+        When the pairing is the assignment by likelihood or by order checked ("auto"):
+        make it again at the fit the verdict rests on and, where it differs, diagnose again
+        with it, and keep the pass that explains all peaks best (:mod:`.reassign`). Pairing
+        by order or index is kept as asked, and pairing by shapes too.
     prior_odds : dict, optional
         ``{candidate name: prior odds against the nominal model}`` (default 1 for every
         candidate; a case-file key for them is not defined yet).
@@ -302,6 +302,7 @@ def diagnose(
     model = model or PlateModel.from_case(case)
     physics = physics or all_candidates()
     mu_b, V_b = prior_in_stiffness(case.prior.mean, case.prior.sd, "full")
+    checked = checks_order(case.measured, pairing)  # by order, the null: every peak a mode
     if not isinstance(pairing, Pairing):
         from ..estimators import settle_pairing
 
@@ -459,10 +460,9 @@ def diagnose(
     # the store, which leaves the state unused)
     again = copy.deepcopy(rng)
     first = one_pass(pairing, rng)
-    if not reassign or pairing.how != "likelihood" or pairing.assignment is None:
-        # paired by order or index as asked, or by shapes (made again by frequency alone
-        # it would ignore them): the assignment is kept
-        return first
+    assigned = pairing.how == "likelihood" and pairing.assignment is not None
+    if not reassign or not (checked or assigned):
+        return first  # by order, index or shapes as asked: kept
     return made_again(first, lambda p: one_pass(p, again), model, pairing, case.measured,
                       (mu_b, V_b), say)  # fmt: skip
 

@@ -1,7 +1,8 @@
 """Each model under its own best assignment of the same measured peaks.
 
-Without measured shapes (or with them), which computed mode explains which peak is settled
-once, by B under the nominal model (:func:`bayesplate.estimators.settle_pairing`). A plate
+Without measured shapes, which computed mode explains which peak is the order (the default:
+every peak a mode, none missed) or settled once, by B under the nominal model
+(:func:`bayesplate.estimators.settle_pairing`, ``pairing="likelihood"``). A plate
 with an effect the nominal model leaves out may order its modes differently: the model
 that explains the recordings may explain them under another assignment. So, after a pass,
 the assignment is made again (:func:`bayesplate.assignment.most_probable`) at the fit the
@@ -208,9 +209,11 @@ def made_again(first, one_pass, model, pairing, measured, prior, say):
         ``one_pass(pairing) -> Diagnosis``: diagnose again with another assignment.
     model : PlateModel
     pairing : bayesplate.pairing.Pairing
-        The settled assignment (``how == "likelihood"``).
+        The assignment of the first pass (by likelihood, or by order checked).
     measured : Measurement
-        Every measured peak and its deviation (Hz).
+        Every measured peak and its deviation (Hz); a pass's paired peaks are assigned again
+        with the deviations it fitted them with (its ``sigma_Hz``: widened by the mesh's
+        error, which would otherwise call the upper peaks of a coarse mesh spurious).
     prior : tuple of numpy.ndarray
         ``(mu_b, V_b)``.
     say : callable
@@ -225,14 +228,16 @@ def made_again(first, one_pass, model, pairing, measured, prior, say):
     passes = []  # (diagnosis, assignment used, score, what the check found)
     while True:
         fit_, label, log_evidence = verdict_fit(current)
-        change, terms, best = check(model, fit_, label, used, f, s, prior)
+        s_pass = np.array(s)  # the deviations the pass fitted (widened by its mesh's error)
+        s_pass[used >= 0] = current.sigma_Hz
+        change, terms, best = check(model, fit_, label, used, f, s_pass, prior)
         passes.append((current, used, log_evidence + terms, change))
         tried = [p[1] for p in passes]
         if (not change.changed or len(passes) == MAX_PASSES
                 or any(np.array_equal(best.modes, t) for t in tried)):  # fmt: skip
             break
         say(f"assignment made again: {change.describe()}; diagnosing again with it")
-        current, used = one_pass(pairing_of(best, pairing.how)), best.modes
+        current, used = one_pass(pairing_of(best, "likelihood")), best.modes
     if len(passes) == 1:
         note = (f"assignment made again at {label}'s constants: the most probable one is "
                 "the one used")  # fmt: skip

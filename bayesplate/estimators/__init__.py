@@ -33,7 +33,7 @@ fast model, each answer confirmed by the full model), :mod:`~.result` (:class:`E
 """
 
 from .conventions import CONVENTIONS, Conventions, resolve_conventions
-from .estimate import estimate, estimate_on_fast, settle_pairing
+from .estimate import OrderRefuted, estimate, estimate_on_fast, refuted_order, settle_pairing
 from .fast import (
     FAST_MIN_DOFS,
     FORWARDS,
@@ -65,6 +65,8 @@ __all__ = [
     "resolve_forward",
     "modes_to_certify",
     "settle_pairing",
+    "OrderRefuted",
+    "refuted_order",
     "run",
     "b_step",
     "mve_step",

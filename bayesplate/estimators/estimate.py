@@ -2,20 +2,42 @@
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from .. import laminate
 from ..model import PlateModel
-from ..pairing import Pairing, pair_measured, resolve_pairing
+from ..pairing import Pairing, assignment_at, checks_order, pair_measured, resolve_pairing
 from ..posterior import GaussianProblem, prior_in_stiffness
 from .conventions import resolve_conventions
 from .fast import case_fast_model, confirmed_run, modes_to_certify, resolve_forward
 from .iteration import DEFAULT_MAX_ITER, run
 from .result import METHODS
 
-__all__ = ["estimate", "estimate_on_fast", "settle_pairing"]
+log = logging.getLogger(__name__)
+
+__all__ = ["OrderRefuted", "estimate", "estimate_on_fast", "refuted_order", "settle_pairing"]
+
+
+class OrderRefuted(Exception):
+    """Pairing by order checked on a model too small to make the assignment by likelihood.
+
+    Raised inside a run on a fast model (which holds the order's modes only) when the most
+    probable assignment at the estimate is not the order; the caller redoes the run by
+    likelihood on a fast model that holds the modes it needs.
+    """
+
+    def __init__(self, assignment):
+        super().__init__(refuted_order(assignment))
+        self.assignment = assignment
+
+
+def refuted_order(assignment):
+    """One clause: why pairing by order was set aside (its 1-based numbers)."""
+    return (f"pairing by order set aside: at its estimate the most probable assignment has "
+            f"{assignment.describe()}; paired by likelihood instead")  # fmt: skip
 
 
 def estimate(
@@ -120,7 +142,25 @@ def estimate(
     _, V = prior_in_stiffness(mean, sd, "full")
     if how != "likelihood":
         pair = pair_measured(case, model, b0, how, prior=(b0, V))
-        return _estimate_paired(case, model, pair, method, mean, sd, options)
+        result = _estimate_paired(case, model, pair, method, mean, sd, options)
+        if not checks_order(case.measured, pairing):
+            return result
+        at = result.b if laminate.is_physical(result.b) else b0
+        found = assignment_at(case, model, at, V, pair)
+        if found.in_order:
+            note = " (pairing by order, checked: the most probable assignment at the estimate)"
+            return _assigned(result, replace(pair, assignment=found), 1, note)
+        if not isinstance(model, PlateModel):
+            # a fast model holds the order's modes only: the caller redoes it by likelihood
+            raise OrderRefuted(found)
+        by_likelihood = estimate(
+            case, method, model=model, tol=tol, max_iter=max_iter, convention=convention,
+            prior_mean=prior_mean, prior_sd=prior_sd, stage1_tol=stage1_tol,
+            stage2_factor=stage2_factor, stage2_sd=stage2_sd, pairing="likelihood",
+            tracking=tracking, forward="full",
+        )  # fmt: skip
+        refuted = refuted_order(found)
+        return replace(by_likelihood, message=f"{by_likelihood.message}; {refuted}")
     # by the most probable assignment (the constants integrated out over the prior's spread
     # centred where the model is linearised: a profile fit with its Occam factor, not the
     # evidence under a far prior mean, which would rather drop the peaks that disagree with
@@ -173,7 +213,9 @@ def estimate_on_fast(case, method="MVE", model=None, fast=None, *, rng=None, **o
     """
     model = model or PlateModel.from_case(case)
     pairing = options.pop("pairing", "auto")
-    if not isinstance(pairing, Pairing) and resolve_pairing(case.measured, pairing) != "likelihood":
+    checked = checks_order(case.measured, pairing)
+    if (not isinstance(pairing, Pairing) and not checked
+            and resolve_pairing(case.measured, pairing) != "likelihood"):  # fmt: skip
         # a fixed pairing is made as the full path makes it: on the full model at the prior
         pairing, _ = settle_pairing(case, model, pairing, prior_mean=options.get("prior_mean"))
     n_modes = modes_to_certify(case, pairing)
@@ -189,7 +231,15 @@ def estimate_on_fast(case, method="MVE", model=None, fast=None, *, rng=None, **o
     def run_on(reduced):
         return estimate(case, method, model=reduced, pairing=pairing, forward="full", **options)
 
-    return confirmed_run(run_on, model, fast)
+    try:
+        return confirmed_run(run_on, model, fast)
+    except OrderRefuted as refuted:
+        # order checked and set aside at the estimate: by likelihood, on a fast model that
+        # holds the modes the assignment may reach (a new one: this one holds the order's)
+        log.info("%s", refuted)
+        result, fast = estimate_on_fast(case, method, model, None, rng=rng,
+                                        **{**options, "pairing": "likelihood"})  # fmt: skip
+        return replace(result, message=f"{result.message}; {refuted}"), fast
 
 
 def settle_pairing(

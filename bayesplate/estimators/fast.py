@@ -33,7 +33,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..pairing import MAC_EXTRA_MODES, Pairing
+from ..pairing import MAC_EXTRA_MODES, Pairing, checks_order
 from ..posterior import prior_in_stiffness
 from ..quantities import hz_from_eigenvalue
 from ..reduced import Box, CertifiedModel, fast_model, relative_errors
@@ -86,12 +86,16 @@ def resolve_forward(forward, model):
 def modes_to_certify(case, pairing):
     """Elastic modes a fast model must hold for `pairing` (a Pairing, or a pairing's name).
 
-    A :class:`~bayesplate.pairing.Pairing` needs its own ``n_modes()``; an assignment by
-    likelihood, still to be made, may reach any of the ``m + MAC_EXTRA_MODES`` modes it is
-    offered.
+    A :class:`~bayesplate.pairing.Pairing` needs its own ``n_modes()``, and so does pairing
+    by order checked (``"auto"`` without shapes or mode numbers: the check looks at the
+    order's modes only, and a run whose order is set aside is redone on a fast model of its
+    own); an assignment by likelihood, still to be made, may reach any of the
+    ``m + MAC_EXTRA_MODES`` modes it is offered.
     """
     if isinstance(pairing, Pairing):
         return pairing.n_modes()
+    if checks_order(case.measured, pairing):
+        return Pairing.from_measurement(case.measured, "order").n_modes()
     return case.measured.size + MAC_EXTRA_MODES
 
 

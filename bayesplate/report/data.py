@@ -96,10 +96,14 @@ class ReportData:
         The pairing step's :class:`bayesplate.pairing.Pairing`; but ``"likelihood"`` by name,
         so that each step settles the assignment as :func:`bayesplate.estimators.estimate`
         does, from B's warm-started rounds (given only the pairing, B from the prior mean
-        can reach another optimum when a mode is missing).
+        can reach another optimum when a mode is missing); and ``"auto"`` for pairing by
+        order checked (:func:`bayesplate.pairing.checks_order`), which each step checks
+        again at its own answer.
         """
-        if self.options.pairing == "likelihood":
+        if self.options.pairing == "likelihood" or self.results["pairing"]["how"] == "likelihood":
             return "likelihood"
+        if self.results["pairing"].get("checked"):
+            return "auto"  # by order, each step checking it at its answer
         return self.pairing()
 
     def pairing(self):

@@ -107,7 +107,12 @@ def _measured_section(data, figures):
             )
         rows.append(row)
     lines = ["### Measured frequencies", "", f"Pairing: {r['describe']}."]
-    if pairing.mac is None:
+    if r.get("checked"):
+        lines[-1] += (" The case has no measured mode shapes: each estimate, the posterior "
+                      "and diagnose check the order against the most probable assignment of "
+                      "the frequencies at their own answer, and say so where they set it "
+                      "aside.")  # fmt: skip
+    elif pairing.mac is None:
         lines[-1] += " The case has no measured mode shapes, so the pairing is not checked."
     lines += [""] + _table(head, rows) + [""]
     return lines + _image(

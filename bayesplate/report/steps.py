@@ -12,7 +12,7 @@ import warnings
 import numpy as np
 
 from ..laminate import stiffness_from_engineering
-from ..pairing import MAC_EXTRA_MODES
+from ..pairing import MAC_EXTRA_MODES, checks_order
 from ..quantities import to_case_units
 
 # Chain bounds of the posterior section: the sampler's own defaults (5000 steps, ESS 2000)
@@ -35,6 +35,8 @@ def pairing_step(case, model, how="auto"):
         warnings.simplefilter("always")
         from ..estimators import settle_pairing
 
+        # by order checked: each step checks it at its own answer (at the prior mean an
+        # assignment is no test of the order: far from the answer it sets good pairs aside)
         pairing, _ = settle_pairing(case, model, how, modal=modal)
     data = {
         "how": pairing.how,
@@ -43,6 +45,7 @@ def pairing_step(case, model, how="auto"):
         "warnings": [str(w.message) for w in caught],
         "prior_frequency_Hz": modal.frequency_Hz,
         "threshold": pairing.threshold,
+        "checked": checks_order(case.measured, how),
     }
     if pairing.measured is not None:
         data["measured"] = pairing.measured

@@ -32,12 +32,12 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..estimators import resolve_conventions, run, settle_pairing
+from ..estimators import refuted_order, resolve_conventions, run, settle_pairing
 from ..inputs import input_jacobian, input_sources
 from ..inputs_posterior import declared_readings, input_conditional, linear_input_certificate
 from ..model import PlateModel
-from ..pairing import Pairing
-from ..posterior import INPUT_TREATMENTS, GaussianProblem
+from ..pairing import Pairing, assignment_at, checks_order
+from ..posterior import INPUT_TREATMENTS, GaussianProblem, prior_in_stiffness
 from ..reduced import fast_model
 from .assigned import reassignment
 from .box import check_box as _check_box
@@ -334,6 +334,12 @@ reassignment`); any other pairing stays fixed, no modes computed beyond the pair
     mean = np.asarray(case.prior.mean if prior_mean is None else prior_mean, dtype=float)
     sd = np.asarray(case.prior.sd if prior_sd is None else prior_sd, dtype=float)
     settled = None
+    checked = checks_order(case.measured, pairing)
+    if checked:  # the arguments, to begin again by likelihood if the order is set aside
+        again = dict(model=model, forward=forward, rng=rng, convention=convention,
+                     prior_mean=prior_mean, prior_sd=prior_sd, pairing="likelihood",
+                     box_sigma=box_sigma, box=box, pilot_mesh=pilot_mesh if own_model else None,
+                     fast=None, fast_options=fast_options, inputs=inputs)  # fmt: skip
     if not isinstance(pairing, Pairing):
         # by likelihood, B settles the assignment on the working model (a coarser mesh's
         # error in the upper modes would call their peaks spurious), and that B run is the
@@ -395,6 +401,13 @@ reassignment`); any other pairing stays fixed, no modes computed beyond the pair
         setup = replace(setup, problem=problem, input_model=conditional, n_full_solves=solves)
         estimate = _scaled_map(setup, _map(setup, conventions, estimate.b))
     timings["map"] = time.perf_counter() - started
+    if checked:  # pairing by order, checked at the MAP on the sampler's model
+        found = assignment_at(case, setup.fast or model, estimate.b,
+                              prior_in_stiffness(mean, sd, "full")[1], pair)  # fmt: skip
+        if not found.in_order:
+            log.warning("%s: the sampler's setup is made again", refuted_order(found))
+            return prepare(case, **again)
+        log.info("pairing by order checked at the MAP: the most probable assignment")
     if not estimate.converged:
         log.warning("B (the MAP) did not converge: %s", estimate.message)
     _check_box(setup.box, estimate)
