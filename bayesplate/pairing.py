@@ -318,10 +318,11 @@ def resolve_pairing(measured, how="auto"):
     measured : bayesplate.io.Measurement
     how : {"auto", "mac", "likelihood", "index", "order"}
         ``"auto"``: by shape and frequency (MAC) when the measurement has shapes, else by its
-        mode numbers when it has them, else by order (the paper's). ``"likelihood"`` (the
-        most probable assignment of frequencies) is chosen by name: as a default it let
-        diagnose explain concealed defects away as missed modes and spurious peaks (see the
-        README).
+        mode numbers when it has them, else by order (the paper's), which the estimators,
+        the sampler and diagnose check at their answer (:func:`checks_order`).
+        ``"likelihood"`` (the most probable assignment of frequencies made before the fit)
+        is chosen by name: as the default it let diagnose explain concealed defects away as
+        missed modes and spurious peaks (see the README).
 
     Returns
     -------

@@ -253,6 +253,76 @@ def test_likelihood_assignment_of_a_complete_test_is_the_order(plate1_test2, com
     assert np.all(difference[[0, 1, 3]] < complete_mve.sd[[0, 1, 3]])
 
 
+def test_pairing_by_order_checked_is_the_default_without_shapes_or_mode_numbers(plate1_test2):
+    import dataclasses
+
+    from bayesplate.pairing import Pairing, checks_order
+
+    case, _ = plate1_test2
+    assert checks_order(case.measured, "auto")
+    # asked for by name, or with the case's mode numbers or a Pairing: not checked
+    assert not any(checks_order(case.measured, how) for how in ("order", "likelihood", "index"))
+    assert not checks_order(case.measured, Pairing(np.arange(14)))
+    numbered = dataclasses.replace(case.measured, mode=np.arange(1, 15))
+    assert not checks_order(numbered, "auto")
+
+
+def test_a_complete_test_checked_keeps_the_order_results_to_the_bit(plate1_test2, complete_mve):
+    # The default on a complete test: the order's estimate, checked (at it the most probable
+    # assignment is the order), is returned as it is: the same numbers as by order, and the
+    # check said in the message and kept in the settings.
+    from bayesplate.estimators import estimate
+
+    case, options = plate1_test2
+    for method, by_order in (("MVE", complete_mve), ("B", None), ("MVE-mod", None)):
+        by_order = by_order or estimate(case, method, pairing="order", **options)
+        checked = estimate(case, method, **options)
+        np.testing.assert_array_equal(checked.constants, by_order.constants)
+        np.testing.assert_array_equal(checked.sd, by_order.sd)
+        assert checked.pairing.how == "order" and checked.settings["assignment"].in_order
+        assert "pairing by order, checked" in checked.message
+
+
+def test_a_missed_mode_sets_the_order_aside_and_is_assigned_by_likelihood(plate1_test2):
+    # Mode 5 missing: by order every peak above the gap is wrong and, checked at the
+    # order's estimate, the most probable assignment is not the order; the answer is then
+    # the assignment by likelihood's, to the bit, and the message says why.
+    from bayesplate.estimators import estimate
+
+    case, options = plate1_test2
+    keep = np.delete(np.arange(14), 4)
+    missing = case.with_measured(
+        frequency_Hz=case.measured.frequency_Hz[keep], sigma_Hz=case.measured.sigma_Hz[keep]
+    )
+    checked = estimate(missing, "B", **options)
+    by_likelihood = estimate(missing, "B", pairing="likelihood", **options)
+    np.testing.assert_array_equal(checked.constants, by_likelihood.constants)
+    assert checked.settings["unobserved_modes"] == [5] and checked.pairing.how == "likelihood"
+    assert "pairing by order set aside" in checked.message
+
+
+def test_on_the_fast_model_a_refuted_order_is_redone_on_a_fast_model_of_its_own():
+    # A fast model made for the order holds the order's modes only; where the check sets the
+    # order aside, the run is made again by likelihood on a fast model that holds the modes
+    # the assignment may reach: the same answer as asking for the likelihood on the fast path.
+    from bayesplate import PlateModel, bundled_case_path, load_case
+    from bayesplate.estimators import estimate
+
+    case = load_case(bundled_case_path("plate1"))
+    model = PlateModel.from_case(case)
+    keep = np.delete(np.arange(14), 6)
+    missing = case.with_measured(
+        frequency_Hz=case.measured.frequency_Hz[keep], sigma_Hz=case.measured.sigma_Hz[keep]
+    )
+    checked = estimate(missing, "B", model=model, forward="fast")
+    by_likelihood = estimate(missing, "B", model=model, forward="fast", pairing="likelihood")
+    np.testing.assert_array_equal(checked.constants, by_likelihood.constants)
+    assert checked.settings["unobserved_modes"] == [7]
+    assert "pairing by order set aside" in checked.message and checked.check.confirmed
+    complete = estimate(case, "B", model=model, forward="fast")
+    assert complete.settings["assignment"].in_order and complete.pairing.how == "order"
+
+
 def test_the_command_line_offers_every_pairing():
     from bayesplate.cli.options import PAIRING_CHOICES
     from bayesplate.pairing import PAIRINGS
@@ -278,21 +348,20 @@ def _bundled(name):
 def test_every_bundled_case_with_a_mode_removed_or_a_peak_added(name):
     # Issue 16: with a mode removed or a spurious peak added to any bundled case, the
     # automatic assignment finds it and the constants stay within their reported
-    # uncertainty of the complete case (B, the case's own prior and mesh).
+    # uncertainty of the complete case (B, the case's own prior and mesh; the default
+    # pairing: by order, checked at the estimate and set aside for the assignment by
+    # likelihood where the order is not the most probable there).
     from bayesplate.estimators import estimate
 
     case, model = _bundled(name)
     f, s = case.measured.frequency_Hz, case.measured.sigma_Hz
     m = f.size
-    complete = estimate(case, "B", model=model, pairing="likelihood")
+    complete = estimate(case, "B", model=model)  # the default: by order, checked
     assert complete.settings["assignment"].in_order, complete.message
     # a mode removed from the middle of the band
     gone = m // 2
     keep = np.delete(np.arange(m), gone)
-    r = estimate(
-        case.with_measured(frequency_Hz=f[keep], sigma_Hz=s[keep]), "B", model=model,
-        pairing="likelihood",
-    )  # fmt: skip
+    r = estimate(case.with_measured(frequency_Hz=f[keep], sigma_Hz=s[keep]), "B", model=model)
     assert len(r.settings["unobserved_modes"]) == 1 and r.settings["spurious_peaks"] == []
     assert abs(r.settings["unobserved_modes"][0] - (gone + 1)) <= 1  # a close pair: either
     assert np.all(np.abs(r.constants - complete.constants) < complete.sd), r.message
@@ -302,7 +371,7 @@ def test_every_bundled_case_with_a_mode_removed_or_a_peak_added(name):
     added = np.insert(f, k + 1, extra)
     r = estimate(
         case.with_measured(frequency_Hz=added, sigma_Hz=np.insert(s, k + 1, s[k])), "B",
-        model=model, pairing="likelihood",
+        model=model,
     )  # fmt: skip
     assert r.settings["spurious_peaks"] == [k + 2], r.message
     assert r.settings["unobserved_modes"] == []

@@ -244,6 +244,27 @@ def test_sampler_reassigns_a_test_that_missed_a_mode(complete):
     assert result.n_full == 0
 
 
+def test_by_default_the_order_is_checked_at_the_map(caplog):
+    # the default pairing (by order, checked): a complete test keeps the order's setup to
+    # the bit; with mode 5 missing, the most probable assignment at the order's MAP is not
+    # the order, and the setup is made again by likelihood (the chain then re-makes it)
+    case = _plate1()
+    checked = prepare(case, rng=SEED)
+    by_order = prepare(case, rng=SEED, pairing="order")
+    np.testing.assert_array_equal(checked.estimate.b, by_order.estimate.b)
+    assert checked.assigned is None and checked.problem.pairing.how == "order"
+    keep = np.delete(np.arange(14), 4)
+    missing = case.with_measured(
+        frequency_Hz=case.measured.frequency_Hz[keep], sigma_Hz=case.measured.sigma_Hz[keep]
+    )
+    with caplog.at_level("WARNING", logger="bayesplate.sampling.setup"):
+        setup = prepare(missing, rng=SEED)
+    assert setup.assigned is not None and setup.problem.pairing.how == "likelihood"
+    assert "re-made at every point" in setup.assignment
+    assert any("pairing by order set aside" in r.getMessage() for r in caplog.records)
+    np.testing.assert_array_equal(setup.problem.pairing.modes, np.delete(np.arange(14), 4))
+
+
 def test_sampler_calls_a_peak_between_two_modes_spurious(complete):
     case = _plate1()
     f, s = case.measured.frequency_Hz, case.measured.sigma_Hz
