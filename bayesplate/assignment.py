@@ -117,6 +117,17 @@ class Assignment:
         """Whether this is pairing by order: peak i with computed mode i, for all peaks."""
         return bool(np.array_equal(self.modes, np.arange(self.modes.size)))
 
+    @property
+    def keeps_order(self):
+        """Whether every peak it pairs goes with its own computed mode (peak i with mode i).
+
+        True for the order and for the order with some peaks called spurious in their own
+        place (their own mode then unobserved): outliers of a fit, not a re-ordering. False
+        where a peak goes with another mode: a mode missed or a peak inserted below it.
+        """
+        k = self.paired
+        return bool(np.array_equal(self.modes[k], k))
+
     def describe(self):
         """One sentence on what went unobserved and unexplained (1-based numbers)."""
         parts = []

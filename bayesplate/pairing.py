@@ -11,7 +11,8 @@ tolerated; a measured mode that no computed mode resembles is left unpaired and 
 Without shapes or mode numbers the default is pairing by order, the paper's, *checked*
 (:func:`checks_order`): the most probable assignment of frequencies
 (:mod:`bayesplate.assignment`) is made again at the answer, and where it is not the order
-(a mode the test missed, a spurious peak) the answer is made by that assignment instead;
+(a mode the test missed, a spurious peak) the answer is made by that assignment instead
+(:mod:`bayesplate.checked_order`);
 the assignment by likelihood throughout is an option. While an
 estimator iterates, the computed modes can change order
 (two close frequencies cross); :func:`track` follows them from one iterate to the next by the
@@ -44,8 +45,6 @@ __all__ = [
     "pair_by_order",
     "pair_by_index",
     "assign_by_mac",
-    "checks_order",
-    "assignment_at",
     "track",
     "pair_measured",
     "resolve_pairing",
@@ -319,7 +318,8 @@ def resolve_pairing(measured, how="auto"):
     how : {"auto", "mac", "likelihood", "index", "order"}
         ``"auto"``: by shape and frequency (MAC) when the measurement has shapes, else by its
         mode numbers when it has them, else by order (the paper's), which the estimators,
-        the sampler and diagnose check at their answer (:func:`checks_order`).
+        the sampler and diagnose check at their answer
+        (:func:`bayesplate.checked_order.checks_order`).
         ``"likelihood"`` (the most probable assignment of frequencies made before the fit)
         is chosen by name: as the default it let diagnose explain concealed defects away as
         missed modes and spurious peaks (see the README).
@@ -336,66 +336,6 @@ def resolve_pairing(measured, how="auto"):
     if measured.shapes is not None and measured.points is not None:
         return "mac"
     return "order" if measured.mode is None else "index"
-
-
-def checks_order(measured, how):
-    """Whether `how` asks for pairing by order checked by the most probable assignment.
-
-    ``"auto"`` on a measurement with neither shapes nor mode numbers: the paper's pairing
-    by order is used, and the assignment by likelihood made again at the answer (the
-    estimate, the sampler's MAP, diagnose's verdict fit) decides whether it stands. Order
-    alone cannot see a mode the test missed or a peak that is not a bending mode; the
-    assignment alone, made before the fit, can explain a concealed defect away as missed
-    modes and spurious peaks. Checked at the answer, a complete test keeps its order
-    results to the bit.
-
-    Parameters
-    ----------
-    measured : bayesplate.io.Measurement
-    how : str or Pairing
-        A pairing's name or a :class:`Pairing` (never checked: it is fixed).
-
-    Returns
-    -------
-    bool
-    """
-    if not isinstance(how, str) or how != "auto":
-        return False
-    return resolve_pairing(measured, how) == "order"
-
-
-def assignment_at(case, model, b, covariance_b, pairing, modal=None):
-    """The most probable assignment at `b`, over a fixed pairing's modes, searched from it.
-
-    What checks a pairing by order at an answer (:func:`checks_order`): the assignment by
-    likelihood (:func:`bayesplate.assignment.most_probable`) over the ``pairing.n_modes()``
-    lowest computed modes (all that a fast model made for that pairing holds), the constants
-    integrated out over `covariance_b` centred at `b`.
-
-    Parameters
-    ----------
-    case : bayesplate.io.Case
-    model : ForwardModel
-        Anything with ``solve(b, n_modes)`` (the full model or a fast one); one solve.
-    b : array_like, shape (6,)
-        The answer, Pa.
-    covariance_b : array_like, shape (6, 6)
-        The prior's covariance of ``b``, Pa^2.
-    pairing : Pairing
-        The pairing in use.
-    modal : ModalResult, optional
-        The modes at `b` if already computed (then no solve; ``pairing.n_modes()`` of them
-        are used).
-
-    Returns
-    -------
-    bayesplate.assignment.Assignment
-    """
-    b = np.asarray(b, dtype=float)
-    extra = pairing.n_modes() - case.measured.size
-    again = pair_measured(case, model, b, "likelihood", extra_modes=extra, modal=modal,
-                          prior=(b, covariance_b), start=pairing)  # fmt: skip
-    return again.assignment
 
 
 def shape_mac(measurement, model, vectors):

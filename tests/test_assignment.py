@@ -256,7 +256,8 @@ def test_likelihood_assignment_of_a_complete_test_is_the_order(plate1_test2, com
 def test_pairing_by_order_checked_is_the_default_without_shapes_or_mode_numbers(plate1_test2):
     import dataclasses
 
-    from bayesplate.pairing import Pairing, checks_order
+    from bayesplate.checked_order import checks_order
+    from bayesplate.pairing import Pairing
 
     case, _ = plate1_test2
     assert checks_order(case.measured, "auto")
@@ -357,7 +358,7 @@ def test_every_bundled_case_with_a_mode_removed_or_a_peak_added(name):
     f, s = case.measured.frequency_Hz, case.measured.sigma_Hz
     m = f.size
     complete = estimate(case, "B", model=model)  # the default: by order, checked
-    assert complete.settings["assignment"].in_order, complete.message
+    assert complete.settings["assignment"].keeps_order, complete.message
     # a mode removed from the middle of the band
     gone = m // 2
     keep = np.delete(np.arange(m), gone)

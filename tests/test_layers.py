@@ -23,6 +23,7 @@ NUMERICS = (
     "forward",
     "pairing",
     "assignment",
+    "checked_order",
     "posterior",
     "error_scale",
     "inputs",

@@ -170,8 +170,9 @@ def add_pairing_option(p):
         "when the case has measured shapes, else by the case's mode numbers ('index') if any, "
         "else by order checked: the i-th peak with the i-th computed mode (the paper's "
         "pairing), set aside for 'likelihood' where the most probable assignment at the "
-        "answer (each estimate, the sampler's MAP, diagnose's verdict fit) is not the order; "
-        "'order': by order unchecked; 'likelihood': the most probable assignment by frequency (a computed mode may go "
-        "unobserved, a peak be spurious), settled by B; `sample` re-makes it at every point of "
+        "answer (each estimate, the sampler's MAP, diagnose's verdict fit) pairs a peak with "
+        "another mode; 'order': by order unchecked; 'likelihood': the most probable "
+        "assignment by frequency (a computed mode may go unobserved, a peak be spurious), "
+        "settled by B; `sample` re-makes it at every point of "
         "the chain (kept as settled with marginalised inputs or an error scale)",
     )

@@ -40,8 +40,9 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.stats import chi2 as chi2_dist
 
+from ..checked_order import checks_order
 from ..model import PlateModel
-from ..pairing import Pairing, checks_order
+from ..pairing import Pairing
 from ..parallel import fork_map
 from ..posterior import observed_eigenvalues, prior_in_stiffness
 from ..quantities import hz_from_eigenvalue
@@ -460,8 +461,7 @@ def diagnose(
     # the store, which leaves the state unused)
     again = copy.deepcopy(rng)
     first = one_pass(pairing, rng)
-    assigned = pairing.how == "likelihood" and pairing.assignment is not None
-    if not reassign or not (checked or assigned):
+    if not reassign or not (checked or pairing.how == "likelihood" and pairing.assignment):
         return first  # by order, index or shapes as asked: kept
     return made_again(first, lambda p: one_pass(p, again), model, pairing, case.measured,
                       (mu_b, V_b), say)  # fmt: skip

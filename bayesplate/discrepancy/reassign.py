@@ -209,7 +209,9 @@ def made_again(first, one_pass, model, pairing, measured, prior, say):
         ``one_pass(pairing) -> Diagnosis``: diagnose again with another assignment.
     model : PlateModel
     pairing : bayesplate.pairing.Pairing
-        The assignment of the first pass (by likelihood, or by order checked).
+        The assignment of the first pass (by likelihood, or by order checked: the order then
+        stands unless the assignment at the verdict's fit pairs a peak with another mode;
+        peaks it only calls spurious in their own place are outliers the verdict weighs).
     measured : Measurement
         Every measured peak and its deviation (Hz); a pass's paired peaks are assigned again
         with the deviations it fitted them with (its ``sigma_Hz``: widened by the mesh's
@@ -225,6 +227,7 @@ def made_again(first, one_pass, model, pairing, measured, prior, say):
     """
     f, s = np.asarray(measured.frequency_Hz), np.asarray(measured.sigma_Hz)
     current, used = first, full_modes(pairing, f.size)
+    order = pairing.how == "order"  # the null (every peak its own mode) until set aside
     passes = []  # (diagnosis, assignment used, score, what the check found)
     while True:
         fit_, label, log_evidence = verdict_fit(current)
@@ -233,14 +236,22 @@ def made_again(first, one_pass, model, pairing, measured, prior, say):
         change, terms, best = check(model, fit_, label, used, f, s_pass, prior)
         passes.append((current, used, log_evidence + terms, change))
         tried = [p[1] for p in passes]
+        if order and best.keeps_order:
+            break  # peaks called spurious in their own place are the fit's outliers: kept
         if (not change.changed or len(passes) == MAX_PASSES
                 or any(np.array_equal(best.modes, t) for t in tried)):  # fmt: skip
             break
+        order = False
         say(f"assignment made again: {change.describe()}; diagnosing again with it")
         current, used = one_pass(pairing_of(best, "likelihood")), best.modes
     if len(passes) == 1:
         note = (f"assignment made again at {label}'s constants: the most probable one is "
                 "the one used")  # fmt: skip
+        if change.changed:  # the order kept, its outliers named
+            which = ", ".join(str(i + 1) for i in best.spurious)
+            note = (f"assignment made again at {label}'s constants: it pairs no peak with "
+                    f"another mode than the order's (it would call peak(s) {which} spurious: "
+                    "outliers of this fit, kept)")  # fmt: skip
         return replace(first, notes=[*first.notes, note], peak_modes=used)
     k = int(np.argmax([p[2] for p in passes]))
     kept, peaks = passes[k][0], passes[k][1]

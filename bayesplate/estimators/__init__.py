@@ -33,7 +33,7 @@ fast model, each answer confirmed by the full model), :mod:`~.result` (:class:`E
 """
 
 from .conventions import CONVENTIONS, Conventions, resolve_conventions
-from .estimate import OrderRefuted, estimate, estimate_on_fast, refuted_order, settle_pairing
+from .estimate import OrderRefuted, estimate, estimate_on_fast, settle_pairing
 from .fast import (
     FAST_MIN_DOFS,
     FORWARDS,
@@ -66,7 +66,6 @@ __all__ = [
     "modes_to_certify",
     "settle_pairing",
     "OrderRefuted",
-    "refuted_order",
     "run",
     "b_step",
     "mve_step",

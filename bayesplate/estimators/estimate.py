@@ -8,8 +8,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .. import laminate
+from ..checked_order import assignment_at, checks_order, refuted_order
 from ..model import PlateModel
-from ..pairing import Pairing, assignment_at, checks_order, pair_measured, resolve_pairing
+from ..pairing import Pairing, pair_measured, resolve_pairing
 from ..posterior import GaussianProblem, prior_in_stiffness
 from .conventions import resolve_conventions
 from .fast import case_fast_model, confirmed_run, modes_to_certify, resolve_forward
@@ -18,7 +19,7 @@ from .result import METHODS
 
 log = logging.getLogger(__name__)
 
-__all__ = ["OrderRefuted", "estimate", "estimate_on_fast", "refuted_order", "settle_pairing"]
+__all__ = ["OrderRefuted", "estimate", "estimate_on_fast", "settle_pairing"]
 
 
 class OrderRefuted(Exception):
@@ -32,12 +33,6 @@ class OrderRefuted(Exception):
     def __init__(self, assignment):
         super().__init__(refuted_order(assignment))
         self.assignment = assignment
-
-
-def refuted_order(assignment):
-    """One clause: why pairing by order was set aside (its 1-based numbers)."""
-    return (f"pairing by order set aside: at its estimate the most probable assignment has "
-            f"{assignment.describe()}; paired by likelihood instead")  # fmt: skip
 
 
 def estimate(
@@ -147,9 +142,8 @@ def estimate(
             return result
         at = result.b if laminate.is_physical(result.b) else b0
         found = assignment_at(case, model, at, V, pair)
-        if found.in_order:
-            note = " (pairing by order, checked: the most probable assignment at the estimate)"
-            return _assigned(result, replace(pair, assignment=found), 1, note)
+        if found.keeps_order:
+            return _order_checked(result, replace(pair, assignment=found))
         if not isinstance(model, PlateModel):
             # a fast model holds the order's modes only: the caller redoes it by likelihood
             raise OrderRefuted(found)
@@ -362,6 +356,23 @@ def _lowest_first(case, model, b0, V, method, mean, sd, options):
 def _same(a, b, m):
     """Whether two pairings pair the same of `m` measured frequencies with the same modes."""
     return np.array_equal(a.kept(m), b.kept(m)) and np.array_equal(a.modes, b.modes)
+
+
+def _order_checked(result, pair):
+    """The order's result, checked: its assignment made at the estimate kept in ``settings``.
+
+    Peaks that assignment calls spurious in their own place stay paired (outliers of the
+    fit, which the order keeps: diagnose is what examines them) and are named.
+    """
+    a = pair.assignment
+    outliers = (a.spurious + 1).tolist()
+    note = "pairing by order, checked: at the estimate the most probable assignment pairs "
+    note += ("every peak in order" if not outliers else
+             f"no peak with another mode (it would call peak{'s' if len(outliers) > 1 else ''} "
+             f"{', '.join(map(str, outliers))} spurious: outliers of this fit, kept)")  # fmt: skip
+    settings = {**result.settings, "assignment": a, "assignment_rounds": 1, "outlier_peaks":
+                outliers, "unobserved_modes": [], "spurious_peaks": []}  # fmt: skip
+    return replace(result, settings=settings, message=f"{result.message}; {note}", pairing=pair)
 
 
 def _assigned(result, pair, rounds, note):

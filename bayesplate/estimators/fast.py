@@ -33,7 +33,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..pairing import MAC_EXTRA_MODES, Pairing, checks_order
+from ..checked_order import checks_order
+from ..pairing import MAC_EXTRA_MODES, Pairing
 from ..posterior import prior_in_stiffness
 from ..quantities import hz_from_eigenvalue
 from ..reduced import Box, CertifiedModel, fast_model, relative_errors

@@ -11,8 +11,9 @@ import warnings
 
 import numpy as np
 
+from ..checked_order import checks_order
 from ..laminate import stiffness_from_engineering
-from ..pairing import MAC_EXTRA_MODES, checks_order
+from ..pairing import MAC_EXTRA_MODES
 from ..quantities import to_case_units
 
 # Chain bounds of the posterior section: the sampler's own defaults (5000 steps, ESS 2000)

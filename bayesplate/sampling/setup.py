@@ -32,11 +32,12 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..estimators import refuted_order, resolve_conventions, run, settle_pairing
+from ..checked_order import assignment_at, checks_order, refuted_order
+from ..estimators import resolve_conventions, run, settle_pairing
 from ..inputs import input_jacobian, input_sources
 from ..inputs_posterior import declared_readings, input_conditional, linear_input_certificate
 from ..model import PlateModel
-from ..pairing import Pairing, assignment_at, checks_order
+from ..pairing import Pairing
 from ..posterior import INPUT_TREATMENTS, GaussianProblem, prior_in_stiffness
 from ..reduced import fast_model
 from .assigned import reassignment
@@ -404,7 +405,7 @@ reassignment`); any other pairing stays fixed, no modes computed beyond the pair
     if checked:  # pairing by order, checked at the MAP on the sampler's model
         found = assignment_at(case, setup.fast or model, estimate.b,
                               prior_in_stiffness(mean, sd, "full")[1], pair)  # fmt: skip
-        if not found.in_order:
+        if not found.keeps_order:
             log.warning("%s: the sampler's setup is made again", refuted_order(found))
             return prepare(case, **again)
         log.info("pairing by order checked at the MAP: the most probable assignment")
