@@ -475,10 +475,23 @@ def run_task_recorded(task, quick=False, code=None):
     return row
 
 
-def run_task(task, quick=False):
-    """Make the recordings of one replicate, diagnose them blind; the row (plain data)."""
+def recordings(task, quick=False):
+    """One replicate's recordings and what made them.
+
+    Returns
+    -------
+    blind : Case
+        The nominal case with the noisy recorded frequencies (sorted) and their deviations.
+    model : PlateModel
+        The mesh diagnose works on.
+    f_true, f0 : numpy.ndarray
+        The recordings' mesh's frequencies with the effect and without it, Hz.
+    physics, theta
+        The concealed effect (None for a clean replicate).
+    seed : int
+        diagnose's seed, drawn after the noise from the replicate's stream.
+    """
     kind, family, effect, label, size, rep = task
-    logging.getLogger("bayesplate").setLevel(logging.ERROR)
     case, model, fine = _models(family, quick)
     rng = np.random.default_rng(_seed(task))
     f0 = _frequencies(case, fine)
@@ -490,11 +503,19 @@ def run_task(task, quick=False):
     else:
         f_true = f0
     f = np.sort(f_true * (1.0 + NOISE * rng.standard_normal(f_true.size)))
-    sigma = NOISE * f
+    blind = case.with_measured(frequency_Hz=f, sigma_Hz=NOISE * f)
+    return blind, model, f_true, f0, physics, theta, int(rng.integers(2**31))
+
+
+def run_task(task, quick=False):
+    """Make the recordings of one replicate, diagnose them blind; the row (plain data)."""
+    kind, family, effect, label, size, rep = task
+    logging.getLogger("bayesplate").setLevel(logging.ERROR)
+    blind, model, f_true, f0, physics, theta, seed = recordings(task, quick)
+    case, f, sigma = blind, blind.measured.frequency_Hz, blind.measured.sigma_Hz
     ideal_chi2 = float(np.sum(((f - np.sort(f0)) / sigma) ** 2))
-    blind = case.with_measured(frequency_Hz=f, sigma_Hz=sigma)
     start = time.perf_counter()
-    d = diagnose(blind, model=model, rng=int(rng.integers(2**31)), pairing="order")
+    d = diagnose(blind, model=model, rng=seed, pairing="order")
     seconds = time.perf_counter() - start
     b_true = stiffness_from_engineering(case.reference)
     row = {

@@ -1,0 +1,51 @@
+"""studies/checked_order.py: the altered recordings, the plan, and a quick run (issue 16)."""
+
+import numpy as np
+
+from tests._studies import load_study
+
+co = load_study("checked_order", "checked_order_study")
+
+
+class _Measured:
+    def __init__(self, f):
+        self.frequency_Hz = np.asarray(f, dtype=float)
+        self.sigma_Hz = 0.002 * self.frequency_Hz
+
+
+class _Case:
+    def __init__(self, f):
+        self.measured = _Measured(f)
+
+    def with_measured(self, frequency_Hz, sigma_Hz):
+        case = _Case(frequency_Hz)
+        case.measured.sigma_Hz = np.asarray(sigma_Hz)
+        return case
+
+
+def test_a_missed_mode_and_an_inserted_peak_and_their_right_assignments():
+    f = np.array([100.0, 200.0, 260.0, 300.0, 480.0, 520.0, 700.0])
+    case, truth = co.altered(_Case(f), "mode missed")
+    np.testing.assert_array_equal(case.measured.frequency_Hz, [100, 200, 260, 480, 520, 700])
+    np.testing.assert_array_equal(truth, [0, 1, 2, 4, 5, 6])  # peak 4 is mode 5, and so on
+    case, truth = co.altered(_Case(f), "peak inserted")
+    # the widest ratio between middle peaks (2..m-2): 300 -> 480; their geometric mean put in
+    g = case.measured.frequency_Hz
+    assert g.size == 8 and g[4] == np.sqrt(300.0 * 480.0) and np.all(np.diff(g) > 0)
+    np.testing.assert_array_equal(truth, [0, 1, 2, 3, -1, 4, 5, 6])
+    assert case.measured.sigma_Hz[4] == case.measured.sigma_Hz[3]
+
+
+def test_quick_rows_a_complete_test_stays_consistent_and_a_missed_mode_is_found():
+    # the crossply plate on the quick study's 8 x 4 mesh (its recordings' mesh 16 x 8): the
+    # complete clean replicate keeps its order in one pass; with its middle peak taken out,
+    # the order is set aside at the verdict's fit and every peak goes with its right mode
+    clean = ("clean", "crossply", None, None, None, 0)
+    complete = co.run_row(("as recorded", clean), quick=True)
+    assert complete["verdict"] == "consistent" and complete["peaks_right"]
+    missed = co.run_row(("mode missed", clean), quick=True)
+    assert missed["verdict"] == "consistent" and missed["peaks_right"] and missed["passes"] > 1
+    order_rows = {"clean/crossply/0": {"verdict": "consistent", "chosen": None, "seconds": 1.0}}
+    text = co.report([complete, missed], order_rows, [])
+    assert "the same verdict and name as by order in 1; one pass" in text
+    assert "every peak with its right mode in 1; `consistent` in 1" in text
