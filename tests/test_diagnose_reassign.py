@@ -87,17 +87,19 @@ def test_a_wrong_assignment_is_made_again_and_the_second_pass_kept():
     assert "pass 1 (unexplained)" in note and "pass 2 (" in note and "kept" in note
 
 
-def test_by_default_the_order_is_checked_at_the_verdict_fit_and_set_aside():
-    # the default pairing (by order, checked): the first pass pairs by order, the
-    # assignment is made again at the verdict's fit, and the pass that skips mode 3 is kept,
-    # as when a wrong assignment is given (above), with no assignment settled beforehand
+def test_by_default_a_missed_mode_is_said_at_the_verdict_fit_in_one_pass():
+    # the default pairing (by order, checked): one pass by order; the assignment made again
+    # at the verdict's fit pairs peaks with other modes (mode 3 was missed), and a note and
+    # the progress line say so and point to --pairing likelihood, which finds it (below)
     case = _missing_mode_case()
     model = PlateModel.from_case(case, mesh=MESH)
-    d = diagnose(case, model=model, rng=0, n_starts=2, physics=[PointMass()])
-    np.testing.assert_array_equal(d.peak_modes, [0, 1, *range(3, case.measured.size + 1)])
-    assert d.verdict == "consistent"
-    note = next(n for n in d.notes if n.startswith("assignment made again"))
-    assert "pass 1 (unexplained)" in note and "kept" in note
+    said = []
+    d = diagnose(case, model=model, rng=0, n_starts=1, physics=[PointMass()],
+                 progress=said.append)  # fmt: skip
+    np.testing.assert_array_equal(d.peak_modes, np.arange(case.measured.size))  # as used
+    note = next(n for n in d.notes if n.startswith("pairing by order set aside"))
+    assert "--pairing likelihood" in note and "peak 4: mode 4 -> mode 5" in note
+    assert note in said and not any("diagnosing again" in line for line in said)
 
 
 def test_by_default_a_complete_test_on_a_coarse_mesh_keeps_its_order_in_one_pass():

@@ -242,7 +242,7 @@ def diagnose(
         Measured-to-computed modes (:func:`bayesplate.pairing.pair_measured` at the prior
         mean, as :func:`bayesplate.estimators.estimate` takes it): "auto" pairs by shape
         and frequency when the case has shapes, else by mode numbers if any, else by order
-        checked (the assignment made again at the verdict's fit: `reassign`);
+        checked (the assignment made again at the verdict's fit and said: `reassign`);
         "likelihood" takes the assignment B settles on (on `model`). Unpaired measured modes
         (spurious peaks) are left out.
     alpha : float
@@ -273,10 +273,10 @@ def diagnose(
     pairs : bool
         Fit two effects at once when the best single candidate's refit is rejected.
     reassign : bool
-        When the pairing is the assignment by likelihood or by order checked ("auto"):
-        make it again at the fit the verdict rests on and, where it differs, diagnose again
-        with it, and keep the pass that explains all peaks best (:mod:`.reassign`). Pairing
-        by order or index is kept as asked, and pairing by shapes too.
+        By likelihood: make the assignment again at the fit the verdict rests on and, where
+        it differs, diagnose again with it, keeping the pass that explains all peaks best;
+        by order checked ("auto"): made again there and said, one pass (:mod:`.reassign`).
+        Order or index asked by name, and pairing by shapes, are kept as they are.
     prior_odds : dict, optional
         ``{candidate name: prior odds against the nominal model}`` (default 1 for every
         candidate; a case-file key for them is not defined yet).

@@ -1,8 +1,8 @@
 """Each model under its own best assignment of the same measured peaks.
 
-Without measured shapes, which computed mode explains which peak is the order (the default:
-every peak a mode, none missed) or settled once, by B under the nominal model
-(:func:`bayesplate.estimators.settle_pairing`, ``pairing="likelihood"``). A plate
+Without measured shapes, which computed mode explains which peak is settled once, by B
+under the nominal model (:func:`bayesplate.estimators.settle_pairing`,
+``pairing="likelihood"``), or is the order (the default). A plate
 with an effect the nominal model leaves out may order its modes differently: the model
 that explains the recordings may explain them under another assignment. So, after a pass,
 the assignment is made again (:func:`bayesplate.assignment.most_probable`) at the fit the
@@ -17,7 +17,18 @@ the terms of :mod:`bayesplate.assignment`'s model with the pairs' Gaussian densi
 the Laplace evidence (in eigenvalues, as the fits' data are): a spurious peak is uniform over
 ``[0, lambda_B]``, ``lambda_B`` the eigenvalue of the band's upper end. The pass whose
 verdict model scores higher is kept (the maximum over the assignments tried, not a sum over
-all of them). Pure computation on fits and arrays; one full solve per fit checked; the
+all of them).
+
+By order (the default, checked), the assignment is made again at the verdict's fit and the
+diagnosis stays one pass: the order stands when that assignment pairs no peak with another
+mode (peaks it calls spurious in their own place are named as outliers); otherwise a note and
+the progress line say that the verdict rests on a pairing its own fit does not support, and
+to diagnose again by likelihood. Further passes from the order were tried: on the
+calibration's recordings with the middle peak taken out (40 x 20 Frederiksen and 32 x 16
+crossply meshes, 2026-11-27) they took 12 minutes each and gave a wrong name on one and a
+failure of a reduced eigenproblem (B not positive definite) on the other.
+
+Pure computation on fits and arrays; one full solve per fit checked; the
 passes themselves are diagnose's (:func:`made_again` is handed them).
 """
 
@@ -236,22 +247,27 @@ def made_again(first, one_pass, model, pairing, measured, prior, say):
         change, terms, best = check(model, fit_, label, used, f, s_pass, prior)
         passes.append((current, used, log_evidence + terms, change))
         tried = [p[1] for p in passes]
-        if order and best.keeps_order:
-            break  # peaks called spurious in their own place are the fit's outliers: kept
+        if order:  # checked, not made again: one pass (see the module docstring)
+            break
         if (not change.changed or len(passes) == MAX_PASSES
                 or any(np.array_equal(best.modes, t) for t in tried)):  # fmt: skip
             break
-        order = False
         say(f"assignment made again: {change.describe()}; diagnosing again with it")
         current, used = one_pass(pairing_of(best, "likelihood")), best.modes
     if len(passes) == 1:
         note = (f"assignment made again at {label}'s constants: the most probable one is "
                 "the one used")  # fmt: skip
-        if change.changed:  # the order kept, its outliers named
+        if change.changed and best.keeps_order:  # the order kept, its outliers named
             which = ", ".join(str(i + 1) for i in best.spurious)
             note = (f"assignment made again at {label}'s constants: it pairs no peak with "
                     f"another mode than the order's (it would call peak(s) {which} spurious: "
                     "outliers of this fit, kept)")  # fmt: skip
+        elif change.changed:  # the order set aside: said, not acted on
+            note = (f"pairing by order set aside at {label}'s constants ({change.describe()}): "
+                    "this verdict rests on a pairing its own fit does not support (a mode the "
+                    "test missed, or a peak that is no mode?); diagnose again with "
+                    "--pairing likelihood")  # fmt: skip
+            say(note)
         return replace(first, notes=[*first.notes, note], peak_modes=used)
     k = int(np.argmax([p[2] for p in passes]))
     kept, peaks = passes[k][0], passes[k][1]
