@@ -93,30 +93,3 @@ def test_reduced_candidate_matches_full_solve(plate, physics):
         scale = np.abs(fd).max()
         if scale > 0:
             assert np.max(np.abs(d_theta[:, i] - fd)) < 1e-2 * scale
-
-
-def test_a_reduced_plate_it_cannot_solve_is_refused_as_an_unphysical_point():
-    # A reduced model built far from where a least-squares step lands can have a modified
-    # mass that is not positive definite there (on the calibration's Frederiksen plate with
-    # a mode missed, a pair's rough fit ended the diagnosis with scipy's "leading minor ...
-    # of B is not positive definite"): such a point is refused as an unphysical one is, a
-    # constant large residual that trust-region steps back from, with no Jacobian asked.
-    from bayesplate.discrepancy.fit import _UNPHYSICAL_RESIDUAL, JointProblem
-    from bayesplate.posterior import observed_eigenvalues, prior_in_stiffness
-
-    case = load_case(bundled_case_path("plate1"))
-    model = PlateModel.from_case(case, mesh=(6, 3))
-    mu_b, V_b = prior_in_stiffness(case.prior.mean, case.prior.sd, "full")
-    f = case.measured.frequency_Hz[:4]
-    problem = JointProblem(model, observed_eigenvalues(f), 0.01 * observed_eigenvalues(f),
-                           mu_b, V_b, np.arange(4))  # fmt: skip
-
-    class _Unsolvable:
-        def solve(self, b, theta, n_modes):
-            raise np.linalg.LinAlgError("the leading minor of order 9 of B is not positive")
-
-    z = np.zeros(6)
-    solved = problem.residuals(z)
-    assert np.all(np.isfinite(solved)) and solved[0] != _UNPHYSICAL_RESIDUAL
-    problem.pencil, problem._cache = _Unsolvable(), {}
-    np.testing.assert_array_equal(problem.residuals(z), np.full(4 + 6, _UNPHYSICAL_RESIDUAL))

@@ -249,13 +249,7 @@ class JointProblem:
         return lam, J, modal
 
     def _evaluate_reduced(self, b, theta):
-        try:
-            modal, d_theta = self.pencil.solve(b, theta, int(self.modes.max()) + 1)
-        except np.linalg.LinAlgError:
-            # the reduced plate's mass is not positive definite here (far from where its
-            # basis was made): outside what it can solve, as an unphysical point is, so a
-            # least-squares step there is refused instead of ending the diagnosis
-            return None
+        modal, d_theta = self.pencil.solve(b, theta, int(self.modes.max()) + 1)
         lam = modal.eigenvalues[self.modes]
         J = np.hstack([modal.sensitivities[self.modes] @ self.L,
                        d_theta[self.modes] * self.theta_sd])  # fmt: skip
