@@ -15,7 +15,7 @@ made again at it:
 - it pairs a peak with another mode: the order is set aside and the answer made by
   likelihood (:func:`refuted_order` says why).
 
-Pure functions; one eigen solve per check unless the modes are given.
+Pure functions; one eigen solve per check.
 """
 
 from __future__ import annotations
@@ -53,7 +53,7 @@ def checks_order(measured, how):
     return resolve_pairing(measured, how) == "order"
 
 
-def assignment_at(case, model, b, covariance_b, pairing, modal=None):
+def assignment_at(case, model, b, covariance_b, pairing):
     """The most probable assignment at `b`, over a fixed pairing's modes, searched from it.
 
     What checks a pairing by order at an answer (:func:`checks_order`): the assignment by
@@ -72,9 +72,6 @@ def assignment_at(case, model, b, covariance_b, pairing, modal=None):
         The prior's covariance of ``b``, Pa^2.
     pairing : Pairing
         The pairing in use.
-    modal : ModalResult, optional
-        The modes at `b` if already computed (then no solve; ``pairing.n_modes()`` of them
-        are used).
 
     Returns
     -------
@@ -82,7 +79,7 @@ def assignment_at(case, model, b, covariance_b, pairing, modal=None):
     """
     b = np.asarray(b, dtype=float)
     extra = pairing.n_modes() - case.measured.size
-    again = pair_measured(case, model, b, "likelihood", extra_modes=extra, modal=modal,
+    again = pair_measured(case, model, b, "likelihood", extra_modes=extra,
                           prior=(b, covariance_b), start=pairing)  # fmt: skip
     return again.assignment
 

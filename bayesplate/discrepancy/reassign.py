@@ -25,8 +25,9 @@ mode (peaks it calls spurious in their own place are named as outliers); otherwi
 the progress line say that the verdict rests on a pairing its own fit does not support, and
 to diagnose again by likelihood. Further passes from the order were tried: on the
 calibration's recordings with the middle peak taken out (40 x 20 Frederiksen and 32 x 16
-crossply meshes, 2026-11-27) they took 12 minutes each and gave a wrong name on one and a
-failure of a reduced eigenproblem (B not positive definite) on the other.
+crossply meshes, 2026-11-27) a diagnosis took 12 minutes, the crossply one ending in a wrong
+name; the Frederiksen one failed in its first pass (a reduced eigenproblem, B not positive
+definite), as pairing by order alone does there.
 
 Pure computation on fits and arrays; one full solve per fit checked; the
 passes themselves are diagnose's (:func:`made_again` is handed them).
