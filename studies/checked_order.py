@@ -12,9 +12,10 @@ diagnose did not make (`studies/calibration.py`'s: the finer mesh, 0.2 % noise, 
   the time.
 - **Does it see a mode the test missed or a peak that is no mode?** Clean replicates with
   the middle peak taken out, and with a peak put into the widest gap between two middle
-  peaks (their geometric mean, many deviations from both): the verdict, and whether the
-  check at the verdict's fit set the order aside (diagnose then says so and points to
-  ``--pairing likelihood``; it does not diagnose again by itself).
+  peaks (their geometric mean, many deviations from both): whether the check at the first
+  pass's verdict fit set the order aside (diagnose then diagnoses again from the assignment
+  B settles and keeps the pass that explains every peak best), the verdict kept, and
+  whether every peak went to its right mode.
 
 The report is ``reports/checked_order.md``; rows are kept in
 ``reports/.cache/checked_order.json`` as they come (a run again resumes). Run:
@@ -32,6 +33,7 @@ import os
 import pathlib
 import sys
 import time
+import traceback
 
 import numpy as np
 
@@ -100,12 +102,16 @@ def run_row(row_task, quick=False):
     try:
         d = diagnose(case, model=model, rng=seed)  # the default pairing
     except Exception as exc:  # noqa: BLE001 - every failure is a result of the study
+        where = "; ".join(f"{pathlib.Path(f.filename).name}:{f.lineno}"
+                          for f in traceback.extract_tb(exc.__traceback__)[-4:])  # fmt: skip
         return {"key": key(row_task), "variant": variant, "kind": task[0], "verdict": "error",
-                "error": f"{type(exc).__name__}: {exc}", "named": [], "peaks_right": False,
+                "error": f"{type(exc).__name__}: {exc} (at {where})", "named": [],
+                "peaks_right": False,
                 "passes": 0, "outliers_kept": False, "chosen": None,
                 "seconds": time.perf_counter() - start}  # fmt: skip
     seconds = time.perf_counter() - start
-    note = next((n for n in d.notes if n.startswith("assignment made again")), "")
+    note = next((n for n in d.notes
+                 if n.startswith(("assignment made again", "pairing by order set aside"))), "")
     passes = 1 if " passes in all" not in note else int(note.split(" passes in all")[0].split()[-1])
     peaks = None if d.peak_modes is None else [int(j) for j in d.peak_modes]
     return {
@@ -209,12 +215,16 @@ def report(rows, order_rows, runs):
             lines.append("Not run yet.")
             continue
         flagged = sum(bool(r.get("set_aside")) for r in got)
-        lines += [f"- {len(got)} replicates: the order set aside at the verdict's fit (the "
-                  f"note that sends the user to `--pairing likelihood`) in {flagged}; median "
+        lines += [f"- {len(got)} replicates: the order set aside at the first pass's verdict "
+                  f"fit (diagnosed again from the assignment B settles) in {flagged}; every "
+                  f"peak on its right mode in the pass kept in "
+                  f"{sum(bool(r.get('peaks_right')) for r in got)}; median "
                   f"{np.median([r['seconds'] for r in got]):.0f} s.", "",
-                  "| replicate | verdict | order set aside | s |", "|---|---|---|---|"]
+                  "| replicate | verdict kept | order set aside | passes | peaks right | s |",
+                  "|---|---|---|---|---|---|"]
         lines += [f"| {r['key'].split('/', 1)[1]} | {_said(r)} | {bool(r.get('set_aside'))} "
-                  f"| {r['seconds']:.0f} |" + (f" {r['error']}" if r.get("error") else "")
+                  f"| {r['passes']} | {bool(r.get('peaks_right'))} | {r['seconds']:.0f} |"
+                  + (f" {r['error']}" if r.get("error") else "")
                   for r in sorted(got, key=lambda r: r["key"])]  # fmt: skip
     return "\n".join(lines) + "\n"
 

@@ -375,12 +375,15 @@ def test_a_named_candidates_rivals_left_on_the_coarse_model_are_refined():
 
     from bayesplate.discrepancy.rank import RIVAL_REACH, _rivals
 
-    def result(gain, refined):
-        return SimpleNamespace(log_evidence_gain=gain, fit=SimpleNamespace(refined=refined))
+    def result(gain, refined, failed=""):
+        return SimpleNamespace(log_evidence_gain=gain, fit=SimpleNamespace(refined=refined),
+                               failed=failed)  # fmt: skip
 
     results = [result(3.5, True), result(-0.7, False), result(3.5 - RIVAL_REACH - 0.1, False),
                result(2.0, True)]  # fmt: skip
     assert _rivals(results, threshold=3.0) == [1]
+    # one whose refinement failed already is not tried again
+    assert _rivals([*results, result(3.0, False, "its settled fit failed")], 3.0) == [1]
     assert _rivals(results, threshold=4.0) == []  # the best may not be named: no rivals
     assert _rivals([result(-0.7, False)], threshold=3.0) == []
 
@@ -405,3 +408,7 @@ def test_every_named_fit_not_settled_gets_its_note():
     assert notes[1].startswith("c: the full model's objective 14 could still fall by 2.5")
     assert unsettled_notes(nominal, None) == []
     assert len(unsettled_notes(fitted("nominal", False).fit, None)) == 1
+    # and a note for each ranked candidate whose fit failed (ranked as its phase before)
+    failed = SimpleNamespace(name="cutout+thickness_taper", failed="its settled fit failed (x)")
+    assert unsettled_notes(nominal, None, ranked=[second, failed]) == [
+        "cutout+thickness_taper: its settled fit failed (x)"]  # fmt: skip

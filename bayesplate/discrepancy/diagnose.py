@@ -242,7 +242,7 @@ def diagnose(
         Measured-to-computed modes (:func:`bayesplate.pairing.pair_measured` at the prior
         mean, as :func:`bayesplate.estimators.estimate` takes it): "auto" pairs by shape
         and frequency when the case has shapes, else by mode numbers if any, else by order
-        checked (the assignment made again at the verdict's fit and said: `reassign`);
+        checked (the assignment made again at the verdict's fit: `reassign`);
         "likelihood" takes the assignment B settles on (on `model`). Unpaired measured modes
         (spurious peaks) are left out.
     alpha : float
@@ -273,9 +273,8 @@ def diagnose(
     pairs : bool
         Fit two effects at once when the best single candidate's refit is rejected.
     reassign : bool
-        By likelihood: make the assignment again at the fit the verdict rests on and, where
-        it differs, diagnose again with it, keeping the pass that explains all peaks best;
-        by order checked ("auto"): made again there and said, one pass (:mod:`.reassign`).
+        Make the assignment again at the fit the verdict rests on and, where it differs (by
+        order checked: where it pairs a peak with another mode), diagnose again (:mod:`.reassign`).
         Order or index asked by name, and pairing by shapes, are kept as they are.
     prior_odds : dict, optional
         ``{candidate name: prior odds against the nominal model}`` (default 1 for every
@@ -448,7 +447,7 @@ def diagnose(
         if outcome != "consistent" and region is not None and mirrors:
             notes.append("the plate's symmetry makes the mirror images of the located region fit "
                          "equally well from frequencies alone")  # fmt: skip
-        notes += unsettled_notes(nominal, chosen, tied if rival else [])
+        notes += unsettled_notes(nominal, chosen, tied if rival else [], ranked)
         say(f"verdict: {outcome}" + (f" ({chosen.name})" if chosen else "")
             + "".join(f" or {c.name}" for c, _ in (tied if rival else [])))  # fmt: skip
         return Diagnosis(
@@ -463,8 +462,9 @@ def diagnose(
     first = one_pass(pairing, rng)
     if not reassign or not (checked or pairing.how == "likelihood" and pairing.assignment):
         return first  # by order, index or shapes as asked: kept
+    settled = (lambda: settle_pairing(case, model, "likelihood", tol=1e-2)[0]) if checked else None
     return made_again(first, lambda p: one_pass(p, again), model, pairing, case.measured,
-                      (mu_b, V_b), say)  # fmt: skip
+                      (mu_b, V_b), say, settled)  # fmt: skip
 
 
 def _paired(fit_, modes):

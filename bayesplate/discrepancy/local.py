@@ -10,7 +10,7 @@ from __future__ import annotations
 import logging
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import OptimizeResult, least_squares
 
 from ..parallel import fork_map
 
@@ -31,23 +31,37 @@ def distinct(results):
 
 
 def local_fits(problem, starts, max_nfev, workers=1, tol=1e-8):
-    """Least-squares results from every start, lowest cost first (``tol``: ftol and xtol)."""
+    """Least-squares results from every start, lowest cost first (``tol``: ftol and xtol).
+
+    A start whose fit meets a plate that cannot be solved (on a reduced model far from
+    where it was built, a pair's summed mass matrix need not stay positive definite) is
+    dropped with a warning; if every start fails, their results are returned at their
+    starts with an infinite cost.
+    """
     lo, hi = problem.bounds()
 
     def local_fit(z0):
         solves = problem.n_solves
         z0 = np.clip(np.asarray(z0, dtype=float), lo + 1e-9, hi - 1e-9)
-        res = least_squares(
-            problem.residuals,
-            z0,
-            jac=problem.jacobian,
-            bounds=(lo, hi),
-            method="trf",
-            x_scale="jac",
-            max_nfev=max_nfev,
-            ftol=tol,
-            xtol=tol,
-        )
+        try:
+            res = least_squares(
+                problem.residuals,
+                z0,
+                jac=problem.jacobian,
+                bounds=(lo, hi),
+                method="trf",
+                x_scale="jac",
+                max_nfev=max_nfev,
+                ftol=tol,
+                xtol=tol,
+            )
+        except np.linalg.LinAlgError as error:
+            log.warning("%s start %s: fit failed (%s: %s)", problem_name(problem),
+                        np.round(z0, 2), type(error).__name__, error)  # fmt: skip
+            failed = OptimizeResult(x=z0, cost=np.inf, success=False, status=-1,
+                                    message=f"failed: {error}")  # fmt: skip
+            failed.n_solves = problem.n_solves - solves
+            return failed
         log.info(
             "%s start %s: cost %.3g (%s)",
             problem_name(problem),
@@ -61,7 +75,8 @@ def local_fits(problem, starts, max_nfev, workers=1, tol=1e-8):
     solves = problem.n_solves
     results = fork_map(local_fit, starts, workers)
     problem.n_solves = solves + sum(r.n_solves for r in results)  # also those of workers
-    return sorted(results, key=lambda r: r.cost)
+    fitted = [r for r in results if np.isfinite(r.cost)]
+    return sorted(fitted or results, key=lambda r: r.cost)
 
 
 def problem_name(problem):

@@ -31,9 +31,6 @@ from .pencil import _has_ritz, project
 
 __all__ = ["Pair", "pairs_with"]
 
-#: Stiffness coefficients where only the number of a candidate's parameters matters (it does
-#: not depend on ``b``: only their priors do, through the plate's scale).
-_ANY_B = np.ones(6)
 #: Modes compared to tell a true mirror image of a pair from a mere combination of images.
 MIRROR_MODES = 8
 #: Most elements each way of the mesh that tells them apart (see :meth:`Pair.mirror_images`).
@@ -80,7 +77,7 @@ class Pair(Physics):
 
     def apply(self, model, theta):
         """The nominal plate plus both components' changes (see the module docstring)."""
-        ta, tb = self.split(model, _ANY_B, theta)
+        ta, tb = self.split(model, self.b, theta)
         pa, pb = self.first.apply(model, ta), self.second.apply(model, tb)
         terms = pa.stiffness_terms + pb.stiffness_terms - model.stiffness_terms
         mass = pa.mass_data + pb.mass_data - model.mass_data
@@ -145,7 +142,7 @@ class Pair(Physics):
         None when either component does not say (:meth:`mirror_images` then tells the
         images apart by their frequencies).
         """
-        ta, tb = self.split(model, _ANY_B, theta)
+        ta, tb = self.split(model, self.b, theta)
         ia, ib = self.first.image(model, ta, symmetry), self.second.image(model, tb, symmetry)
         return None if ia is None or ib is None else np.concatenate([ia, ib])
 
@@ -163,7 +160,7 @@ class Pair(Physics):
         images = [self.image(model, theta, s) for s in plate_symmetries(model)]
         if all(t is not None for t in images):
             return distinct_images(theta, images)
-        ta, tb = self.split(model, _ANY_B, theta)
+        ta, tb = self.split(model, self.b, theta)
         images_a = [ta, *self.first.mirror_images(model, ta)]
         images_b = [tb, *self.second.mirror_images(model, tb)]
         combos = [np.concatenate([images_a[i], images_b[j]])

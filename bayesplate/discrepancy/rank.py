@@ -83,6 +83,9 @@ class CandidateResult:
     parameters_sd : dict
     mirror_images : list of dict
         Parameter values that fit equally by the plate's symmetry.
+    failed : str
+        Empty, or why a later phase of :func:`rank` failed on this candidate (a plate on
+        the way that could not be solved): the result is then that of the phase before.
     """
 
     name: str
@@ -91,6 +94,7 @@ class CandidateResult:
     parameters: dict
     parameters_sd: dict
     mirror_images: list
+    failed: str = ""
 
 
 def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list, say,
@@ -213,25 +217,28 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
     results = [None] * len(physics_list)
     hits = [[] for _ in physics_list]  # the phases of each taken from the store
     _phase(stages, "rough", rough_stage, [(i, physics_list[i], None) for i in order],
-           results, hits, level["workers"])  # fmt: skip
+           results, hits, level["workers"], say)  # fmt: skip
+    kept = [i for i, r in enumerate(results) if r is not None]  # a failed rough fit: left out
+    physics_list, results, hits = ([x[i] for i in kept] for x in (physics_list, results, hits))
     todo = _to_refine(results, level["margin"])
     log.debug("rough gains: %s; refined: %s",
               ", ".join(f"{_label(r)} {r.log_evidence_gain:+.1f}" for r in results),
               ", ".join(_label(results[i]) for i in todo))  # fmt: skip
     _phase(stages, "settled", settled, [(i, physics_list[i], results[i].fit) for i in todo],
-           results, hits, level["workers"])  # fmt: skip
+           results, hits, level["workers"], say)  # fmt: skip
     todo = _rivals(results, level.get("threshold", NAMED))
     _phase(stages, "settled", settled, [(i, physics_list[i], results[i].fit) for i in todo],
-           results, hits, level["workers"])  # fmt: skip
+           results, hits, level["workers"], say)  # fmt: skip
     todo = _unsettled_leaders(results)
     _phase(stages, "again", again, [(i, physics_list[i], results[i].fit) for i in todo],
-           results, hits, level["workers"])  # fmt: skip
+           results, hits, level["workers"], say)  # fmt: skip
     for r, hit, physics in zip(results, hits, physics_list, strict=True):
         where = "" if r.fit.refined else " (coarse mesh, not refined)"
         if r.fit.check is not None and not r.fit.check.settled:
             where += (f" (not settled in {r.fit.check.rounds} rounds: the full model's "
                       f"objective could still fall by {r.fit.check.decrement:.2g})")
         where += "".join(f" ({phase} fit taken from the store)" for phase in hit)
+        where += f" ({r.failed})" if r.failed else ""
         variant = "".join(f" ({v})" for v in physics.settings().values())
         say(f"{r.name}{variant}: chi2 = {r.fit.chi2:.1f}, evidence gain "
             f"{r.log_evidence_gain:+.1f}{where}")  # fmt: skip
@@ -244,13 +251,16 @@ def _label(result):
     return result.name + "".join(f" ({v})" for v in variant)
 
 
-def _phase(stages, name, compute, items, results, hits, workers):
+def _phase(stages, name, compute, items, results, hits, workers, say):
     """One phase of :func:`rank`: ``compute((physics, earlier fit))`` for each item, stored.
 
     ``items`` are ``(index, physics, earlier fit or None)``; each result goes to
     ``results[index]`` (its ``fit.physics`` the very object given); the phase's name is
     appended to ``hits[index]`` when it came from the store (each stage used is announced:
-    a rerun after an interruption shows what it took).
+    a rerun after an interruption shows what it took). A candidate whose fit meets a plate
+    that cannot be solved (a far reduced model's mass no longer positive definite, say)
+    keeps its earlier phase's result, marked ``failed`` (None for the first phase: the
+    candidate is left out), and the failure is said; nothing is stored for it.
     """
     if not items:
         return
@@ -260,16 +270,27 @@ def _phase(stages, name, compute, items, results, hits, workers):
 
     def task(item):
         _, physics, earlier = item
-        if stages is None:
-            return compute((physics, earlier) if earlier is not None else physics), False
-        found, value = stages.get(key(physics, earlier))
-        if not found:
-            value = compute((physics, earlier) if earlier is not None else physics)
-            stages.put(key(physics, earlier), value)
+        try:
+            if stages is None:
+                return compute((physics, earlier) if earlier is not None else physics), False
+            found, value = stages.get(key(physics, earlier))
+            if not found:
+                value = compute((physics, earlier) if earlier is not None else physics)
+                stages.put(key(physics, earlier), value)
+        except np.linalg.LinAlgError as error:
+            log.warning("%s: %s fit failed: %s", physics.name, name, error)
+            return None, f"its {name} fit failed ({type(error).__name__}: {error})"
         return value, found
 
     done = fork_map(task, items, workers)
     for (i, physics, earlier), (value, found) in zip(items, done, strict=True):
+        if value is None:
+            failed = found + ("; left out" if results[i] is None else "; the phase before kept")
+            say(f"{physics.name}{''.join(f' ({v})' for v in physics.settings().values())}: "
+                f"{failed}")  # fmt: skip
+            if results[i] is not None:
+                results[i] = replace(results[i], failed=failed)
+            continue
         results[i] = replace(value, fit=replace(value.fit, physics=physics))
         if found:
             hits[i].append(name)
@@ -297,7 +318,8 @@ def _rivals(results, threshold):
     if best <= threshold:
         return []
     return [i for i, r in enumerate(results)
-            if not r.fit.refined and r.log_evidence_gain >= best - RIVAL_REACH]  # fmt: skip
+            if not r.fit.refined and not r.failed
+            and r.log_evidence_gain >= best - RIVAL_REACH]  # fmt: skip
 
 
 def _unsettled_leaders(results):

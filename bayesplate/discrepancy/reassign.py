@@ -19,15 +19,16 @@ the Laplace evidence (in eigenvalues, as the fits' data are): a spurious peak is
 verdict model scores higher is kept (the maximum over the assignments tried, not a sum over
 all of them).
 
-By order (the default, checked), the assignment is made again at the verdict's fit and the
-diagnosis stays one pass: the order stands when that assignment pairs no peak with another
-mode (peaks it calls spurious in their own place are named as outliers); otherwise a note and
-the progress line say that the verdict rests on a pairing its own fit does not support, and
-to diagnose again by likelihood. Further passes from the order were tried: on the
-calibration's recordings with the middle peak taken out (40 x 20 Frederiksen and 32 x 16
-crossply meshes, 2026-11-27) a diagnosis took 12 minutes, the crossply one ending in a wrong
-name; the Frederiksen one failed in its first pass (a reduced eigenproblem, B not positive
-definite), as pairing by order alone does there.
+By order (the default, checked), the assignment is made again at the verdict's fit: the
+order stands, and the diagnosis is one pass, when that assignment pairs no peak with another
+mode (peaks it calls spurious in their own place are named as outliers). Otherwise the order
+is set aside and the next pass takes the assignment B settles (``settled``: what
+``--pairing likelihood`` starts from), not the one made at the order's verdict fit: a fit
+of wrongly paired peaks is pulled away, and from its assignment further passes went astray
+(the calibration's crossply recordings with the middle peak taken out, 2026-11-27: a local
+stiffness loss named, the last peak on mode 15 instead of 14, where the assignment B settles
+gives `consistent` with every peak right). From there the passes go on as by likelihood, and
+all of them, the order's first, are compared on the one scale.
 
 Pure computation on fits and arrays; one full solve per fit checked; the
 passes themselves are diagnose's (:func:`made_again` is handed them).
@@ -205,7 +206,7 @@ def verdict_fit(d):
     return d.nominal, "the nominal fit", d.nominal.log_evidence
 
 
-def made_again(first, one_pass, model, pairing, measured, prior, say):
+def made_again(first, one_pass, model, pairing, measured, prior, say, settled=None):
     """The assignment made again at the verdict's fit; further passes where it differs.
 
     A pass whose verdict fit prefers another assignment is followed by one with it, up to
@@ -231,6 +232,9 @@ def made_again(first, one_pass, model, pairing, measured, prior, say):
     prior : tuple of numpy.ndarray
         ``(mu_b, V_b)``.
     say : callable
+    settled : callable, optional
+        ``settled() -> Pairing``: the assignment B settles (by likelihood), the next pass's
+        where the order is set aside; None: the order set aside is said, not acted on.
 
     Returns
     -------
@@ -248,8 +252,16 @@ def made_again(first, one_pass, model, pairing, measured, prior, say):
         change, terms, best = check(model, fit_, label, used, f, s_pass, prior)
         passes.append((current, used, log_evidence + terms, change))
         tried = [p[1] for p in passes]
-        if order:  # checked, not made again: one pass (see the module docstring)
-            break
+        if order:  # checked: one pass unless set aside (see the module docstring)
+            if settled is None or not change.changed or best.keeps_order:
+                break
+            order, again = False, settled()
+            if np.array_equal(full_modes(again, f.size), used):  # B settles the order
+                again = pairing_of(best, "likelihood")  # then on as by likelihood
+            say(f"pairing by order set aside at {label}'s constants ({change.describe()}); "
+                "diagnosing again by likelihood")  # fmt: skip
+            current, used = one_pass(again), full_modes(again, f.size)
+            continue
         if (not change.changed or len(passes) == MAX_PASSES
                 or any(np.array_equal(best.modes, t) for t in tried)):  # fmt: skip
             break
@@ -275,8 +287,10 @@ def made_again(first, one_pass, model, pairing, measured, prior, say):
     story = "; ".join(f"pass {i + 1} ({p[0].verdict}): ln p(all peaks) {p[2]:.1f}"
                       for i, p in enumerate(passes))  # fmt: skip
     say(f"assignment: {story}; pass {k + 1} kept")
-    note = (f"assignment made again at the verdict's fit ({passes[0][3].describe()}) and "
-            f"diagnosed with it, {len(passes)} passes in all; {story} (ln p(all peaks | the "
-            f"verdict's model, assignment)); pass {k + 1} kept (the best of these "
-            "assignments, not a sum over all)")  # fmt: skip
+    how = ("pairing by order set aside at the verdict's fit ({}) and diagnosed again from the "
+           "assignment B settles" if pairing.how == "order" else
+           "assignment made again at the verdict's fit ({}) and diagnosed with it")  # fmt: skip
+    note = (f"{how.format(passes[0][3].describe())}, {len(passes)} passes in all; {story} "
+            f"(ln p(all peaks | the verdict's model, assignment)); pass {k + 1} kept (the best "
+            "of these assignments, not a sum over all)")  # fmt: skip
     return replace(kept, notes=[*kept.notes, note], peak_modes=peaks)

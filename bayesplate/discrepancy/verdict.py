@@ -250,12 +250,13 @@ def refit_test(fit_, m):
     return dof, float(chi2_dist.sf(fit_.chi2, dof))
 
 
-def unsettled_notes(nominal, chosen, tied=()):
+def unsettled_notes(nominal, chosen, tied=(), ranked=()):
     """A note for each fit the verdict rests on whose full-model check did not settle.
 
     The nominal fit, the named candidate ``chosen`` (or None) and, for an ``ambiguous``
     verdict, every candidate ``tied`` with it (``(candidate, kind)`` pairs, as
-    :func:`ties` gives them).
+    :func:`ties` gives them); and one for each candidate of ``ranked`` whose fit failed
+    (its ``failed``: ranked as its phase before left it).
     """
     named = [c for c in (chosen, *(t for t, _ in tied)) if c is not None]
     notes = []
@@ -267,4 +268,5 @@ def unsettled_notes(nominal, chosen, tied=()):
                 f"fall by {check.decrement:.2g} (a Newton step) after {check.rounds} rounds on "
                 "reduced models; its numbers are those of the last round"
             )
+    notes += [f"{c.name}: {c.failed}" for c in ranked if getattr(c, "failed", "")]
     return notes
