@@ -410,5 +410,6 @@ def test_every_named_fit_not_settled_gets_its_note():
     assert len(unsettled_notes(fitted("nominal", False).fit, None)) == 1
     # and a note for each ranked candidate whose fit failed (ranked as its phase before)
     failed = SimpleNamespace(name="cutout+thickness_taper", failed="its settled fit failed (x)")
-    assert unsettled_notes(nominal, None, ranked=[second, failed]) == [
+    fitted_ok = SimpleNamespace(name="b", failed="")
+    assert unsettled_notes(nominal, None, ranked=[fitted_ok, failed]) == [
         "cutout+thickness_taper: its settled fit failed (x)"]  # fmt: skip

@@ -69,15 +69,19 @@ class Pair(Physics):
         return tuple(replace(p, name=f"{c.name}.{p.name}") for c in (self.first, self.second)
                      for p in c.parameters(model, b))  # fmt: skip
 
-    def split(self, model, b, theta):
-        """``(theta_first, theta_second)`` of a concatenated parameter vector."""
-        k = len(self.first.parameters(model, b))
+    def split(self, model, theta):
+        """``(theta_first, theta_second)`` of a concatenated parameter vector.
+
+        The first component's parameters counted at the pair's :attr:`b`: their number does
+        not depend on the constants, but their priors are sized from a physical plate.
+        """
+        k = len(self.first.parameters(model, self.b))
         theta = np.asarray(theta, dtype=float)
         return theta[:k], theta[k:]
 
     def apply(self, model, theta):
         """The nominal plate plus both components' changes (see the module docstring)."""
-        ta, tb = self.split(model, self.b, theta)
+        ta, tb = self.split(model, theta)
         pa, pb = self.first.apply(model, ta), self.second.apply(model, tb)
         terms = pa.stiffness_terms + pb.stiffness_terms - model.stiffness_terms
         mass = pa.mass_data + pb.mass_data - model.mass_data
@@ -97,7 +101,7 @@ class Pair(Physics):
         """
         if not (_has_ritz(self.first) and _has_ritz(self.second)):
             return None
-        na, nb = (None, None) if near is None else self.split(model, b, near)
+        na, nb = (None, None) if near is None else self.split(model, near)
         ma = self.first.ritz(model, b, basis, na)
         mb = self.second.ritz(model, b, basis, nb)
         if ma is None or mb is None:
@@ -142,7 +146,7 @@ class Pair(Physics):
         None when either component does not say (:meth:`mirror_images` then tells the
         images apart by their frequencies).
         """
-        ta, tb = self.split(model, self.b, theta)
+        ta, tb = self.split(model, theta)
         ia, ib = self.first.image(model, ta, symmetry), self.second.image(model, tb, symmetry)
         return None if ia is None or ib is None else np.concatenate([ia, ib])
 
@@ -160,7 +164,7 @@ class Pair(Physics):
         images = [self.image(model, theta, s) for s in plate_symmetries(model)]
         if all(t is not None for t in images):
             return distinct_images(theta, images)
-        ta, tb = self.split(model, self.b, theta)
+        ta, tb = self.split(model, theta)
         images_a = [ta, *self.first.mirror_images(model, ta)]
         images_b = [tb, *self.second.mirror_images(model, tb)]
         combos = [np.concatenate([images_a[i], images_b[j]])

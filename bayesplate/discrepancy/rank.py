@@ -151,7 +151,8 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
     list of CandidateResult
         Each ``fit.physics`` is the very object of ``physics_list`` (also for a result that
         came back from a worker or from the store: :func:`.pair.pairs_with` looks a
-        candidate's own fit up by it).
+        candidate's own fit up by it). A candidate whose first phase failed is left out
+        (said; see :func:`_phase`).
     """
 
     def problem_of(physics):
@@ -270,22 +271,23 @@ def _phase(stages, name, compute, items, results, hits, workers, say):
 
     def task(item):
         _, physics, earlier = item
+        """``(result, taken from the store, why it failed or "")``."""
         try:
             if stages is None:
-                return compute((physics, earlier) if earlier is not None else physics), False
+                return compute((physics, earlier) if earlier is not None else physics), False, ""
             found, value = stages.get(key(physics, earlier))
             if not found:
                 value = compute((physics, earlier) if earlier is not None else physics)
                 stages.put(key(physics, earlier), value)
         except np.linalg.LinAlgError as error:
             log.warning("%s: %s fit failed: %s", physics.name, name, error)
-            return None, f"its {name} fit failed ({type(error).__name__}: {error})"
-        return value, found
+            return None, False, f"its {name} fit failed ({type(error).__name__}: {error})"
+        return value, found, ""
 
     done = fork_map(task, items, workers)
-    for (i, physics, earlier), (value, found) in zip(items, done, strict=True):
-        if value is None:
-            failed = found + ("; left out" if results[i] is None else "; the phase before kept")
+    for (i, physics, earlier), (value, found, failed) in zip(items, done, strict=True):
+        if failed:
+            failed += "; left out" if results[i] is None else "; the phase before kept"
             say(f"{physics.name}{''.join(f' ({v})' for v in physics.settings().values())}: "
                 f"{failed}")  # fmt: skip
             if results[i] is not None:

@@ -206,7 +206,7 @@ def verdict_fit(d):
     return d.nominal, "the nominal fit", d.nominal.log_evidence
 
 
-def made_again(first, one_pass, model, pairing, measured, prior, say, settled=None):
+def made_again(first, one_pass, model, pairing, measured, prior, say, settled):
     """The assignment made again at the verdict's fit; further passes where it differs.
 
     A pass whose verdict fit prefers another assignment is followed by one with it, up to
@@ -232,9 +232,10 @@ def made_again(first, one_pass, model, pairing, measured, prior, say, settled=No
     prior : tuple of numpy.ndarray
         ``(mu_b, V_b)``.
     say : callable
-    settled : callable, optional
+    settled : callable or None
         ``settled() -> Pairing``: the assignment B settles (by likelihood), the next pass's
-        where the order is set aside; None: the order set aside is said, not acted on.
+        where the order is set aside; called only then (None where ``pairing`` is not by
+        order).
 
     Returns
     -------
@@ -253,14 +254,15 @@ def made_again(first, one_pass, model, pairing, measured, prior, say, settled=No
         passes.append((current, used, log_evidence + terms, change))
         tried = [p[1] for p in passes]
         if order:  # checked: one pass unless set aside (see the module docstring)
-            if settled is None or not change.changed or best.keeps_order:
+            if not change.changed or best.keeps_order:
                 break
             order, again = False, settled()
-            if np.array_equal(full_modes(again, f.size), used):  # B settles the order
-                again = pairing_of(best, "likelihood")  # then on as by likelihood
+            peaks = full_modes(again, f.size)
+            if np.array_equal(peaks, used):  # B settles the order: on as by likelihood
+                again, peaks = pairing_of(best, "likelihood"), best.modes
             say(f"pairing by order set aside at {label}'s constants ({change.describe()}); "
                 "diagnosing again by likelihood")  # fmt: skip
-            current, used = one_pass(again), full_modes(again, f.size)
+            current, used = one_pass(again), peaks
             continue
         if (not change.changed or len(passes) == MAX_PASSES
                 or any(np.array_equal(best.modes, t) for t in tried)):  # fmt: skip
@@ -270,25 +272,19 @@ def made_again(first, one_pass, model, pairing, measured, prior, say, settled=No
     if len(passes) == 1:
         note = (f"assignment made again at {label}'s constants: the most probable one is "
                 "the one used")  # fmt: skip
-        if change.changed and best.keeps_order:  # the order kept, its outliers named
+        if change.changed:  # the order kept (one pass), its outliers named
             which = ", ".join(str(i + 1) for i in best.spurious)
             note = (f"assignment made again at {label}'s constants: it pairs no peak with "
                     f"another mode than the order's (it would call peak(s) {which} spurious: "
                     "outliers of this fit, kept)")  # fmt: skip
-        elif change.changed:  # the order set aside: said, not acted on
-            note = (f"pairing by order set aside at {label}'s constants ({change.describe()}): "
-                    "this verdict rests on a pairing its own fit does not support (a mode the "
-                    "test missed, or a peak that is no mode?); diagnose again with "
-                    "--pairing likelihood")  # fmt: skip
-            say(note)
         return replace(first, notes=[*first.notes, note], peak_modes=used)
     k = int(np.argmax([p[2] for p in passes]))
     kept, peaks = passes[k][0], passes[k][1]
     story = "; ".join(f"pass {i + 1} ({p[0].verdict}): ln p(all peaks) {p[2]:.1f}"
                       for i, p in enumerate(passes))  # fmt: skip
     say(f"assignment: {story}; pass {k + 1} kept")
-    how = ("pairing by order set aside at the verdict's fit ({}) and diagnosed again from the "
-           "assignment B settles" if pairing.how == "order" else
+    how = ("pairing by order set aside at the verdict's fit ({}) and diagnosed again by "
+           "likelihood" if pairing.how == "order" else
            "assignment made again at the verdict's fit ({}) and diagnosed with it")  # fmt: skip
     note = (f"{how.format(passes[0][3].describe())}, {len(passes)} passes in all; {story} "
             f"(ln p(all peaks | the verdict's model, assignment)); pass {k + 1} kept (the best "

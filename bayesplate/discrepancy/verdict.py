@@ -268,5 +268,5 @@ def unsettled_notes(nominal, chosen, tied=(), ranked=()):
                 f"fall by {check.decrement:.2g} (a Newton step) after {check.rounds} rounds on "
                 "reduced models; its numbers are those of the last round"
             )
-    notes += [f"{c.name}: {c.failed}" for c in ranked if getattr(c, "failed", "")]
+    notes += [f"{c.name}: {c.failed}" for c in ranked if c.failed]
     return notes
