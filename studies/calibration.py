@@ -454,12 +454,12 @@ def _seed(task):
     return np.random.SeedSequence(SEED, spawn_key=spawn)
 
 
-def run_task_recorded(task, quick=False, code=None):
+def run_task_recorded(task, quick=False, code=None, options=None):
     """:func:`run_task`, its failure a row too (verdict ``error``, the traceback's end):
     a replicate that raises is recorded, not lost, and the run goes on."""
     start = time.perf_counter()
     try:
-        row = run_task(task, quick)
+        row = run_task(task, quick, options)
     except Exception as exc:  # noqa: BLE001 - every failure is a result of the study
         kind, family, effect, label, size, rep = task
         row = {
@@ -507,15 +507,18 @@ def recordings(task, quick=False):
     return blind, model, f_true, f0, physics, theta, int(rng.integers(2**31))
 
 
-def run_task(task, quick=False):
-    """Make the recordings of one replicate, diagnose them blind; the row (plain data)."""
+def run_task(task, quick=False, options=None):
+    """Make the recordings of one replicate, diagnose them blind; the row (plain data).
+
+    ``options``: keyword options of diagnose besides its defaults (another study's rule).
+    """
     kind, family, effect, label, size, rep = task
     logging.getLogger("bayesplate").setLevel(logging.ERROR)
     blind, model, f_true, f0, physics, theta, seed = recordings(task, quick)
     case, f, sigma = blind, blind.measured.frequency_Hz, blind.measured.sigma_Hz
     ideal_chi2 = float(np.sum(((f - np.sort(f0)) / sigma) ** 2))
     start = time.perf_counter()
-    d = diagnose(blind, model=model, rng=seed, pairing="order")
+    d = diagnose(blind, model=model, rng=seed, pairing="order", **(options or {}))
     seconds = time.perf_counter() - start
     b_true = stiffness_from_engineering(case.reference)
     row = {
@@ -532,6 +535,7 @@ def run_task(task, quick=False):
         "ideal_lambda": noncentrality(f_true, f0),
         "truth": None if physics is None else physics.labelled(model, b_true, theta),
         "recovered": None, "images": [], "seconds": seconds,
+        "widening": (d.sigma_Hz / sigma).tolist(),
     }  # fmt: skip
     if physics is not None and d.chosen is not None and d.chosen.name == effect:
         c = d.chosen

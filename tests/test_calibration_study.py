@@ -255,7 +255,7 @@ def test_tasks_run_the_fitted_size_first_with_clean_replicates_between_its_round
 
 
 def test_a_replicate_that_raises_is_recorded(monkeypatch):
-    def boom(task, quick=False):
+    def boom(task, quick=False, options=None):
         raise RuntimeError("no convergence")
 
     monkeypatch.setattr(cal, "run_task", boom)

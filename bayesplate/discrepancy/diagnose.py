@@ -49,6 +49,7 @@ from ..quantities import hz_from_eigenvalue
 from . import candidates as all_candidates
 from .fit import JointFit, JointProblem
 from .locate import absorbable_projector, best_region, mode_kinds
+from .mesh_error import MESH_ERROR_PARTS, coarse_model, mesh_error, unabsorbed
 from .nominal import N_STARTS, check_fast, fit_nominal, nominal_reduced, nominal_stage
 from .probabilities import model_probabilities
 from .rank import CandidateResult, improved_nominal, rank, searched_anew
@@ -88,6 +89,7 @@ DEFAULTS = {
     "n_starts": N_STARTS,  # random starts of the nominal fit (reduced model), and the mean
     "unidentified_ratio": 0.7,  # posterior sd / prior sd above which a constant is unidentified
     "mesh_error_ratio": 0.3,  # mesh error / sigma above which sigma is inflated
+    "mesh_error_part": "whole",  # of the mesh error added: all, or what the constants leave
     "refine_margin": 1.0,  # nats: candidates below this on the coarse mesh are not refined
     "basin_margin": 2.0,  # chi2 + chi2_prior: another nominal optimum this close fits as well
     "workers": 1,  # processes for independent fits (fork); the CLI uses 2
@@ -178,27 +180,6 @@ class Diagnosis:
     also_tied: list = field(default_factory=list, repr=False)
 
 
-def coarse_model(model):
-    """The same plate on a mesh with half as many elements each way."""
-    return model.on_mesh((max(model.mesh.nx // 2, 2), max(model.mesh.ny // 2, 1)))
-
-
-def mesh_error(model, b, n_modes, coarse=None):
-    """Richardson estimate of each frequency's discretisation error on ``model``'s mesh.
-
-    The mesh is compared with one of half as many elements each way; with the element's
-    ``h^2`` rate the error of the finer one is ``(f_coarse - f_fine) / 3``.
-
-    Returns
-    -------
-    numpy.ndarray, shape (n_modes,)
-        Estimated ``f_mesh - f_converged`` in Hz (positive: the mesh is too stiff).
-    """
-    coarse = coarse or coarse_model(model)
-    fine = model.solve(b, n_modes).frequency_Hz
-    return (coarse.solve(b, n_modes).frequency_Hz - fine) / 3.0
-
-
 def diagnose(
     case,
     model=None,
@@ -212,6 +193,7 @@ def diagnose(
     n_starts=DEFAULTS["n_starts"],
     unidentified_ratio=DEFAULTS["unidentified_ratio"],
     mesh_error_ratio=DEFAULTS["mesh_error_ratio"],
+    mesh_error_part=DEFAULTS["mesh_error_part"],
     refine_margin=DEFAULTS["refine_margin"],
     basin_margin=DEFAULTS["basin_margin"],
     workers=DEFAULTS["workers"],
@@ -255,6 +237,10 @@ def diagnose(
         Posterior sd / prior sd above which a constant is reported as unidentified.
     mesh_error_ratio : float
         Mesh error / measurement deviation above which the deviation is inflated.
+    mesh_error_part : {"whole", "unabsorbed"}
+        What of the mesh's estimated error inflates the deviations: all of it, or the part
+        the six constants cannot absorb (:mod:`.mesh_error`; measured by
+        ``studies/mesh_error_rule.py``).
     refine_margin : float
         Candidates gaining less than this on their reduced coarse model are not refined on
         the working mesh, nats.
@@ -297,6 +283,9 @@ def diagnose(
     -------
     Diagnosis
     """
+    if mesh_error_part not in MESH_ERROR_PARTS:
+        raise ValueError(f"mesh_error_part = {mesh_error_part!r}: must be one of "
+                         f"{', '.join(MESH_ERROR_PARTS)}")  # fmt: skip
     rng = np.random.default_rng(rng)
     say = progress or (lambda message: log.info(message))
     model = model or PlateModel.from_case(case)
@@ -322,18 +311,24 @@ def diagnose(
 
         n_solve = int(modes.max()) + 1
         if n_solve not in at_mean:  # a second pass (another assignment) solves nothing again
-            at_mean[n_solve] = (model.solve(mu_b, n_solve).eigenvalues,
+            at_mean[n_solve] = (model.solve(mu_b, n_solve),
                                 coarse.solve(mu_b, n_solve).eigenvalues)  # fmt: skip
-        fine_lam, coarse_at_mean = at_mean[n_solve]
+        at_fine, coarse_at_mean = at_mean[n_solve]
+        fine_lam = at_fine.eigenvalues
         err = ((hz_from_eigenvalue(coarse_at_mean) - hz_from_eigenvalue(fine_lam)) / 3.0)[modes]
         sigma_Hz = np.asarray(measured.sigma_Hz, dtype=float)
         ratio = np.abs(err) / sigma_Hz
         say(f"mesh {model.mesh.nx} x {model.mesh.ny}: error up to {ratio.max():.2f} sigma")
-        if ratio.max() > mesh_error_ratio:
-            sigma_Hz = np.hypot(sigma_Hz, err)
+        added, what = err, "it was"
+        if mesh_error_part == "unabsorbed":  # what the six constants cannot take themselves
+            added = unabsorbed(err, sigma_Hz, fine_lam[modes], at_fine.sensitivities[modes])
+            left = np.abs(added / sigma_Hz).max()
+            what = f"the part of it the constants cannot absorb (up to {left:.2f} sigma) was"
+        if np.abs(added / sigma_Hz).max() > mesh_error_ratio:
+            sigma_Hz = np.hypot(sigma_Hz, added)
             notes.append(
                 f"the mesh's own error reaches {ratio.max():.2f} sigma (mode "
-                f"{int(np.argmax(ratio)) + 1}); it was added to the deviations in quadrature: "
+                f"{int(np.argmax(ratio)) + 1}); {what} added to the deviations in quadrature: "
                 "use a finer [model] mesh"
             )
         Y = observed_eigenvalues(measured.frequency_Hz)
@@ -343,6 +338,8 @@ def diagnose(
         options = (alpha, evidence_threshold, n_starts, unidentified_ratio, mesh_error_ratio,
                    refine_margin, basin_margin, ambiguity_margin, prior_margin, pairs,
                    prior_odds)  # fmt: skip
+        if mesh_error_part != "whole":  # (the default keeps the stores' keys of before)
+            options += (mesh_error_part,)
         stages = Stages(store, digest(Y, sigma, measured.frequency_Hz, modes, mu_b, V_b, options,
                                       plate_digest(model), physics, fast), say)  # fmt: skip
         rough, nominal = nominal_stage(nominal_problem, (mu_b, V_b), coarse,

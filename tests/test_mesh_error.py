@@ -1,0 +1,46 @@
+"""The mesh's own error and the part of it the six constants cannot absorb."""
+
+import numpy as np
+import pytest
+
+from bayesplate import PlateModel, bundled_case_path, load_case
+from bayesplate.discrepancy.diagnose import diagnose
+from bayesplate.discrepancy.mesh_error import unabsorbed
+
+
+def _synthetic(m=12, seed=0):
+    """Eigenvalues, sensitivities and deviations of an invented plate (m modes)."""
+    rng = np.random.default_rng(seed)
+    lam = np.sort(rng.uniform(1e6, 1e8, m))
+    b = np.array([1.2e11, 9e9, 3e9, 5e9, 5e9, 3e9])
+    S = lam[:, None] * rng.uniform(0.0, 1.0, (m, 6)) / b  # d lambda / d b, homogeneous
+    f = np.sqrt(lam) / (2 * np.pi)
+    return lam, S, 0.002 * f, f
+
+
+def test_an_error_the_constants_can_mimic_leaves_nothing():
+    lam, S, sigma, f = _synthetic()
+    db = np.array([1e9, -2e8, 5e7, 3e7, -1e8, 2e7])
+    error = f / (2 * lam) * (S @ db)  # first order: what that change of b does to f, Hz
+    assert np.abs(error / sigma).max() > 1.0
+    np.testing.assert_allclose(unabsorbed(error, sigma, lam, S), 0.0, atol=1e-9 * sigma.max())
+
+
+def test_an_error_no_change_of_the_constants_can_mimic_is_left_whole():
+    lam, S, sigma, f = _synthetic()
+    whitened = (f / (2 * lam))[:, None] * S / sigma[:, None]
+    q, _ = np.linalg.qr(whitened, mode="complete")
+    error = sigma * (q[:, 6:] @ np.arange(1.0, 7.0))  # whitened: orthogonal to every column
+    np.testing.assert_allclose(unabsorbed(error, sigma, lam, S), error, rtol=1e-10)
+
+
+def test_as_many_constants_as_modes_absorb_any_error():
+    lam, S, sigma, f = _synthetic(m=6)
+    error = sigma * np.linspace(-2, 3, 6)
+    np.testing.assert_allclose(unabsorbed(error, sigma, lam, S), 0.0, atol=1e-9 * sigma.max())
+
+
+def test_an_unknown_part_is_refused_with_its_value_and_the_choices():
+    case = load_case(bundled_case_path("plate1"))
+    with pytest.raises(ValueError, match=r"mesh_error_part = 'most'.*whole, unabsorbed"):
+        diagnose(case, model=PlateModel.from_case(case, mesh=(6, 3)), mesh_error_part="most")
