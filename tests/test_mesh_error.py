@@ -44,3 +44,28 @@ def test_an_unknown_part_is_refused_with_its_value_and_the_choices():
     case = load_case(bundled_case_path("plate1"))
     with pytest.raises(ValueError, match=r"mesh_error_part = 'most'.*whole, unabsorbed"):
         diagnose(case, model=PlateModel.from_case(case, mesh=(6, 3)), mesh_error_part="most")
+
+
+@pytest.mark.slow  # two diagnoses of plate 1 on a 12 x 6 mesh
+def test_the_unabsorbed_part_widens_the_deviations_less_and_is_said():
+    """On a coarse mesh diagnose widens its deviations by the mesh's error; the part the
+    constants leave is a fraction of it (plate 1, 12 x 6, recordings on 24 x 12)."""
+    from bayesplate import stiffness_from_engineering
+
+    case = load_case(bundled_case_path("plate1"))
+    fine = PlateModel.from_case(case, mesh=(24, 12))
+    f = fine.solve(stiffness_from_engineering(case.reference), 14).frequency_Hz
+    f = f * (1 + 0.002 * np.random.default_rng(1).standard_normal(f.size))
+    blind = case.with_measured(frequency_Hz=f, sigma_Hz=0.002 * f)
+    model = PlateModel.from_case(case, mesh=(12, 6))
+    whole = diagnose(blind, model=model, rng=0, n_starts=1, pairing="order")
+    left = diagnose(blind, model=model, rng=0, n_starts=1, pairing="order",
+                    mesh_error_part="unabsorbed")  # fmt: skip
+    sigma = blind.measured.sigma_Hz
+    assert np.max(whole.sigma_Hz / sigma) > 1.5  # the whole error: well above the deviations
+    np.testing.assert_allclose(left.mesh_error_Hz, whole.mesh_error_Hz)  # the same estimate
+    assert np.all(left.sigma_Hz >= sigma)
+    # a projection: the whitened error it adds is shorter (not each of its components)
+    added = [np.sum((d.sigma_Hz / sigma) ** 2 - 1.0) for d in (whole, left)]
+    assert added[1] < added[0]
+    assert any("cannot absorb" in n for n in left.notes) or np.all(left.sigma_Hz == sigma)
