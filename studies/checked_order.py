@@ -112,7 +112,7 @@ def run_row(row_task, quick=False):
     seconds = time.perf_counter() - start
     note = next((n for n in d.notes
                  if n.startswith(("assignment made again", "pairing by order set aside"))), "")
-    passes = 1 if " passes in all" not in note else int(note.split(" passes in all")[0].split()[-1])
+    passes = d.passes
     peaks = None if d.peak_modes is None else [int(j) for j in d.peak_modes]
     return {
         "key": key(row_task), "variant": variant, "kind": task[0], "family": task[1],

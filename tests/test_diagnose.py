@@ -76,6 +76,7 @@ def test_concealed_point_mass_is_named_and_recovered(model, tmp_path):
     assert any("mesh" in note for note in d.notes)
     out = diagnosis_to_dict(d)
     assert out["chosen"] == "point_mass" and out["refit"]["parameters"]["mass_g"] > 0
+    assert all(c["failed"] == "" for c in out["candidates"])  # no fit failed on the way
     write_json(out, tmp_path / "d.json")  # plain data, as the command writes it
     assert json.loads((tmp_path / "d.json").read_text())["verdict"] == "explained"
 

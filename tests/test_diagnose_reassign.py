@@ -100,7 +100,7 @@ def test_by_default_a_missed_mode_sets_the_order_aside_and_is_found_by_likelihoo
     np.testing.assert_array_equal(d.peak_modes, [0, 1, *range(3, case.measured.size + 1)])
     assert d.verdict == "consistent"
     note = next(n for n in d.notes if n.startswith("pairing by order set aside"))
-    assert "peak 4: mode 4 -> mode 5" in note and "2 passes in all" in note
+    assert "peak 4: mode 4 -> mode 5" in note and "2 passes in all" in note and d.passes == 2
     assert "pass 1 (unexplained)" in note and "pass 2 kept" in note
     assert any(line.endswith("diagnosing again by likelihood") for line in said)
     by_likelihood = diagnose(case, model=model, rng=0, n_starts=1, physics=[PointMass()],

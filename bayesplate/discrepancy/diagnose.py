@@ -151,6 +151,8 @@ class Diagnosis:
         The computed mode (0-based) of every measured peak in the pass kept, -1 where it was
         left out as spurious; set when the assignment was made again at the verdict's fit
         (:mod:`.reassign`).
+    passes : int
+        Passes diagnose ran, each with another assignment of the peaks (:mod:`.reassign`).
     """
 
     verdict: str
@@ -178,6 +180,7 @@ class Diagnosis:
     separation: Separation | None = None
     peak_modes: np.ndarray | None = None
     also_tied: list = field(default_factory=list, repr=False)
+    passes: int = 1
 
 
 def diagnose(

@@ -289,4 +289,4 @@ def made_again(first, one_pass, model, pairing, measured, prior, say, settled):
     note = (f"{how.format(passes[0][3].describe())}, {len(passes)} passes in all; {story} "
             f"(ln p(all peaks | the verdict's model, assignment)); pass {k + 1} kept (the best "
             "of these assignments, not a sum over all)")  # fmt: skip
-    return replace(kept, notes=[*kept.notes, note], peak_modes=peaks)
+    return replace(kept, notes=[*kept.notes, note], peak_modes=peaks, passes=len(passes))

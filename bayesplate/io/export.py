@@ -479,6 +479,9 @@ def diagnosis_to_dict(d):
                 "parameters_sd": c.parameters_sd,
                 "refined": c.fit.refined,
                 "check": _check(c.fit),
+                # why a later phase of the ranking failed on it (then its phase before's
+                # result), or "" (rank.CandidateResult.failed)
+                "failed": getattr(c, "failed", ""),
             }
             for c in d.candidates
         ],  # fmt: skip
@@ -491,6 +494,7 @@ def diagnosis_to_dict(d):
         "notes": d.notes,
         # the computed mode (1-based) of every measured peak, null where left out as
         # spurious; present when the assignment was made again at the verdict's fit
+        "passes": getattr(d, "passes", 1),  # each with another assignment of the peaks
         "peak_modes": None if getattr(d, "peak_modes", None) is None
         else [None if j < 0 else int(j) + 1 for j in d.peak_modes],
     }
