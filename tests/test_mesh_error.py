@@ -69,3 +69,35 @@ def test_the_unabsorbed_part_widens_the_deviations_less_and_is_said():
     added = [np.sum((d.sigma_Hz / sigma) ** 2 - 1.0) for d in (whole, left)]
     assert added[1] < added[0]
     assert any("cannot absorb" in n for n in left.notes) or np.all(left.sigma_Hz == sigma)
+
+
+def test_the_command_line_offers_every_part_the_default_first():
+    from bayesplate.cli.options import MESH_ERROR_CHOICES
+    from bayesplate.discrepancy.diagnose import DEFAULTS
+    from bayesplate.discrepancy.mesh_error import MESH_ERROR_PARTS
+
+    assert MESH_ERROR_CHOICES == MESH_ERROR_PARTS
+    assert MESH_ERROR_CHOICES[0] == DEFAULTS["mesh_error_part"]
+
+
+def test_the_diagnose_command_passes_the_part_on(monkeypatch, capsys):
+    import bayesplate.discrepancy.diagnose as module
+    from bayesplate.cli import main
+
+    seen = {}
+
+    class _Stop(Exception):
+        pass
+
+    def stand_in(case, **options):
+        seen.update(options)
+        raise _Stop
+
+    monkeypatch.setattr(module, "diagnose", stand_in)
+    with pytest.raises(_Stop):
+        main(["diagnose", "plate1", "--mesh", "6", "3", "--mesh-error", "unabsorbed",
+              "--no-cache"])  # fmt: skip
+    assert seen["mesh_error_part"] == "unabsorbed"
+    with pytest.raises(SystemExit) as exit_:
+        main(["diagnose", "plate1", "--mesh-error", "most"])
+    assert exit_.value.code == 2 and "--mesh-error" in capsys.readouterr().err

@@ -9,6 +9,7 @@ from __future__ import annotations
 import pathlib
 
 from .options import (
+    MESH_ERROR_CHOICES,
     add_case_argument,
     add_json_option,
     add_mesh_option,
@@ -59,6 +60,7 @@ def run(args):
         rng=args.seed,
         pairing=args.pairing,
         workers=args.workers,
+        mesh_error_part=args.mesh_error,
         store=store,
         progress=None if quiet else (lambda msg: print(f"  {msg}", flush=True)),
     )
@@ -129,6 +131,14 @@ def register(sub):
         type=positive_int,
         default=2,
         help="processes for the independent fits (default 2; the results do not depend on it)",
+    )
+    p.add_argument(
+        "--mesh-error",
+        choices=MESH_ERROR_CHOICES,
+        default=MESH_ERROR_CHOICES[0],
+        help="what of the working mesh's estimated error widens the deviations where it is "
+        "not well under them: 'whole' (default) or 'unabsorbed', the part the six constants "
+        "cannot absorb (measured in reports/mesh_error_rule.md)",
     )
     add_pairing_option(p)
     add_json_option(p)

@@ -13,6 +13,7 @@ __all__ = [
     "add_pairing_option",
     "PAIRING_CHOICES",
     "METHOD_CHOICES",
+    "MESH_ERROR_CHOICES",
     "CONVENTION_CHOICES",
     "FORWARD_CHOICES",
     "DEFAULT_MAX_ITER",
@@ -155,6 +156,8 @@ PAIRING_CHOICES = ("auto", "mac", "likelihood", "index", "order")
 #: and :data:`~bayesplate.estimators.DEFAULT_MAX_ITER`, spelled here for the same reason
 #: (``tests/test_startup.py`` holds them equal).
 METHOD_CHOICES = ("B", "MVE", "MVE-mod")
+#: :data:`bayesplate.discrepancy.mesh_error.MESH_ERROR_PARTS`, the first the default.
+MESH_ERROR_CHOICES = ("whole", "unabsorbed")
 CONVENTION_CHOICES = ("paper", "full-prior", "printed")
 FORWARD_CHOICES = ("auto", "fast", "full")
 DEFAULT_MAX_ITER = 200
