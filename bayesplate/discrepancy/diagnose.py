@@ -322,12 +322,12 @@ def diagnose(
         sigma_Hz = np.asarray(measured.sigma_Hz, dtype=float)
         ratio = np.abs(err) / sigma_Hz
         say(f"mesh {model.mesh.nx} x {model.mesh.ny}: error up to {ratio.max():.2f} sigma")
-        added, what = err, "it was"
+        added, left, what = err, ratio.max(), "it was"
         if mesh_error_part == "unabsorbed":  # what the six constants cannot take themselves
             added = unabsorbed(err, sigma_Hz, fine_lam[modes], at_fine.sensitivities[modes])
             left = np.abs(added / sigma_Hz).max()
             what = f"the part of it the constants cannot absorb (up to {left:.2f} sigma) was"
-        if np.abs(added / sigma_Hz).max() > mesh_error_ratio:
+        if left > mesh_error_ratio:
             sigma_Hz = np.hypot(sigma_Hz, added)
             notes.append(
                 f"the mesh's own error reaches {ratio.max():.2f} sigma (mode "

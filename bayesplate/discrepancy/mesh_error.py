@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..quantities import hz_from_eigenvalue
 from .locate import absorbable_projector
 
 __all__ = ["MESH_ERROR_PARTS", "coarse_model", "mesh_error", "unabsorbed"]
@@ -67,7 +68,7 @@ def unabsorbed(error_Hz, sigma_Hz, eigenvalues, sensitivities):
     """
     error_Hz, sigma_Hz = np.asarray(error_Hz, float), np.asarray(sigma_Hz, float)
     lam = np.asarray(eigenvalues, dtype=float)
-    frequency = np.sqrt(lam) / (2.0 * np.pi)
+    frequency = hz_from_eigenvalue(lam)
     S = np.asarray(sensitivities, dtype=float) * (frequency / (2.0 * lam))[:, None]
     whitened = S / sigma_Hz[:, None]
     whitened = whitened / np.linalg.norm(whitened, axis=0)  # (the span is what counts)

@@ -270,8 +270,8 @@ def _phase(stages, name, compute, items, results, hits, workers, say):
         return stages.key(name, physics, *(() if earlier is None else (fit_digest(earlier),)))
 
     def task(item):
-        _, physics, earlier = item
         """``(result, taken from the store, why it failed or "")``."""
+        _, physics, earlier = item
         try:
             if stages is None:
                 return compute((physics, earlier) if earlier is not None else physics), False, ""
