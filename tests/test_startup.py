@@ -234,3 +234,15 @@ def test_the_parser_choices_match_the_estimators():
     assert options.CONVENTION_CHOICES == tuple(CONVENTIONS)
     assert options.FORWARD_CHOICES == FORWARDS
     assert options.DEFAULT_MAX_ITER == DEFAULT_MAX_ITER
+
+
+def test_a_closed_standard_output_ends_in_one_line_without_traceback():
+    # `bayesplate cases | head -0`: the reader is gone before the first line is written
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    proc = subprocess.Popen([sys.executable, "-m", "bayesplate.cli", "cases"], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    proc.stdout.close()
+    err = proc.stderr.read()
+    assert proc.wait(timeout=60) == 1
+    assert "Traceback" not in err and "Exception ignored" not in err, err
+    assert err == "bayesplate cases: standard output closed; stopped\n"

@@ -83,6 +83,13 @@ def main(argv=None):
             sys.stderr.flush()
             os._exit(INTERRUPTED)
         return INTERRUPTED
+    except BrokenPipeError:
+        # standard output closed early (`bayesplate diagnose ... | head`): one line, no
+        # traceback; what was stored stays stored. Nothing more can reach the pipe: point
+        # it at /dev/null so that the interpreter's last flush stays quiet too
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        print(f"bayesplate {args.command}: standard output closed; stopped", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":
