@@ -127,12 +127,14 @@ def main(argv=None):
     _machine.add_base_arguments(parser, BASE_REV, ROOT / "reports")
     args = parser.parse_args(argv)
     info = _machine.machine()
+    head = None
     if args.no_base:
         bench = run_benchmark(args.runs)
     else:
         with _machine.base_checkout(args.base_rev, args.base_dir, "bench-report-") as base:
+            head = _machine.commit(base)  # the checkout's own commit (--base-dir: not --base-rev)
             bench = run_benchmark(args.runs, base)
-    path = write_report(bench, info, args.out, base_rev=None if args.no_base else args.base_rev)
+    path = write_report(bench, info, args.out, base_rev=head)
     print(path.read_text())
 
 
