@@ -303,11 +303,14 @@ def test_concealed_cutout_is_named():
     model = PlateModel.from_case(_plate1_case(), mesh=MESH)
     truth = np.array([60.0, 35.0, 30.0])  # a 30 mm hole in the 200 x 100 mm plate: 3.5 % mass
     d = diagnose(_concealed(Cutout(), truth, seed=2), model=model, rng=0)
-    # A local stiffness loss fits these recordings about as well (chi2 9.1 against 8.5 on
-    # 2026-11-27, 2.5 nats below): the hole is the more probable by its prior volume alone,
-    # and the verdict says the tie (verdict.runner_up), the hole named first.
+    # A local stiffness loss fits these recordings about as well (chi2 10.6 against 8.5,
+    # 1.4 nats below, probabilities 0.20 and 0.80, since its fits start from six places of
+    # its scan; 9.1 and 2.5 nats from three): the verdict says the tie (verdict.runner_up),
+    # the hole named first, the two holding all but a trace of the probability.
     assert d.verdict == "ambiguous" and d.chosen.name == "cutout"
-    assert d.rival.name == "local_stiffness_loss" and d.probabilities["cutout"] > 0.85
+    assert d.rival.name == "local_stiffness_loss"
+    hole, patch = d.probabilities["cutout"], d.probabilities["local_stiffness_loss"]
+    assert hole > patch and hole + patch > 0.95
     got, sd = d.chosen.fit.theta, d.chosen.fit.theta_sd
     assert abs(got[2] - truth[2]) < 3 * sd[2] + 2.0  # diameter, mm
     assert _near_truth_or_mirror(model, got[:2], truth[:2], 15.0)
