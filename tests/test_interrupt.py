@@ -356,12 +356,18 @@ def test_diagnose_sigint_ends_with_one_line_and_130_then_resumes(tmp_path):
     # two worker processes: Ctrl-C reaches them too; they leave it to the parent
     # while the candidates are fitted: a time after the nominal fit's line, not a share of
     # the whole run's (on a loaded machine the reference's wall time says little of this one);
-    # at most 0.2 s after it: the candidates' fits take 1.5-1.7 s after that line on the
-    # unloaded 2-core Xeon (2026-11-27), so the kill lands inside them on any of our machines
-    landed = _diagnose_killed_and_resumed(
-        tmp_path, signal.SIGINT, _RNG.uniform(0.0, 0.1), longest=0.2
-    )
-    assert landed, "finished before the interruption: raise the delay's bound"
+    # at most 0.2 s after it: the candidates' fits take 1.5-1.7 s after that line on an
+    # unloaded 2-core machine (2026-11-27). In CI beside the slow tier this process can still
+    # read the line late (starved of the cores) and the run ends first: then again, the kill
+    # at once after the line, up to three tries (each try a reference and a run of its own)
+    for attempt in range(3):
+        folder = tmp_path / f"try{attempt}"
+        folder.mkdir()
+        fraction = _RNG.uniform(0.0, 0.1) if attempt == 0 else 0.0
+        landed = _diagnose_killed_and_resumed(folder, signal.SIGINT, fraction, longest=0.2)
+        if landed:
+            break
+    assert landed, "finished before the interruption in three tries"
     SURVIVED["SIGINT"] += 1
 
 
