@@ -56,21 +56,17 @@ def one(index, workers, quick=False, mesh=None, frequencies=None):
     """
 
     sys.path.insert(0, str(ROOT / "studies"))
-    from concealment import NOISE, SEED, recordings, scenarios
+    from concealment import NOISE, SEED, blind_recording, scenarios
 
-    from bayesplate import PlateModel, bundled_case_path, load_case
     from bayesplate.discrepancy.diagnose import diagnose
 
-    label, physics, size, theta = scenarios()[index]
-    case = load_case(bundled_case_path("frederiksen_t300"))
-    mesh = (12, 6) if quick else tuple(mesh or case.mesh)
-    model = PlateModel.from_case(case, mesh=mesh)
-    fine = PlateModel.from_case(case, mesh=(2 * mesh[0], 2 * mesh[1]))
-    rng = np.random.default_rng(np.random.SeedSequence(SEED).spawn(index + 1)[index])
-    f = recordings(case, fine, physics, theta, rng)
+    label, _, size, _ = scenarios()[index]
+    blind, model = blind_recording(index, quick, mesh)
+    mesh = (model.mesh.nx, model.mesh.ny)
+    f = blind.measured.frequency_Hz
     if frequencies:
         f = f[:frequencies]
-    blind = case.with_measured(frequency_Hz=f, sigma_Hz=NOISE * f)
+        blind = blind.with_measured(frequency_Hz=f, sigma_Hz=NOISE * f)
     load = os.getloadavg()[0]
     start, cpu = time.perf_counter(), _cpu()
     d = diagnose(blind, model=model, rng=SEED, pairing="order", workers=workers)

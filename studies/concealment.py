@@ -107,23 +107,37 @@ def recordings(case, fine, physics, theta, rng):
     return np.sort(f * (1 + NOISE * rng.standard_normal(f.size)))
 
 
-def run_scenario(index, quick=False):
-    """Diagnose scenario ``index`` blind; returns its row (plain data).
+def blind_recording(index, quick=False, mesh=None):
+    """Scenario ``index``'s recordings as a case that does not know the effect.
 
-    Its noise comes from its own stream of ``SeedSequence(SEED)``, so a row does not depend
-    on which other rows ran, in which order or in which process.
+    Its noise comes from its own stream of ``SeedSequence(SEED)``, so a recording does not
+    depend on which other scenarios ran, in which order or in which process. ``mesh``:
+    another working mesh than the case's (the recordings on one twice as fine each way).
+
+    Returns
+    -------
+    blind : Case
+        The nominal case with the noisy recorded frequencies (sorted), 0.2 % deviations.
+    model : PlateModel
+        The working mesh's plate.
     """
-    label, physics, size, theta = scenarios(quick)[index]
+    _, physics, _, theta = scenarios(quick)[index]
     case = load_case(bundled_case_path("frederiksen_t300"))
-    mesh = (12, 6) if quick else case.mesh
+    mesh = (12, 6) if quick else tuple(mesh or case.mesh)
     model = PlateModel.from_case(case, mesh=mesh)
     fine = PlateModel.from_case(case, mesh=(2 * mesh[0], 2 * mesh[1]))
     rng = np.random.default_rng(np.random.SeedSequence(SEED).spawn(index + 1)[index])
     f = recordings(case, fine, physics, theta, rng)
-    blind = case.with_measured(frequency_Hz=f, sigma_Hz=NOISE * f)
+    return case.with_measured(frequency_Hz=f, sigma_Hz=NOISE * f), model
+
+
+def run_scenario(index, quick=False):
+    """Diagnose scenario ``index`` blind (:func:`blind_recording`); its row (plain data)."""
+    label, physics, size, theta = scenarios(quick)[index]
+    blind, model = blind_recording(index, quick)
     start = time.perf_counter()
     d = diagnose(blind, model=model, rng=SEED, pairing="order")
-    row = _row(label, physics, size, theta, d, case, model, time.perf_counter() - start)
+    row = _row(label, physics, size, theta, d, blind, model, time.perf_counter() - start)
     row.update(
         code=code_version(),
         cpu=cpu(),

@@ -321,9 +321,8 @@ def _diagnose_killed_and_resumed(tmp_path, sig, fraction, longest=None):
     The kill comes after the nominal fit's line, at `fraction` of the time the reference
     took from that line to its end: a point in the work, which a loaded machine does not
     move as it moves a share of the whole run's wall time. With `longest` (s), never later
-    than that after the line: a burst of load on the reference alone would otherwise put
-    the kill after the killed run's end (in CI beside the slow tier, a run once finished
-    before a kill at a tenth of the reference's time).
+    than that after the line: the reference, timed under other load than the killed run,
+    can take longer over its rest than the killed run does.
 
     The killed run and the run again keep their stages in the default folder
     (``.bayesplate-cache/diagnose`` beside ``out.json``). Returns whether the kill landed.

@@ -119,18 +119,15 @@ def test_a_concealed_point_support_reaches_its_best_basin_and_is_named():
     concealment = load_study("concealment", "concealment_study")
     index = next(i for i, s in enumerate(concealment.scenarios()) if s[0] == "point_support")
     _, support, _, theta = concealment.scenarios()[index]
-    case = load_case(bundled_case_path("frederiksen_t300"))
-    model = PlateModel.from_case(case, mesh=(50, 50))
-    fine = PlateModel.from_case(case, mesh=(100, 100))
-    seed = np.random.SeedSequence(concealment.SEED).spawn(index + 1)[index]
-    f = concealment.recordings(case, fine, support, theta, np.random.default_rng(seed))
-    blind = case.with_measured(frequency_Hz=f, sigma_Hz=0.002 * f)
+    blind, model = concealment.blind_recording(index, mesh=(50, 50))  # recorded on 100 x 100
 
+    f = blind.measured.frequency_Hz
     Y = observed_eigenvalues(f)
-    mu_b, V_b = prior_in_stiffness(case.prior.mean, case.prior.sd, "full")
-    problem = JointProblem(model, Y, 2.0 * 0.002 * Y, mu_b, V_b, np.arange(f.size), support)
+    mu_b, V_b = prior_in_stiffness(blind.prior.mean, blind.prior.sd, "full")
+    sigma = 2.0 * Y * blind.measured.sigma_Hz / f  # d lambda = 2 lambda df / f
+    problem = JointProblem(model, Y, sigma, mu_b, V_b, np.arange(f.size), support)
     image = [theta[0], model.mesh.a * 1e3 - theta[1], model.mesh.b * 1e3 - theta[2]]
-    reference = fit(problem, [problem.pack(stiffness_from_engineering(case.reference), image)])
+    reference = fit(problem, [problem.pack(stiffness_from_engineering(blind.reference), image)])
 
     d = diagnose(blind, model=model, physics=[PointSupport(), ElasticFoundation()],
                  rng=concealment.SEED, pairing="order", mesh_error_part="unabsorbed",

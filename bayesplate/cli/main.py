@@ -85,9 +85,11 @@ def main(argv=None):
         return INTERRUPTED
     except BrokenPipeError:
         # standard output closed early (`bayesplate diagnose ... | head`): one line, no
-        # traceback; what was stored stays stored. Nothing more can reach the pipe: point
-        # it at /dev/null so that the interpreter's last flush stays quiet too
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        # traceback; what was stored stays stored. Nothing more can reach the pipe: for the
+        # command itself, point it at /dev/null so that the interpreter's last flush stays
+        # quiet too (a caller of main(argv) keeps its own standard output)
+        if argv is None:
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         print(f"bayesplate {args.command}: standard output closed; stopped", file=sys.stderr)
         return 1
 
