@@ -130,6 +130,7 @@ class PlateModel:
         self._uniform_terms = (self.stiffness_terms, element_terms)
         self.mass_data = self.assembler.uniform_data(self.element_mass())
         self.extra_stiffness_data = None
+        self._sparse = {}  # the assembled matrices of :meth:`_pruned`, by name
         self.free_dofs = self._free_dofs()
         self._ordering = self._free_ordering()
         self._rigid_basis = self._rigid_basis_on_free_dofs()
@@ -203,6 +204,7 @@ class PlateModel:
         PlateModel
         """
         other = copy.copy(self)
+        other._sparse = {}
         if stiffness_terms is not None:
             other.stiffness_terms = np.asarray(stiffness_terms)
         if mass_data is not None:
@@ -216,13 +218,32 @@ class PlateModel:
         return self.assembler.matrix(self._stiffness_data(b))
 
     def stiffness_term(self, j):
-        """Assembled ``K_j = d K / d b_j`` (CSR, all unknowns)."""
-        return self.assembler.matrix(self.stiffness_terms[j])
+        """Assembled ``K_j = d K / d b_j`` (CSR, all unknowns; its exact zeros left out)."""
+        return self._pruned(("K", j), self.stiffness_terms, lambda: self.stiffness_terms[j])
+
+    @property
+    def extra_stiffness(self):
+        """Assembled stiffness independent of ``b`` (CSR, all unknowns), or None."""
+        if self.extra_stiffness_data is None:
+            return None
+        return self._pruned("K0", self.extra_stiffness_data, lambda: self.extra_stiffness_data)
 
     @property
     def mass(self):
-        """Assembled consistent mass matrix (CSR, all unknowns)."""
-        return self.assembler.matrix(self.mass_data)
+        """Assembled consistent mass matrix (CSR, all unknowns; its exact zeros left out)."""
+        return self._pruned("M", self.mass_data, lambda: self.mass_data)
+
+    def _pruned(self, name, source, data):
+        """:meth:`Assembler.sparse` of ``data()``, kept while ``source`` is the model's array.
+
+        Built once per model and array (a modified copy starts afresh): the matrices are
+        shared, not to be changed in place.
+        """
+        kept = self._sparse.get(name)
+        if kept is None or kept[0] is not source:
+            kept = (source, self.assembler.sparse(data()))
+            self._sparse[name] = kept
+        return kept[1]
 
     def _free_dofs(self):
         """Unknowns left free by the boundary conditions."""

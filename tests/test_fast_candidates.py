@@ -93,3 +93,26 @@ def test_reduced_candidate_matches_full_solve(plate, physics):
         scale = np.abs(fd).max()
         if scale > 0:
             assert np.max(np.abs(d_theta[:, i] - fd)) < 1e-2 * scale
+
+
+def test_region_projection_is_the_projected_assembled_region(plate):
+    """``RegionProjection`` (element by element, summed over runs of element numbers) against
+    the assembled matrix of the same weighted elements projected on the same basis; weights
+    on runs split across rows, a single element, and none."""
+    from bayesplate.discrepancy.pencil import RegionProjection
+
+    model, b = plate
+    V = np.random.default_rng(3).standard_normal((model.mesh.n_dofs, 9))
+    element = np.concatenate([model.element_stiffness_terms()[:2], model.element_mass()[None]])
+    region = RegionProjection(model, V, element)
+    nx = model.mesh.nx
+    for inside in ([3, 4, 5, nx + 3, nx + 4, 2 * nx + 7], [11], []):
+        inside = np.array(inside, dtype=int)
+        weights = np.zeros(model.mesh.n_elements)
+        weights[inside] = np.linspace(0.3, 1.0, len(inside))
+        got = region(weights)
+        assert got.shape == (3, 9, 9)
+        for t, E in enumerate(element):
+            data = model.assembler.element_data(inside, weights[inside, None, None] * E[None])
+            want = V.T @ (model.assembler.matrix(data) @ V)
+            assert np.allclose(got[t], want, rtol=1e-12, atol=1e-12 * np.abs(want).max(initial=1))

@@ -201,3 +201,25 @@ def test_lowest_eigenvalue_bound_lies_just_above_the_computed_one(a, b, layup, m
     model = PlateModel(a, b, 2e-3, 1537.0, layup, mesh=mesh)
     computed = model.solve(B_REF, 1).eigenvalues[0]
     assert 1.0 < model.lowest_eigenvalue_bound(B_REF) / computed < 1.3
+
+
+def test_assembled_matrices_leave_out_exact_zeros_and_multiply_bit_for_bit():
+    """The model's ``K_j``, ``M`` and a foundation's ``K_0`` against the CSR on the whole
+    shared pattern: fewer stored entries, none of them zero, the same products to the last
+    bit; a modified copy gets its own matrices, and the original keeps its."""
+    model = PlateModel(0.2, 0.1, 0.004, 1500.0, [0.0, 90.0, 90.0, 0.0], mesh=(6, 4))
+    x = np.random.default_rng(5).standard_normal((model.mesh.n_dofs, 3))
+    foundation = model.modified(extra_stiffness_data=0.5 * model.mass_data)
+    pairs = [(model.stiffness_term(j), model.stiffness_terms[j]) for j in range(6)]
+    pairs += [(model.mass, model.mass_data),
+              (foundation.extra_stiffness, foundation.extra_stiffness_data)]  # fmt: skip
+    for A, data in pairs:
+        full = model.assembler.matrix(data)
+        assert A.nnz == np.count_nonzero(data) < full.nnz
+        assert np.all(A.data != 0)
+        assert np.array_equal(A @ x, full @ x)
+        assert np.array_equal(A.toarray(), full.toarray())
+    assert model.extra_stiffness is None
+    heavier = model.modified(mass_data=2.0 * model.mass_data)
+    assert np.array_equal(heavier.mass @ x, 2.0 * (model.mass @ x))
+    assert model.mass is model.mass  # built once

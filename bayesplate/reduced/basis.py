@@ -157,10 +157,10 @@ def _project_constant(model, basis, new):
     ``K_0`` is the model's :attr:`~bayesplate.model.PlateModel.extra_stiffness_data` (None for
     the bare plate).
     """
-    data = model.extra_stiffness_data
-    if data is None:
+    K0 = model.extra_stiffness
+    if K0 is None:
         return None
-    return basis.T @ (model.assembler.matrix(data) @ new)
+    return basis.T @ (K0 @ new)
 
 
 def _extend(terms, columns):

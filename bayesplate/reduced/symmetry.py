@@ -45,7 +45,7 @@ def _symmetries(model):
     """
     mats = [model.stiffness_term(j) for j in range(6)] + [model.mass]
     if model.extra_stiffness_data is not None:
-        mats.append(model.assembler.matrix(model.extra_stiffness_data))
+        mats.append(model.extra_stiffness)
     x = np.random.default_rng(_SIGN_SEED).standard_normal(model.mesh.n_dofs)
     images = [A @ x for A in mats]
     fixed = np.zeros(model.mesh.n_dofs, dtype=bool)
