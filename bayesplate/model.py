@@ -9,7 +9,6 @@ matrix does not depend on ``b``. Sensitivities follow Fox and Kapoor (paper eq. 
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -20,56 +19,12 @@ from .fem.eigen import lowest_modes
 from .fem.element import TSDTRectangle
 from .fem.mesh import RectangularMesh
 from .fem.submatrix import SubPattern
-from .quantities import hz_from_eigenvalue
+from .modal import ModalResult
 
-__all__ = ["BOUNDARIES", "DEFAULT_MESH", "ModalResult", "PlateModel"]
+__all__ = ["BOUNDARIES", "DEFAULT_MESH", "ModalResult", "PlateModel"]  # ModalResult from .modal
 
 BOUNDARIES = ("free", "simply_supported")
 DEFAULT_MESH = (24, 12)
-
-
-@dataclass(frozen=True)
-class ModalResult:
-    """Elastic modes of the plate at one set of stiffness coefficients.
-
-    Attributes
-    ----------
-    b : numpy.ndarray, shape (6,)
-        ``(C11, C22, C12, C66, C44, C55)`` in Pa.
-    eigenvalues : numpy.ndarray, shape (n,)
-        ``lambda = (2 pi f)^2`` in rad^2/s^2 (eq. 27).
-    vectors : numpy.ndarray, shape (n_dofs, n)
-        Mass-normalised mode shapes on all unknowns (constrained ones are zero).
-    sensitivities : numpy.ndarray, shape (n, 6)
-        ``d lambda_i / d b_j`` (eq. 28), in rad^2/s^2 per Pa.
-    rigid_eigenvalues : numpy.ndarray
-        Near-zero eigenvalues detected and dropped (six for a free plate).
-    """
-
-    b: np.ndarray
-    eigenvalues: np.ndarray
-    vectors: np.ndarray
-    sensitivities: np.ndarray
-    rigid_eigenvalues: np.ndarray = field(repr=False)
-
-    @property
-    def frequency_Hz(self):
-        """Natural frequencies in Hz, shape (n,)."""
-        return hz_from_eigenvalue(self.eigenvalues)
-
-    @property
-    def n_rigid(self):
-        """Number of rigid-body modes detected and dropped."""
-        return len(self.rigid_eigenvalues)
-
-    def normalised_sensitivities(self):
-        """``s_ij = (d lambda_i / d b_j) b_j / lambda_i`` (eq. 29), shape (n, 6)."""
-        return self.sensitivities * self.b[None, :] / self.eigenvalues[:, None]
-
-    def engineering_sensitivities(self):
-        """``d lambda_i / d e_j`` for ``e = (E1, E2, nu12, G12, G13, G23)``, shape (n, 6)."""
-        e = laminate.engineering_from_stiffness(self.b)
-        return self.sensitivities @ laminate.stiffness_jacobian(e)
 
 
 class PlateModel:
@@ -218,31 +173,28 @@ class PlateModel:
         return self.assembler.matrix(self._stiffness_data(b))
 
     def stiffness_term(self, j):
-        """Assembled ``K_j = d K / d b_j`` (CSR, all unknowns; its exact zeros left out)."""
+        """Assembled ``K_j = d K / d b_j`` (CSR, all unknowns, its exact zeros left out)."""
         return self._pruned(("K", j), self.stiffness_terms, lambda: self.stiffness_terms[j])
 
     @property
     def extra_stiffness(self):
-        """Assembled stiffness independent of ``b`` (CSR, all unknowns), or None."""
-        if self.extra_stiffness_data is None:
-            return None
-        return self._pruned("K0", self.extra_stiffness_data, lambda: self.extra_stiffness_data)
+        """Assembled stiffness independent of ``b`` (CSR, as ``K_j``), or None."""
+        data = self.extra_stiffness_data
+        return None if data is None else self._pruned("K0", data, lambda: data)
 
     @property
     def mass(self):
-        """Assembled consistent mass matrix (CSR, all unknowns; its exact zeros left out)."""
+        """Assembled consistent mass matrix (CSR, as ``K_j``)."""
         return self._pruned("M", self.mass_data, lambda: self.mass_data)
 
     def _pruned(self, name, source, data):
-        """:meth:`Assembler.sparse` of ``data()``, kept while ``source`` is the model's array.
+        """``Assembler.sparse(data())``, built once while ``source`` is the model's array.
 
-        Built once per model and array (a modified copy starts afresh): the matrices are
-        shared, not to be changed in place.
+        A modified copy starts afresh. The matrix is shared: not to be changed in place.
         """
         kept = self._sparse.get(name)
         if kept is None or kept[0] is not source:
-            kept = (source, self.assembler.sparse(data()))
-            self._sparse[name] = kept
+            self._sparse[name] = kept = (source, self.assembler.sparse(data()))
         return kept[1]
 
     def _free_dofs(self):

@@ -87,6 +87,16 @@ def one(index, workers, quick=False, mesh=None, frequencies=None):
                       [best_pair.name, best_pair.log_evidence_gain]}))  # fmt: skip
 
 
+def _label(tree):
+    """A base checkout named by its commit (the folder alone says nothing a week later)."""
+    if tree is None:
+        return "none"
+    try:
+        return f"{_machine.commit(tree)} in {tree}"
+    except (OSError, subprocess.CalledProcessError):
+        return str(tree)
+
+
 def _cpu():
     """Processor seconds of this process and its finished children (forked workers)."""
     own = resource.getrusage(resource.RUSAGE_SELF)
@@ -241,7 +251,7 @@ def main(out_dir, runs, workers, base=None, base_runs=(), quick=False, scaling=F
         if base is not None and i in base_runs:
             base_rows.append(run(i, base, workers))
             print("base", json.dumps(base_rows[-1]), flush=True)
-        write_report(rows, base_rows, info, out_dir, str(base), started)
+        write_report(rows, base_rows, info, out_dir, _label(base), started)
     if scaling:
         for mesh in SCALING_MESHES:
             for frequencies in SCALING_FREQUENCIES if mesh == SCALING_MESHES[-1] else (14,):
@@ -255,7 +265,7 @@ def main(out_dir, runs, workers, base=None, base_runs=(), quick=False, scaling=F
             label = f"{code} ({_machine.commit(tree)})"  # before the run: a bad tree stops at once
             pair_rows.append({**run(PAIRS_RUN, tree, 1, mesh=PAIRS_MESH), "code": label})
             print("pairs", json.dumps(pair_rows[-1]), flush=True)
-            write_pairs(pair_rows, info, out_dir, str(base), started)
+            write_pairs(pair_rows, info, out_dir, _label(base), started)
     return rows, base_rows, scale_rows
 
 

@@ -19,6 +19,7 @@ NUMERICS = (
     "parallel",
     "fem",
     "plate_bounds",
+    "modal",
     "model",
     "forward",
     "pairing",
