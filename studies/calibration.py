@@ -119,15 +119,27 @@ RETIRED = {
         "nominal fit's global stage shares its first round (9433d2b)"
     ),
 }
-#: Rows of one candidate made by these code versions, kept but not counted, and why.
+#: Rows of one candidate made by these code versions, kept but not counted, and why: for
+#: each candidate, ``(codes, why)`` pairs.
 RETIRED_EFFECT = {
     "point_support": (
-        ("3b28b25", "b9a300c", "7d51a9c"),
-        "made on 2026-11-26 by the code of 3b28b25, b9a300c or 7d51a9c: since then a rival that "
-        "fits the recordings as well as the best candidate and lies within 4 nats of it makes "
-        "the verdict ambiguous (three point supports had been named a foundation by its prior "
-        "volume alone); rows of other candidates are kept, as the change can only turn an "
-        "explained verdict ambiguous",
+        (
+            ("3b28b25", "b9a300c", "7d51a9c"),
+            "made on 2026-11-26 by the code of 3b28b25, b9a300c or 7d51a9c: since then a rival "
+            "that fits the recordings as well as the best candidate and lies within 4 nats of it "
+            "makes the verdict ambiguous (three point supports had been named a foundation by "
+            "its prior volume alone); rows of other candidates are kept, as the change can only "
+            "turn an explained verdict ambiguous",
+        ),
+        (
+            ("d373176", "087f58f"),
+            "made on 2026-11-27 by the code of d373176 or 087f58f: since then located "
+            "candidates start from the six best places of their scans instead of three (a "
+            "concealed point support's best basin had been missed and it was named a "
+            "foundation); run again for the candidate the change was made for. Rows of other "
+            "candidates are kept, not run again: a search from more places can only find "
+            "better optima, but which of two look-alikes leads can change",
+        ),
     ),
 }
 #: Single rows set aside to run again first, by (code, key), and why: a change since can
@@ -678,9 +690,9 @@ def migrate(stored):
 def _retired(row, key):
     """Why a cached row is set aside (its code, its candidate's rows of that code, or it
     alone), or None."""
-    codes, because = RETIRED_EFFECT.get(row.get("effect"), ((), None))
-    return (RETIRED.get(row["code"]) or (because if row["code"] in codes else None)
-            or RETIRED_ROWS.get((row["code"], key)))  # fmt: skip
+    because = next((why for codes, why in RETIRED_EFFECT.get(row.get("effect"), ())
+                    if row["code"] in codes), None)  # fmt: skip
+    return RETIRED.get(row["code"]) or because or RETIRED_ROWS.get((row["code"], key))
 
 
 def _now():

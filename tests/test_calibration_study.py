@@ -205,8 +205,11 @@ def test_rows_stored_without_a_code_are_the_retired_legacy_rows():
     assert stored["seconds"] == 0.0 and stored["retired_seconds"] == {cal.LEGACY_CODE: 2770.0}
 
 
-def test_one_candidates_rows_of_a_retired_code_are_set_aside_with_their_reason():
-    (effect, (codes, why)), = cal.RETIRED_EFFECT.items()
+@pytest.mark.parametrize("effect, codes, why", [
+    (effect, codes, why) for effect, pairs in cal.RETIRED_EFFECT.items() for codes, why in pairs
+])  # fmt: skip
+def test_one_candidates_rows_of_a_retired_code_are_set_aside_with_their_reason(effect, codes,
+                                                                               why):  # fmt: skip
     other = next(name for name in cal.EFFECTS if name != effect)
     rows = [_row("power", effect, 0, 48000.0, 0, code=codes[0]),
             _row("power", other, 0, 0.14, 0, code=codes[0]),
