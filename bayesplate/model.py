@@ -174,27 +174,27 @@ class PlateModel:
 
     def stiffness_term(self, j):
         """Assembled ``K_j = d K / d b_j`` (CSR, all unknowns, its exact zeros left out)."""
-        return self._pruned(("K", j), self.stiffness_terms, lambda: self.stiffness_terms[j])
+        return self._pruned(("K", j), self.stiffness_terms, self.stiffness_terms[j])
 
     @property
     def extra_stiffness(self):
         """Assembled stiffness independent of ``b`` (CSR, as ``K_j``), or None."""
         data = self.extra_stiffness_data
-        return None if data is None else self._pruned("K0", data, lambda: data)
+        return None if data is None else self._pruned("K0", data, data)
 
     @property
     def mass(self):
         """Assembled consistent mass matrix (CSR, as ``K_j``)."""
-        return self._pruned("M", self.mass_data, lambda: self.mass_data)
+        return self._pruned("M", self.mass_data, self.mass_data)
 
     def _pruned(self, name, source, data):
-        """``Assembler.sparse(data())``, built once while ``source`` is the model's array.
+        """``Assembler.sparse(data)``, built once while ``source`` is the model's array.
 
         A modified copy starts afresh. The matrix is shared: not to be changed in place.
         """
         kept = self._sparse.get(name)
         if kept is None or kept[0] is not source:
-            self._sparse[name] = kept = (source, self.assembler.sparse(data()))
+            self._sparse[name] = kept = (source, self.assembler.sparse(data))
         return kept[1]
 
     def _free_dofs(self):

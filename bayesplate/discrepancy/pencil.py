@@ -199,9 +199,8 @@ class RegionProjection:
     def __init__(self, model, basis, element_matrices):
         self.dofs = model.mesh.element_dofs
         self.basis = basis
-        self.element_matrices = np.asarray(element_matrices, dtype=float)
         factors, signs, self._slices = [], [], []
-        for A in self.element_matrices:
+        for A in np.asarray(element_matrices, dtype=float):
             w, U = np.linalg.eigh(0.5 * (A + A.T))
             keep = np.abs(w) > FACTOR_TOL * np.abs(w).max(initial=0.0)
             start = sum(f.shape[1] for f in factors)
@@ -210,7 +209,7 @@ class RegionProjection:
             self._slices.append(slice(start, start + int(keep.sum())))
         self._factors_t = np.ascontiguousarray(np.hstack(factors).T)  # (sum of ranks, 32)
         self._signs = np.concatenate(signs)
-        shape = (len(self.dofs), len(self.element_matrices), basis.shape[1], basis.shape[1])
+        shape = (len(self.dofs), len(self._slices), basis.shape[1], basis.shape[1])
         self._projected = np.empty(shape)  # filled element by element (pages on first touch)
         self._done = np.zeros(len(self.dofs), dtype=bool)
 

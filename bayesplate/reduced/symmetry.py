@@ -44,7 +44,7 @@ def _symmetries(model):
         symmetry group, whose characters label the classes.
     """
     mats = [model.stiffness_term(j) for j in range(6)] + [model.mass]
-    if model.extra_stiffness_data is not None:
+    if model.extra_stiffness is not None:
         mats.append(model.extra_stiffness)
     x = np.random.default_rng(_SIGN_SEED).standard_normal(model.mesh.n_dofs)
     images = [A @ x for A in mats]
