@@ -119,8 +119,20 @@ RETIRED = {
         "nominal fit's global stage shares its first round (9433d2b)"
     ),
 }
-#: Rows of one candidate made by these code versions, kept but not counted, and why: for
-#: each candidate, ``(codes, why)`` pairs.
+#: The code versions whose located candidates started from three places of their scans.
+THREE_STARTS = ("3b28b25", "b9a300c", "7d51a9c", "d373176", "ff4f0ea", "087f58f", "6d608ea")
+
+
+def _six_starts(rows):
+    """Why ``rows`` made with three located starts are run again."""
+    return (f"made on 2026-11-26 and 2026-11-27 by code whose located candidates started from "
+            f"the three best places of their scans; since 1cd1ff4 they start from six (a "
+            f"concealed point support's best basin had been missed): {rows} run again with "
+            f"six, as the point support's rows were")  # fmt: skip
+
+
+#: Rows of one candidate (or ``"clean"``: the clean plates') made by these code versions,
+#: kept but not counted, and why: for each, ``(codes, why)`` pairs.
 RETIRED_EFFECT = {
     "point_support": (
         (
@@ -143,13 +155,17 @@ RETIRED_EFFECT = {
     ),
     "cutout": (
         (
-            ("3b28b25", "b9a300c", "7d51a9c", "d373176", "ff4f0ea", "087f58f", "6d608ea"),
+            THREE_STARTS,
             "made on 2026-11-26 and 2026-11-27 by code whose located candidates started from the "
             "three best places of their scans; since 1cd1ff4 they start from six, and a concealed "
             "hole's test saw the stiffness loss come within 1.4 nats of it (2.5 before): run "
             "again with six, as the point support's rows were",
         ),
     ),
+    "local_stiffness_loss": ((THREE_STARTS, _six_starts("the local stiffness loss's rows")),),
+    "point_mass": ((THREE_STARTS, _six_starts("the point mass's rows")),),
+    "clean": ((THREE_STARTS, _six_starts("the clean plates' rows, where any located candidate "
+                                         "could raise a false alarm,")),),
 }
 #: Single rows set aside to run again first, by (code, key), and why: a change since can
 #: alter their outcome and no other row's on the measure the report counts.
@@ -699,7 +715,8 @@ def migrate(stored):
 def _retired(row, key):
     """Why a cached row is set aside (its code, its candidate's rows of that code, or it
     alone), or None."""
-    because = next((why for codes, why in RETIRED_EFFECT.get(row.get("effect"), ())
+    group = row.get("effect") or row["kind"]  # a candidate's power rows, or "clean"
+    because = next((why for codes, why in RETIRED_EFFECT.get(group, ())
                     if row["code"] in codes), None)  # fmt: skip
     return RETIRED.get(row["code"]) or because or RETIRED_ROWS.get((row["code"], key))
 

@@ -210,18 +210,25 @@ def test_rows_stored_without_a_code_are_the_retired_legacy_rows():
 ])  # fmt: skip
 def test_one_candidates_rows_of_a_retired_code_are_set_aside_with_their_reason(effect, codes,
                                                                                why):  # fmt: skip
-    other = next(name for name in cal.EFFECTS if name != effect)
-    rows = [_row("power", effect, 0, 48000.0, 0, code=codes[0]),
-            _row("power", other, 0, 0.14, 0, code=codes[0]),
-            _row("clean", None, None, None, 0, code=codes[0])]  # fmt: skip
-    table = {**_table(), effect: {"sizes": [48000.0, None, None, None]}}
+    # ``effect`` is a candidate (its power rows) or "clean" (the clean plates' rows); a
+    # candidate no rule sets aside keeps its row of the same code
+    other = next(name for name in cal.EFFECTS if name not in cal.RETIRED_EFFECT)
+    table = {**_table(), other: {"sizes": [0.14, None, None, None]}}
+    rows = [_row("power", other, 0, 0.14, 0, code=codes[0])]
+    if effect == "clean":
+        rows.append(_row("clean", None, None, None, 0, code=codes[0]))
+    else:
+        rows.append(_row("power", effect, 0, 48000.0, 0, code=codes[0]))
+        table = {**table, effect: {"sizes": [48000.0, None, None, None]}}
     stored = {"sizes": table, "rows": {r["key"]: r for r in rows}, "seconds": 60.0}
     cal.migrate(stored)
-    assert {r["effect"] for r in stored["rows"].values()} == {other, None}
+    assert [r["effect"] for r in stored["rows"].values()] == [other]
     (gone,) = stored["retired"].values()
-    assert gone["effect"] == effect and gone["retired"] == why
+    assert gone["retired"] == why
+    assert (gone["kind"], gone["effect"]) == (("clean", None) if effect == "clean"
+                                              else ("power", effect))  # fmt: skip
     todo = [t for t in cal.tasks(stored["sizes"]) if cal.task_key(t) not in stored["rows"]]
-    assert any(t[2] == effect for t in todo)  # run again by the current code
+    assert (gone["kind"], gone["effect"]) in {(t[0], t[2]) for t in todo}  # run again
 
 
 def test_a_single_row_set_aside_is_the_only_one_of_its_code_run_again(monkeypatch):
