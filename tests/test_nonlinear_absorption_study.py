@@ -1,0 +1,56 @@
+"""studies/nonlinear_absorption.py: the exact fit of the constants, and a quick run."""
+
+import numpy as np
+import pytest
+
+from bayesplate.laminate import stiffness_from_engineering
+from tests._studies import load_study
+
+na = load_study("nonlinear_absorption", "nonlinear_absorption_study")
+cal = na.cal
+
+
+@pytest.fixture(scope="module")
+def plate():
+    case, _, fine = cal._models(cal.POWER_FAMILY, quick=True)
+    return case, fine, stiffness_from_engineering(case.reference)
+
+
+def test_an_effect_that_is_a_change_of_the_constants_is_absorbed_whole(plate):
+    # a plate whose shear modulus G12 is 8 % higher is no effect at all once the constants are
+    # fitted: the exact fit leaves nothing and finds the 8 % (closed form: lambda(b) itself)
+    case, fine, b = plate
+    m = case.measured.size
+    moved = b * np.array([1.0, 1.0, 1.0, 1.08, 1.0, 1.0])
+    lam = fine.solve(moved, m).eigenvalues
+    sigma = 2.0 * cal.NOISE * fine.solve(b, m).eigenvalues
+    chi2, prior_term, fitted = na.exact_fit(fine, b, lam, sigma)
+    assert chi2 < 1e-10 and prior_term == 0.0
+    np.testing.assert_allclose(fitted, moved, rtol=1e-6)
+
+
+def test_a_stiffer_plate_all_round_is_absorbed_and_the_prior_pulls_back(plate):
+    # every eigenvalue is linear in a common factor of the stiffnesses: 5 % stiffer all round
+    # is absorbed whole without a prior; the prior (its mean below the truth) holds the fit
+    # back, leaving a chi-square, and its own term is the Gaussian's at the fitted constants
+    case, fine, b = plate
+    m = case.measured.size
+    lam = 1.05 * fine.solve(b, m).eigenvalues
+    sigma = 2.0 * cal.NOISE * lam
+    chi2, _, fitted = na.exact_fit(fine, b, lam, sigma)
+    assert chi2 < 1e-10
+    np.testing.assert_allclose(fitted / b, 1.05, rtol=1e-6)
+    prior = (np.asarray(case.prior.mean, float), np.asarray(case.prior.sd, float))
+    chi2_p, term, fitted_p = na.exact_fit(fine, b, lam, sigma, prior)
+    e = na.engineering_from_stiffness(fitted_p)
+    assert chi2_p > 1e-6 and term == pytest.approx(np.sum(((e - prior[0]) / prior[1]) ** 2))
+
+
+def test_quick_run_writes_its_report(tmp_path):
+    path = na.main(out_dir=tmp_path, quick=True)
+    text = path.read_text()
+    assert "| point_mass | " in text and "(fitted 0.9)" in text and "(3 x ideal 0.9)" in text
+    row = next(line for line in text.splitlines() if "(3 x ideal 0.9)" in line)
+    ideal, linearised, exact = (float(row.split("|")[k]) for k in (3, 4, 5))
+    # the constants absorb much of a point mass and no more than all of it
+    assert 0.0 < exact < ideal and 0.0 < linearised < ideal
