@@ -15,10 +15,12 @@ exact eigenvalues (the recordings' mesh of the calibration study, no noise, the 
   has it: its chi-square part and its prior part.
 
 Each row is an effect at one of the calibration study's sizes (its size table, cached in
-``reports/.cache/calibration.json``, or computed anew). The report is
+``reports/.cache/calibration.json``, or computed anew). The rows are kept in
+``out_dir/.cache/nonlinear_absorption.json``, the report is
 ``out_dir/nonlinear_absorption.md``. Run: ``python studies/nonlinear_absorption.py
-[--quick] [--workers 2] [--effect NAME]``; ``--quick`` uses the calibration study's coarse
-meshes and the point mass alone (a regression run, not a measurement).
+[--quick] [--workers 2] [--effect NAME] [--report-only]``; ``--quick`` uses the
+calibration study's coarse meshes and the point mass alone (a regression run, not a
+measurement).
 """
 
 from __future__ import annotations
@@ -177,15 +179,22 @@ def report(rows, quick, workers, minutes):
         "constants are not the prior's mean). The moved constants are given as ratios to the "
         "true ones.",
         "",
-        "| candidate | size | ideal | linearised | exact | exact / linearised | constants moved "
-        "(exact) | with prior: chi-square + prior | constants moved (with prior) |",
-        "|---|---|---:|---:|---:|---:|---|---|---|",
+        "`P(reject)`: the fitted test's power (chi-square, `m - 6` dof, 1 %) at the "
+        "linearised and at the exact noncentrality.",
+        "",
+        "| candidate | size | ideal | linearised | exact | exact / linearised | P(reject): "
+        "linearised / exact | constants moved (exact) | with prior: chi-square + prior | "
+        "constants moved (with prior) |",
+        "|---|---|---:|---:|---:|---:|---|---|---|---|",
     ]
     for r in rows:
         unit = cal.EFFECTS[r["effect"]][2]
+        dof = r["m"] - cal.N_CONSTANTS
+        power = [cal.ideal_power(r[k], dof) for k in ("linearised", "exact")]
         lines.append(
             f"| {r['effect']} | {r['size']:.2g} {unit} ({r['label']}) | {r['ideal']:.1f} | "
             f"{r['linearised']:.1f} | {r['exact']:.1f} | {r['exact'] / r['linearised']:.2f} | "
+            f"{power[0]:.2f} / {power[1]:.2f} | "
             f"{_changed(r['exact_ratio'])} | {r['prior_chi2']:.1f} + {r['prior_term']:.1f} "
             f"({r['prior_at_truth']:.1f}) | "
             f"{_changed(r['prior_ratio'])} |"
@@ -194,14 +203,23 @@ def report(rows, quick, workers, minutes):
     return "\n".join(lines)
 
 
-def main(out_dir="reports", quick=False, workers=1, effects=None):
-    """Fit every row, write the report; return its path."""
+def main(out_dir="reports", quick=False, workers=1, effects=None, report_only=False):
+    """Fit every row (or, ``report_only``, read them from the last run), write the report;
+    return its path."""
     start = time.perf_counter()
-    todo = tasks(size_table(out_dir, quick), quick, effects)
-    print(f"{len(todo)} rows", flush=True)
-    rows = fork_map(lambda t: row(t, quick), todo, workers)
-    path = pathlib.Path(out_dir) / (("quick_" if quick else "") + REPORT)
-    atomic_write_text(path, report(rows, quick, workers, (time.perf_counter() - start) / 60))
+    prefix = "quick_" if quick else ""
+    cache = pathlib.Path(out_dir) / ".cache" / f"{prefix}nonlinear_absorption.json"
+    if report_only:
+        stored = json.loads(cache.read_text())
+    else:
+        todo = tasks(size_table(out_dir, quick), quick, effects)
+        print(f"{len(todo)} rows", flush=True)
+        rows = fork_map(lambda t: row(t, quick), todo, workers)
+        stored = {"rows": rows, "workers": workers, "minutes": (time.perf_counter() - start) / 60}
+        cache.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(cache, json.dumps(stored))
+    path = pathlib.Path(out_dir) / (prefix + REPORT)
+    atomic_write_text(path, report(stored["rows"], quick, stored["workers"], stored["minutes"]))
     print(path)
     return path
 
@@ -212,5 +230,6 @@ if __name__ == "__main__":
     parser.add_argument("--workers", type=int, default=1)
     parser.add_argument("--out", default="reports")
     parser.add_argument("--effect", action="append", choices=list(cal.EFFECTS), default=None)
+    parser.add_argument("--report-only", action="store_true", help="the last run's rows")
     args = parser.parse_args()
-    main(args.out, args.quick, args.workers, args.effect)
+    main(args.out, args.quick, args.workers, args.effect, args.report_only)
