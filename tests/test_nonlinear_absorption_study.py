@@ -1,5 +1,7 @@
 """studies/nonlinear_absorption.py: the exact fit of the constants, and a quick run."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -46,8 +48,34 @@ def test_a_stiffer_plate_all_round_is_absorbed_and_the_prior_pulls_back(plate):
     assert chi2_p > 1e-6 and term == pytest.approx(np.sum(((e - prior[0]) / prior[1]) ** 2))
 
 
+def test_diagnoses_read_per_size_median_widening_and_nominal_rejections():
+    rows = [{"effect": "cutout", "size": 6.2, "widening": [1.0, 2.0], "p_value": 0.001},
+            {"effect": "cutout", "size": 6.2, "widening": [1.2, 3.0], "p_value": 0.2},
+            {"effect": "cutout", "size": 6.2, "widening": [1.4, 1.0], "p_value": 0.005},
+            {"effect": "cutout", "size": 13.0, "widening": [9.0, 9.0], "p_value": 0.0},
+            {"effect": "cutout", "size": 6.2, "p_value": 0.0}]  # no widening kept: not read
+    widening, rejected, n = na.diagnosed(rows, "cutout", 6.2)
+    np.testing.assert_allclose(widening, [1.2, 2.0])
+    assert (rejected, n) == (2, 3)
+    assert na.diagnosed(rows, "point_mass", 0.17) == (None, 0, 0)
+
+
 def test_quick_run_writes_its_report(tmp_path):
+    # a calibration cache whose replicates were not widened: the figures at diagnose's
+    # deviations are then those at the declared ones
+    table = cal.sizes(quick=True)
+    m = cal._case(cal.POWER_FAMILY).measured.size
+    rows = {f"r{j}": {"effect": "point_mass", "size": size, "widening": [1.0] * m,
+                      "p_value": 0.5} for j, size in enumerate(table["point_mass"]["sizes"])}
+    cache = cal._cache_path(tmp_path, True)
+    cache.parent.mkdir(parents=True)
+    cache.write_text(json.dumps({"sizes": table, "rows": rows}))
     path = na.main(out_dir=tmp_path, quick=True)
+    stored = json.loads((tmp_path / ".cache" / "quick_nonlinear_absorption.json").read_text())
+    for r in stored["rows"]:
+        assert r["widened_linearised"] == pytest.approx(r["linearised"], rel=1e-12)
+        assert r["widened_exact"] == pytest.approx(r["prior_chi2"], rel=1e-6)
+        assert (r["rejected"], r["replicates"]) == (0, 1)
     text = path.read_text()
     assert "| point_mass | " in text and "(fitted 0.9)" in text and "(3 x ideal 0.9)" in text
     row = next(line for line in text.splitlines() if "(3 x ideal 0.9)" in line)
