@@ -182,16 +182,23 @@ def _changed(ratio):
     return ", ".join(moved) or "none by more than 5 %"
 
 
-def report(rows, quick, workers, minutes):
-    """The report's Markdown."""
-    now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
+def _run_facts(workers, minutes):
+    """When, where and by what code the rows were made (kept with them)."""
+    return {"workers": workers, "minutes": minutes, "code": code_version(), "cpu": cpu(),
+            "made": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+            "load": list(os.getloadavg())}  # fmt: skip
+
+
+def report(rows, quick, facts):
+    """The report's Markdown; ``facts``: :func:`_run_facts` of the run that made ``rows``."""
+    load = ", ".join(f"{x:.2f}" for x in facts["load"])
     lines = [
         "# How much of an effect the six constants absorb: linearised against exact",
         "",
         f"Made by `python studies/nonlinear_absorption.py{' --quick' if quick else ''}` on "
-        f"{now}, on {cpu()}, {workers} worker(s), code {code_version()}; {len(rows)} rows in "
-        f"{minutes:.1f} min of wall time; load averages (1, 5, 15 min) when written: {load}.",
+        f"{facts['made']}, on {facts['cpu']}, {facts['workers']} worker(s), code "
+        f"{facts['code']}; {len(rows)} rows in {facts['minutes']:.1f} min of wall time; load "
+        f"averages (1, 5, 15 min) when the rows were done: {load}.",
         "",
         "The calibration study's effects on its Frederiksen plate and recordings' mesh, no "
         "noise, deviations 0.2 % of each frequency (in eigenvalue: `2 x 0.002 lambda`), at its "
@@ -273,11 +280,11 @@ def main(out_dir="reports", quick=False, workers=1, effects=None, report_only=Fa
         rows = fork_map(lambda j: row(todo[j], quick, seen[j][0]), range(len(todo)), workers)
         for r, (_, rejected, n) in zip(rows, seen, strict=True):
             r["rejected"], r["replicates"] = rejected, n
-        stored = {"rows": rows, "workers": workers, "minutes": (time.perf_counter() - start) / 60}
+        stored = {"rows": rows, **_run_facts(workers, (time.perf_counter() - start) / 60)}
         cache.parent.mkdir(parents=True, exist_ok=True)
         atomic_write_text(cache, json.dumps(stored))
     path = pathlib.Path(out_dir) / (prefix + REPORT)
-    atomic_write_text(path, report(stored["rows"], quick, stored["workers"], stored["minutes"]))
+    atomic_write_text(path, report(stored["rows"], quick, stored))
     print(path)
     return path
 
