@@ -189,6 +189,15 @@ def _run_facts(workers, minutes):
             "load": list(os.getloadavg())}  # fmt: skip
 
 
+def _size_and_power(r, linearised, exact):
+    """A row's candidate and size cells, and its fitted test's power at two noncentralities
+    (``m - 6`` dof, 1 %), as table cells."""
+    unit = cal.EFFECTS[r["effect"]][2]
+    power = [cal.ideal_power(r[k], r["m"] - cal.N_CONSTANTS) for k in (linearised, exact)]
+    return (f"{r['effect']} | {r['size']:.2g} {unit} ({r['label']})",
+            f"{power[0]:.2f} / {power[1]:.2f}")  # fmt: skip
+
+
 def report(rows, quick, facts):
     """The report's Markdown; ``facts``: :func:`_run_facts` of the run that made ``rows``."""
     load = ", ".join(f"{x:.2f}" for x in facts["load"])
@@ -221,15 +230,11 @@ def report(rows, quick, facts):
         "|---|---|---:|---:|---:|---:|---|---|---|---|",
     ]
     for r in rows:
-        unit = cal.EFFECTS[r["effect"]][2]
-        dof = r["m"] - cal.N_CONSTANTS
-        power = [cal.ideal_power(r[k], dof) for k in ("linearised", "exact")]
+        size, power = _size_and_power(r, "linearised", "exact")
         lines.append(
-            f"| {r['effect']} | {r['size']:.2g} {unit} ({r['label']}) | {r['ideal']:.1f} | "
-            f"{r['linearised']:.1f} | {r['exact']:.1f} | {r['exact'] / r['linearised']:.2f} | "
-            f"{power[0]:.2f} / {power[1]:.2f} | "
-            f"{_changed(r['exact_ratio'])} | {r['prior_chi2']:.1f} + {r['prior_term']:.1f} "
-            f"({r['prior_at_truth']:.1f}) | "
+            f"| {size} | {r['ideal']:.1f} | {r['linearised']:.1f} | {r['exact']:.1f} | "
+            f"{r['exact'] / r['linearised']:.2f} | {power} | {_changed(r['exact_ratio'])} | "
+            f"{r['prior_chi2']:.1f} + {r['prior_term']:.1f} ({r['prior_at_truth']:.1f}) | "
             f"{_changed(r['prior_ratio'])} |"
         )
     lines.append("")
@@ -251,13 +256,10 @@ def report(rows, quick, facts):
             "|---|---|---:|---:|---|---|---|",
         ]
         for r in wide:
-            unit = cal.EFFECTS[r["effect"]][2]
-            dof = r["m"] - cal.N_CONSTANTS
-            power = [cal.ideal_power(r[k], dof) for k in ("widened_linearised", "widened_exact")]
+            size, power = _size_and_power(r, "widened_linearised", "widened_exact")
             lines.append(
-                f"| {r['effect']} | {r['size']:.2g} {unit} ({r['label']}) | {r['widening']:.2f} "
-                f"| {r['widened_linearised']:.1f} | {r['widened_exact']:.1f} + "
-                f"{r['widened_prior_term']:.1f} | {power[0]:.2f} / {power[1]:.2f} | "
+                f"| {size} | {r['widening']:.2f} | {r['widened_linearised']:.1f} | "
+                f"{r['widened_exact']:.1f} + {r['widened_prior_term']:.1f} | {power} | "
                 f"{r['rejected']} of {r['replicates']} |"
             )
         lines.append("")
