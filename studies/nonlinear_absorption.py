@@ -41,7 +41,11 @@ import calibration as cal  # noqa: E402  (this folder's study: its effects, size
 from _study_host import code_version, cpu  # noqa: E402
 
 from bayesplate.io import atomic_write_text  # noqa: E402
-from bayesplate.laminate import engineering_from_stiffness, stiffness_from_engineering  # noqa: E402
+from bayesplate.laminate import (  # noqa: E402
+    engineering_from_stiffness,
+    stiffness_from_engineering,
+    stiffness_jacobian,
+)
 from bayesplate.parallel import fork_map  # noqa: E402
 from bayesplate.quantities import ENGINEERING_NAMES  # noqa: E402
 
@@ -93,29 +97,38 @@ def exact_fit(plate, b_true, lam_effect, sigma, prior=None):
         return np.concatenate([(lam_effect - solve(z).eigenvalues) / sigma, prior_part(z)])
 
     def jacobian(z):
-        sens = solve(z).sensitivities * (b_true * np.exp(z))[None, :]  # d lambda / d z
-        h = 1e-7  # the prior's part by central differences of a closed form
-        dp = [(prior_part(z + h * e) - prior_part(z - h * e)) / (2 * h) for e in np.eye(6)]
-        return np.vstack([-sens / sigma[:, None], np.column_stack(dp).reshape(-1, 6)])
+        b = b_true * np.exp(z)
+        sens = solve(z).sensitivities * b[None, :]  # d lambda / d z
+        if prior is None:
+            return -sens / sigma[:, None]
+        # d e / d z = (d b / d e)^-1 diag(b), the inverse of the laminate's own Jacobian
+        de_dz = np.linalg.solve(stiffness_jacobian(engineering_from_stiffness(b)), np.diag(b))
+        return np.vstack([-sens / sigma[:, None], de_dz / prior[1][:, None]])
 
     out = least_squares(residuals, np.zeros(6), jac=jacobian, xtol=1e-10, ftol=1e-12)
     r = out.fun
     return float(np.sum(r[:m] ** 2)), float(np.sum(r[m:] ** 2)), b_true * np.exp(out.x)
 
 
-def row(task, quick=False, widening=None):
+def plate(quick=False):
+    """The calibration study's power plate on its recordings' mesh: ``(case, model, b,
+    nominal)``, ``b`` the true stiffness coefficients and ``nominal`` their solution."""
+    case, _, fine = cal._models(cal.POWER_FAMILY, quick)
+    b = stiffness_from_engineering(case.reference)
+    return case, fine, b, fine.solve(b, case.measured.size)
+
+
+def row(task, plated, widening=None):
     """One effect at one size: the ideal, linearised and exact fitted noncentralities.
 
-    ``widening``, shape (m,): diagnose's factors on the deviations (the calibration study's
-    replicates of this size, median); the linearised and exact (with the prior) figures are
-    then also computed at the widened deviations.
+    ``plated``: :func:`plate`. ``widening``, shape (m,): diagnose's factors on the deviations
+    (the calibration study's replicates of this size, median); the linearised and exact
+    (with the prior) figures are then also computed at the widened deviations.
     """
     effect, label, size = task
     start = time.perf_counter()
-    case, _, fine = cal._models(cal.POWER_FAMILY, quick)
-    b = stiffness_from_engineering(case.reference)
+    case, fine, b, nominal = plated
     m = case.measured.size
-    nominal = fine.solve(b, m)
     sigma = 2.0 * cal.NOISE * nominal.eigenvalues  # d lambda = 2 lambda df / f
     make, theta, _, _ = cal.EFFECTS[effect]
     lam = np.sort(make().apply(fine, np.asarray(theta(size), dtype=float)).solve(b, m).eigenvalues)
@@ -279,7 +292,8 @@ def main(out_dir="reports", quick=False, workers=1, effects=None, report_only=Fa
         todo = tasks(table, quick, effects)
         print(f"{len(todo)} rows", flush=True)
         seen = [diagnosed(replicates, t[0], t[2]) for t in todo]
-        rows = fork_map(lambda j: row(todo[j], quick, seen[j][0]), range(len(todo)), workers)
+        plated = plate(quick)  # once: the workers inherit it
+        rows = fork_map(lambda j: row(todo[j], plated, seen[j][0]), range(len(todo)), workers)
         for r, (_, rejected, n) in zip(rows, seen, strict=True):
             r["rejected"], r["replicates"] = rejected, n
         stored = {"rows": rows, **_run_facts(workers, (time.perf_counter() - start) / 60)}
