@@ -8,6 +8,7 @@ import argparse
 import importlib
 import json
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -246,3 +247,24 @@ def test_a_closed_standard_output_ends_in_one_line_without_traceback():
     assert proc.wait(timeout=60) == 1
     assert "Traceback" not in err and "Exception ignored" not in err, err
     assert err == "bayesplate cases: standard output closed; stopped\n"
+
+
+def test_a_ctrl_c_after_the_work_is_done_keeps_the_commands_status():
+    # a SIGINT that lands once the command's work is done (its files closed, the interpreter
+    # shutting down) must not turn its status into a death by SIGINT (-2), as it did in CI
+    # once: a test that killed `sample` at a random moment hit the moment after its work
+    script = (
+        "import os, signal, sys, time\n"
+        "from bayesplate.cli.main import main\n"
+        "sys.argv = ['bayesplate', 'cases']\n"
+        "status = main()\n"
+        "os.kill(os.getpid(), signal.SIGINT)\n"
+        "time.sleep(0.2)\n"
+        "sys.exit(status)\n"
+    )
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    done = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True,
+                          text=True, timeout=60, preexec_fn=lambda: signal.signal(
+                              signal.SIGINT, signal.SIG_DFL))  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert "Traceback" not in done.stderr, done.stderr

@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import signal
 import sys
 
 from . import batch, cases, diagnose, estimate, import_case, modes, report, sample
@@ -68,7 +69,13 @@ def main(argv=None):
     from ..io import CaseError  # after parsing: --help and usage errors need no numerics
 
     try:
-        return args.func(args)
+        status = args.func(args)
+        if argv is None:
+            # the work is done and every file is closed: a Ctrl-C from here on (during the
+            # interpreter's shutdown) would only turn the command's own status into a death
+            # by SIGINT, so it is ignored; one arriving before this line is caught below
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+        return status
     except CaseError as err:
         print(f"bayesplate: error: {err}", file=sys.stderr)
         return 2
