@@ -166,6 +166,15 @@ RETIRED_EFFECT = {
     "point_mass": ((THREE_STARTS, _six_starts("the point mass's rows")),),
     "clean": ((THREE_STARTS, _six_starts("the clean plates' rows, where any located candidate "
                                          "could raise a false alarm,")),),
+    # not located themselves, but a located rival that now reaches a better basin can take
+    # the name from them or tie with them
+    "thickness_taper": ((THREE_STARTS, _six_starts("the thickness taper's rows, whose located "
+                                                   "rivals search more places now,")),),
+    "ply_misalignment": ((THREE_STARTS, _six_starts("the ply misalignment's rows, whose located "
+                                                    "rivals search more places now,")),),
+    "elastic_foundation": ((THREE_STARTS, _six_starts("the elastic foundation's rows, whose "
+                                                      "located rivals (the point support "
+                                                      "above all) search more places now,")),),
 }
 #: Single rows set aside to run again first, by (code, key), and why: a change since can
 #: alter their outcome and no other row's on the measure the report counts.

@@ -210,21 +210,23 @@ def test_rows_stored_without_a_code_are_the_retired_legacy_rows():
 ])  # fmt: skip
 def test_one_candidates_rows_of_a_retired_code_are_set_aside_with_their_reason(effect, codes,
                                                                                why):  # fmt: skip
-    # ``effect`` is a candidate (its power rows) or "clean" (the clean plates' rows); a
-    # candidate no rule sets aside keeps its row of the same code
-    other = next(name for name in cal.EFFECTS if name not in cal.RETIRED_EFFECT)
-    table = {**_table(), other: {"sizes": [0.14, None, None, None]}}
-    rows = [_row("power", other, 0, 0.14, 0, code=codes[0])]
+    # ``effect`` is a candidate (its power rows) or "clean" (the clean plates' rows); a row
+    # of the same kind made by a code no rule sets aside is kept
+    kept = "0000000"
+    assert not any(kept in c for pairs in cal.RETIRED_EFFECT.values() for c, _ in pairs)
+    table = _table()
     if effect == "clean":
-        rows.append(_row("clean", None, None, None, 0, code=codes[0]))
+        rows = [_row("clean", None, None, None, 0, code=codes[0]),
+                _row("clean", None, None, None, 1, code=kept)]  # fmt: skip
     else:
-        rows.append(_row("power", effect, 0, 48000.0, 0, code=codes[0]))
+        rows = [_row("power", effect, 0, 48000.0, 0, code=codes[0]),
+                _row("power", effect, 0, 48000.0, 1, code=kept)]  # fmt: skip
         table = {**table, effect: {"sizes": [48000.0, None, None, None]}}
     stored = {"sizes": table, "rows": {r["key"]: r for r in rows}, "seconds": 60.0}
     cal.migrate(stored)
-    assert [r["effect"] for r in stored["rows"].values()] == [other]
+    assert [r["code"] for r in stored["rows"].values()] == [kept]
     (gone,) = stored["retired"].values()
-    assert gone["retired"] == why
+    assert gone["retired"] == why and gone["code"] == codes[0]
     assert (gone["kind"], gone["effect"]) == (("clean", None) if effect == "clean"
                                               else ("power", effect))  # fmt: skip
     todo = [t for t in cal.tasks(stored["sizes"]) if cal.task_key(t) not in stored["rows"]]
