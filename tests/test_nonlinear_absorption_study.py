@@ -26,7 +26,7 @@ def test_an_effect_that_is_a_change_of_the_constants_is_absorbed_whole(plate):
     moved = b * np.array([1.0, 1.0, 1.0, 1.08, 1.0, 1.0])
     lam = fine.solve(moved, m).eigenvalues
     sigma = 2.0 * cal.NOISE * fine.solve(b, m).eigenvalues
-    chi2, prior_term, fitted = na.exact_fit(fine, b, lam, sigma)
+    chi2, prior_term, fitted, *_ = na.exact_fit(fine, b, lam, sigma)
     assert chi2 < 1e-10 and prior_term == 0.0
     np.testing.assert_allclose(fitted, moved, rtol=1e-6)
 
@@ -39,13 +39,61 @@ def test_a_stiffer_plate_all_round_is_absorbed_and_the_prior_pulls_back(plate):
     m = case.measured.size
     lam = 1.05 * fine.solve(b, m).eigenvalues
     sigma = 2.0 * cal.NOISE * lam
-    chi2, _, fitted = na.exact_fit(fine, b, lam, sigma)
+    chi2, _, fitted, *_ = na.exact_fit(fine, b, lam, sigma)
     assert chi2 < 1e-10
     np.testing.assert_allclose(fitted / b, 1.05, rtol=1e-6)
     prior = (np.asarray(case.prior.mean, float), np.asarray(case.prior.sd, float))
-    chi2_p, term, fitted_p = na.exact_fit(fine, b, lam, sigma, prior)
+    chi2_p, term, fitted_p, *_ = na.exact_fit(fine, b, lam, sigma, prior)
     e = na.engineering_from_stiffness(fitted_p)
     assert chi2_p > 1e-6 and term == pytest.approx(np.sum(((e - prior[0]) / prior[1]) ** 2))
+
+
+def _a_fit(m, chi2, seed):
+    """A made-up exact fit without a prior: a Jacobian (m, 6) and a residual orthogonal to
+    its columns with the given chi-square (what a fit leaves at its optimum)."""
+    rng = np.random.default_rng(seed)
+    J = rng.standard_normal((m, 6))
+    r = rng.standard_normal(m)
+    r -= J @ np.linalg.lstsq(J, r, rcond=None)[0]
+    r *= np.sqrt(chi2) / np.linalg.norm(r)
+    return na.Exact(chi2, 0.0, np.ones(6), r, J)
+
+
+@pytest.mark.parametrize("chi2", [0.0, 8.0, 25.0])
+def test_recorded_noise_power_is_the_noncentral_chi_square_without_widening(chi2):
+    # w = 1, no prior: the fitted test's chi-square is ncx2(m - 6, chi2) (closed form)
+    m = 14
+    got = na.recorded_noise_power(_a_fit(m, chi2, 1), np.ones(m), m - 6,
+                                  np.random.default_rng(2))  # fmt: skip
+    want = cal.ideal_power(chi2, m - 6) if chi2 > 0 else cal.ALPHA
+    assert got == pytest.approx(want, abs=0.004)  # 3.5 standard errors of 200 000 draws
+
+
+def test_recorded_noise_power_under_a_uniform_widening_is_the_scaled_noncentral_tail():
+    # w_i = w: the statistic is ncx2(m - 6, w^2 chi2) / w^2 (closed form), less powerful
+    # than the noncentral chi-square at the widened noncentrality the naive reading takes
+    from scipy.stats import chi2 as chi2_dist
+    from scipy.stats import ncx2
+
+    m, w, chi2 = 14, 1.33, 12.0
+    got = na.recorded_noise_power(_a_fit(m, chi2, 3), np.full(m, w), m - 6,
+                                  np.random.default_rng(4))  # fmt: skip
+    crit = chi2_dist.ppf(1 - cal.ALPHA, m - 6)
+    want = ncx2.sf(w**2 * crit, m - 6, w**2 * chi2)
+    assert got == pytest.approx(want, abs=0.004)
+    assert want < cal.ideal_power(chi2, m - 6) - 0.1
+
+
+def test_effective_dof_is_m_minus_6_without_a_prior_and_more_with_one():
+    # without a prior every constant is the data's (p_eff = 6); a prior row on each takes
+    # a share, and a prior far tighter than the data takes nearly all of it (p_eff -> 0)
+    m = 14
+    fitted = _a_fit(m, 5.0, 5)
+    assert na.effective_dof(fitted, m) == pytest.approx(m - 6, abs=1e-12)
+    for scale, low, high in ((1.0, m - 6, m), (1e4, m - 1e-3, m)):
+        J = np.vstack([fitted.jacobian, scale * np.eye(6)])
+        held = fitted._replace(jacobian=J, residual=np.r_[fitted.residual, np.zeros(6)])
+        assert low < na.effective_dof(held, m) < high
 
 
 def test_diagnoses_read_per_size_median_widening_and_nominal_rejections():
@@ -76,6 +124,9 @@ def test_quick_run_writes_its_report(tmp_path):
         assert r["widened_linearised"] == pytest.approx(r["linearised"], rel=1e-12)
         assert r["widened_exact"] == pytest.approx(r["prior_chi2"], rel=1e-6)
         assert (r["rejected"], r["replicates"]) == (0, 1)
+        # the working mesh (half as fine) is diagnose's: its own dof, a power in [0, 1]
+        assert m - 6 < r["working_dof"] < m and 0.0 <= r["working_power"] <= 1.0
+        assert 0.0 <= r["recorded_noise_power"] <= 1.0
     text = path.read_text()
     assert "| point_mass | " in text and "(fitted 0.9)" in text and "(3 x ideal 0.9)" in text
     row = next(line for line in text.splitlines() if "(3 x ideal 0.9)" in line)
