@@ -36,7 +36,6 @@ from typing import NamedTuple
 
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.stats import chi2 as chi2_dist
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import calibration as cal  # noqa: E402  (this folder's study: its effects, sizes and meshes)
@@ -53,10 +52,7 @@ from bayesplate.quantities import ENGINEERING_NAMES  # noqa: E402
 
 REPORT = "nonlinear_absorption.md"
 LABELS = ("fitted 0.9", "3 x ideal 0.9")  # the calibration study's sizes compared here
-#: Noise draws of :func:`recorded_noise_power` (its standard error is at most 0.0011) and
-#: their seed.
-DRAWS, SEED = 200_000, 20261127
-
+DRAWS, SEED = cal.DRAWS, cal.DRAWS_SEED  # of the recorded-noise power
 
 class Exact(NamedTuple):
     """What :func:`exact_fit` found."""
@@ -123,48 +119,6 @@ def exact_fit(plate, b_true, lam_effect, sigma, prior=None):
                  r, out.jac)  # fmt: skip
 
 
-def recorded_noise_power(fitted, widening, dof, rng, draws=DRAWS, alpha=cal.ALPHA):
-    """The fitted test's power at widened deviations when the noise is as recorded.
-
-    diagnose divides the residuals by ``w_i sigma_i`` (its deviations widened by the mesh's
-    error, ``w_i >= 1``) and compares their chi-square with the ``chi2(dof)`` quantile; the
-    recordings' noise has the sd ``sigma_i``, not ``w_i sigma_i``. Linearised at the exact
-    fit, the fitted whitened residual of noisy recordings is ``r + (I - H) e``: ``r`` the
-    exact fit's residual (``fitted.residual``), ``H`` the projection on the columns of its
-    Jacobian (the constants take up their share of the noise too; the prior's rows carry no
-    noise), ``e_i ~ N(0, 1 / w_i^2)`` in the data rows. The chi-square of its data rows is a
-    generalised chi-square, its tail drawn here by Monte Carlo.
-
-    With every ``w_i = 1`` and no prior this is the noncentral chi-square's ``ncx2.sf`` at
-    ``dof = m - 6`` (:func:`calibration.ideal_power`); with ``w_i = w`` it is the tail of
-    ``ncx2(m - 6, w^2 chi2) / w^2`` beyond the same quantile: widening the deviations
-    shrinks the noise's share of the statistic and not its critical value, so the test is
-    conservative.
-
-    Parameters
-    ----------
-    fitted : Exact
-        The exact fit at the widened deviations (:func:`exact_fit` with ``sigma * widening``).
-    widening : numpy.ndarray, shape (m,)
-    dof : float
-    rng : numpy.random.Generator
-    draws : int
-
-    Returns
-    -------
-    float
-        P(chi-square > ``chi2.ppf(1 - alpha, dof)``).
-    """
-    w = np.asarray(widening, dtype=float)
-    m, rows = w.size, fitted.residual.size
-    Q, _ = np.linalg.qr(fitted.jacobian)
-    noise = np.zeros((draws, rows))
-    noise[:, :m] = rng.standard_normal((draws, m)) / w
-    left = noise - (noise @ Q) @ Q.T + fitted.residual
-    statistic = np.sum(left[:, :m] ** 2, axis=1)
-    return float(np.mean(statistic > chi2_dist.ppf(1.0 - alpha, dof)))
-
-
 def plate(quick=False):
     """The calibration study's power plate: ``(case, fine, b, nominal, working)``: its model
     on the recordings' mesh, the true stiffness coefficients ``b``, their solution there, and
@@ -172,6 +126,12 @@ def plate(quick=False):
     case, working, fine = cal._models(cal.POWER_FAMILY, quick)
     b = stiffness_from_engineering(case.reference)
     return case, fine, b, fine.solve(b, case.measured.size), working
+
+
+def _recorded(fitted, widening, dof):
+    """:func:`calibration.recorded_noise_power` of an :class:`Exact` fit, seeded."""
+    return cal.recorded_noise_power(fitted.residual, fitted.jacobian, widening, dof,
+                                    np.random.default_rng(SEED))  # fmt: skip
 
 
 def effective_dof(fitted, m):
@@ -206,13 +166,12 @@ def row(task, plated, widening=None):
     if widening is not None:
         wide = sigma * np.asarray(widening, dtype=float)
         fitted = exact_fit(fine, b, lam, wide, prior)
-        power = recorded_noise_power(fitted, widening, m - cal.N_CONSTANTS,
-                                     np.random.default_rng(SEED))  # fmt: skip
+        power = _recorded(fitted, widening, m - cal.N_CONSTANTS)
         # diagnose's nominal problem without its noise: its working mesh fitted to the
         # recordings' eigenvalues, its deviations, its prior, its degrees of freedom
         seen = exact_fit(working, b, lam, wide, prior)
         dof = effective_dof(seen, m)
-        seen_power = recorded_noise_power(seen, widening, dof, np.random.default_rng(SEED))
+        seen_power = _recorded(seen, widening, dof)
         widened = {"widening": float(np.median(widening)), "widened_prior_term": fitted.prior_term,
                    "widened_linearised": cal.fitted_noncentrality(delta, nominal.sensitivities,
                                                                   wide),
@@ -344,7 +303,7 @@ def report(rows, quick, facts):
             "part) and its power (`m - 6` dof, 1 %) read as if the noise were as wide as the "
             "widened deviations; then its power with the noise as recorded (sd 0.2 %, not "
             "widened: the statistic is a generalised chi-square, whose tail is drawn from "
-            f"{DRAWS:,} seeded noise vectors, `recorded_noise_power`); then diagnose's "
+            f"{DRAWS:,} seeded noise vectors, `calibration.recorded_noise_power`); then diagnose's "
             "nominal problem without its noise: the plate's model on diagnose's working mesh "
             "(half as fine each way as the recordings') fitted exactly to the recordings' "
             "eigenvalues with the same deviations and prior, its chi-square, degrees of "

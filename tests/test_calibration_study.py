@@ -89,6 +89,13 @@ def test_quick_study_runs_and_clean_plates_are_consistent(tmp_path, monkeypatch)
     assert power["ideal_lambda"] > 0.8 * cal.noncentrality_for(0.9, 14)
     (left,) = [lam for lam in cal.absorbed(stored["sizes"], quick=True)["point_mass"][:1]]
     assert left == pytest.approx(cal.noncentrality_for(0.9, 14 - 6), rel=0.3)
+    # its power with the noise drawn (not widened: the declared deviations) is the noncentral
+    # chi-square's at that noncentrality (closed form), to the Monte Carlo's error
+    (drawn,) = cal.absorbed(stored["sizes"], quick=True, power=True)["point_mass"][:1]
+    assert drawn == pytest.approx(cal.ideal_power(left, 14 - 6), abs=0.004)
+    widened = cal.absorbed(stored["sizes"], quick=True, widen=cal.widening(quick=True),
+                           power=True)["point_mass"][0]  # fmt: skip
+    assert widened < drawn  # the widened test is the weaker
     assert (tmp_path / "calibration-quick.png").exists()
     monkeypatch.setattr(cal, "run_task", None)  # everything must come from the cache now
     again = cal.main(tmp_path, quick=True, workers=1)

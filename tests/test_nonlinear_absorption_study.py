@@ -63,8 +63,9 @@ def _a_fit(m, chi2, seed):
 def test_recorded_noise_power_is_the_noncentral_chi_square_without_widening(chi2):
     # w = 1, no prior: the fitted test's chi-square is ncx2(m - 6, chi2) (closed form)
     m = 14
-    got = na.recorded_noise_power(_a_fit(m, chi2, 1), np.ones(m), m - 6,
-                                  np.random.default_rng(2))  # fmt: skip
+    fit = _a_fit(m, chi2, 1)
+    got = cal.recorded_noise_power(fit.residual, fit.jacobian, np.ones(m), m - 6,
+                                   np.random.default_rng(2))  # fmt: skip
     want = cal.ideal_power(chi2, m - 6) if chi2 > 0 else cal.ALPHA
     assert got == pytest.approx(want, abs=0.004)  # 3.5 standard errors of 200 000 draws
 
@@ -76,8 +77,9 @@ def test_recorded_noise_power_under_a_uniform_widening_is_the_scaled_noncentral_
     from scipy.stats import ncx2
 
     m, w, chi2 = 14, 1.33, 12.0
-    got = na.recorded_noise_power(_a_fit(m, chi2, 3), np.full(m, w), m - 6,
-                                  np.random.default_rng(4))  # fmt: skip
+    fit = _a_fit(m, chi2, 3)
+    got = cal.recorded_noise_power(fit.residual, fit.jacobian, np.full(m, w), m - 6,
+                                   np.random.default_rng(4))  # fmt: skip
     crit = chi2_dist.ppf(1 - cal.ALPHA, m - 6)
     want = ncx2.sf(w**2 * crit, m - 6, w**2 * chi2)
     assert got == pytest.approx(want, abs=0.004)
