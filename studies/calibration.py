@@ -920,9 +920,15 @@ def power_cells(rows):
     return cells
 
 
+def _at(values, effect, j):
+    """An effect's value at the ``j``-th size of ``SIZES`` in ``{effect: [value or None]}``
+    (None where the effect or its size is missing)."""
+    return (values.get(effect) or [None] * len(SIZES))[j]
+
+
 def _fitted_p(left, effect, j):
     """The fitted test's power at the ``j``-th size, from noncentralities ``left``."""
-    lam = (left.get(effect) or [None] * len(SIZES))[j]
+    lam = _at(left, effect, j)
     return None if lam is None else ideal_power(lam, 14 - N_CONSTANTS)
 
 
@@ -1046,7 +1052,7 @@ def report(rows, stored, quick, workers):
             p = f"{ideal_power(lambda_at(entry, s), 14):.2f}"
             fp = _fitted_p(left, effect, j)
             q = "-" if fp is None else f"{fp:.2f}"
-            wp = (stored.get("widened_power") or {}).get(effect, [None] * len(SIZES))[j]
+            wp = _at(stored.get("widened_power") or {}, effect, j)
             w = "-" if wp is None else f"{wp:.2f}"
             one = entry_p(left, size_table, effect, j, bound_power) if fp is not None else None
             o = "-" if one is None else f"{one:.2f}"
@@ -1136,7 +1142,7 @@ def _absorption(size_table, left, rows):
     jf = [entry[0] for entry in SIZES].index("fitted 0.9")
     parts = []
     for effect, entry in size_table.items():
-        s, lam = entry["sizes"][j90], (left.get(effect) or [None] * len(SIZES))[j90]
+        s, lam = entry["sizes"][j90], _at(left, effect, j90)
         if s is None or lam is None:
             continue
         ideal = lambda_at(entry, s)
@@ -1178,8 +1184,7 @@ def _widened(stored, cells):
         return []
     jf = [entry[0] for entry in SIZES].index("fitted 0.9")
     table, wide = stored["sizes"] or {}, stored.get("widened_power") or {}
-    at = [(e, (wide.get(e) or [None] * len(SIZES))[jf]) for e in table
-          if table[e]["sizes"][jf] is not None]  # fmt: skip
+    at = [(e, _at(wide, e, jf)) for e in table if table[e]["sizes"][jf] is not None]
     at = [(e, p) for e, p in at if p is not None]
     run = [cells.get((e, size_key(table[e]["sizes"][jf]))) for e, _ in at]
     k = sum(c["rejected"] for c in run if c)
@@ -1242,7 +1247,7 @@ def _judge(c, need=8, of=N_POWER):
 def entry_p(left, size_table, effect, j, power=None):
     """The fitted test's power at an effect's ``j``-th size (1 where unknown: no claim);
     ``power``: of the noncentrality left, e.g. :func:`bound_power` (default the 8 dof test)."""
-    lam = (left.get(effect) or [None] * len(SIZES))[j]
+    lam = _at(left, effect, j)
     if size_table[effect]["sizes"][j] is None or lam is None:
         return 1.0
     return ideal_power(lam, 14 - N_CONSTANTS) if power is None else power(lam)

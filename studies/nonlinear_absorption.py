@@ -52,7 +52,7 @@ from bayesplate.quantities import ENGINEERING_NAMES  # noqa: E402
 
 REPORT = "nonlinear_absorption.md"
 LABELS = ("fitted 0.9", "3 x ideal 0.9")  # the calibration study's sizes compared here
-DRAWS, SEED = cal.DRAWS, cal.DRAWS_SEED  # of the recorded-noise power
+
 
 class Exact(NamedTuple):
     """What :func:`exact_fit` found."""
@@ -131,7 +131,7 @@ def plate(quick=False):
 def _recorded(fitted, widening, dof):
     """:func:`calibration.recorded_noise_power` of an :class:`Exact` fit, seeded."""
     return cal.recorded_noise_power(fitted.residual, fitted.jacobian, widening, dof,
-                                    np.random.default_rng(SEED))  # fmt: skip
+                                    np.random.default_rng(cal.DRAWS_SEED))  # fmt: skip
 
 
 def effective_dof(fitted, m):
@@ -303,7 +303,8 @@ def report(rows, quick, facts):
             "part) and its power (`m - 6` dof, 1 %) read as if the noise were as wide as the "
             "widened deviations; then its power with the noise as recorded (sd 0.2 %, not "
             "widened: the statistic is a generalised chi-square, whose tail is drawn from "
-            f"{DRAWS:,} seeded noise vectors, `calibration.recorded_noise_power`); then diagnose's "
+            f"{cal.DRAWS:,} seeded noise vectors, `calibration.recorded_noise_power`); then "
+            "diagnose's "
             "nominal problem without its noise: the plate's model on diagnose's working mesh "
             "(half as fine each way as the recordings') fitted exactly to the recordings' "
             "eigenvalues with the same deviations and prior, its chi-square, degrees of "
