@@ -98,15 +98,18 @@ def test_reduced_candidate_matches_full_solve(plate, physics):
 def test_region_projection_is_the_projected_assembled_region(plate):
     """``RegionProjection`` (element by element, summed over runs of element numbers) against
     the assembled matrix of the same weighted elements projected on the same basis; weights
-    on runs split across rows, a single element, and none."""
-    from bayesplate.discrepancy.pencil import RegionProjection
+    on runs split across rows, a single element, none, and a run long enough for its own
+    matrix-vector product beside short ones (``RUN_MIN``)."""
+    from bayesplate.discrepancy.pencil import RUN_MIN, RegionProjection
 
     model, b = plate
     V = np.random.default_rng(3).standard_normal((model.mesh.n_dofs, 9))
     element = np.concatenate([model.element_stiffness_terms()[:2], model.element_mass()[None]])
     region = RegionProjection(model, V, element)
     nx = model.mesh.nx
-    for inside in ([3, 4, 5, nx + 3, nx + 4, 2 * nx + 7], [11], []):
+    assert 10 >= RUN_MIN
+    for inside in ([3, 4, 5, nx + 3, nx + 4, 2 * nx + 7], [11], [],
+                   [*range(nx + 2, nx + 12), 3 * nx + 1, 3 * nx + 2]):  # fmt: skip
         inside = np.array(inside, dtype=int)
         weights = np.zeros(model.mesh.n_elements)
         weights[inside] = np.linspace(0.3, 1.0, len(inside))
@@ -116,3 +119,34 @@ def test_region_projection_is_the_projected_assembled_region(plate):
             data = model.assembler.element_data(inside, weights[inside, None, None] * E[None])
             want = V.T @ (model.assembler.matrix(data) @ V)
             assert np.allclose(got[t], want, rtol=1e-12, atol=1e-12 * np.abs(want).max(initial=1))
+
+
+def test_region_sum_by_whole_elements_kept_is_the_weighted_sum(plate):
+    """``RegionProjection.inside`` (whole elements' sums kept by their set, the last result
+    kept) against ``__call__`` (every element weighted): patches moved so that the set of
+    whole elements stays and changes, one repeated, a result changed by its caller, and more
+    sets than are kept."""
+    from bayesplate.discrepancy import pencil
+    from bayesplate.discrepancy.local_stiffness_loss import area_fractions
+
+    model, b = plate
+    mesh = model.mesh
+    V = np.random.default_rng(5).standard_normal((mesh.n_dofs, 7))
+    region = pencil.RegionProjection(model, V, model.element_stiffness_terms()[:2])
+    size = np.array([0.45 * mesh.a, 0.5 * mesh.b])
+    centres = [(0.5 + s) * np.array([mesh.a, mesh.b])
+               for s in (0.0, 1e-4, 0.01, 0.01, 0.07, -0.03, 0.11, 0.15, -0.1, 0.19, -0.07,
+                         -0.15, 0.23, 0.0, 1e-4)]  # fmt: skip
+    sets = set()
+    for centre in centres:
+        fractions = area_fractions(mesh, centre, size)
+        whole = np.flatnonzero(np.abs(fractions - 1.0) <= pencil.WHOLE_TOL)
+        assert whole.size >= pencil.WHOLE_MIN
+        sets.add(whole.tobytes())
+        got, want = region.inside(fractions), region(fractions)
+        assert np.allclose(got, want, rtol=1e-13, atol=1e-13 * np.abs(want).max())
+        got[:] = 0.0  # the caller's copy: the kept result is not changed
+        assert np.allclose(region.inside(fractions), want, rtol=1e-13,
+                           atol=1e-13 * np.abs(want).max())  # fmt: skip
+    assert len(sets) > pencil.WHOLE_KEPT  # the first set was let go, and is summed again
+    assert len(region._whole) == pencil.WHOLE_KEPT

@@ -156,10 +156,14 @@ class Cutout(Physics):
             Parameter("diameter_mm", big / 4, big / 4, 0.0, big),
         )
 
-    def _fractions(self, model, theta):
+    def _disc(self, model, theta):
+        """Each element's share of area inside the hole."""
         x_mm, y_mm, d_mm = theta
-        centre = 1e-3 * np.array([x_mm, y_mm])
-        return (1.0 - RESIDUAL) * disc_fractions(model.mesh, centre, 1e-3 * abs(d_mm))
+        return disc_fractions(model.mesh, 1e-3 * np.array([x_mm, y_mm]), 1e-3 * abs(d_mm))
+
+    def _fractions(self, model, theta):
+        """Each element's share of stiffness and mass removed."""
+        return (1.0 - RESIDUAL) * self._disc(model, theta)
 
     def apply(self, model, theta):
         """The plate with the hole; ``theta = (x_mm, y_mm, diameter_mm)``."""
@@ -177,15 +181,16 @@ class Cutout(Physics):
     def ritz(self, model, b, basis, near=None):
         """``V^T K_j V - sum_e f_e V_e^T K_j^e V_e`` (and the same for M), cut elements only.
 
-        A difference in the place or the diameter visits only the elements along the rim
-        (:class:`~.pencil.RegionProjection`).
+        A difference in the place or the diameter visits only the elements along the rim; the
+        sum of those wholly inside is kept while they stay the same
+        (:meth:`~.pencil.RegionProjection.inside`).
         """
         terms, constant, mass = project(model, basis)
         element = np.concatenate([model.element_stiffness_terms(), model.element_mass()[None]])
         region = RegionProjection(model, basis, element)
 
         def matrices(theta):
-            removed = region(self._fractions(model, theta))
+            removed = (1.0 - RESIDUAL) * region.inside(self._disc(model, theta))
             return terms - removed[:6], constant, mass - removed[6]
 
         def difference(theta, i, h):

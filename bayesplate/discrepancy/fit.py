@@ -239,11 +239,12 @@ class JointProblem:
         modal = plate.solve(b, int(self.modes.max()) + 3)
         self.n_solves += 1
         lam = modal.eigenvalues[self.modes]
-        vectors = modal.vectors[:, self.modes]
         J = np.zeros((lam.size, 6 + self.k))
         J[:, :6] = modal.sensitivities[self.modes] @ self.L
-        for i in range(self.k):
-            J[:, 6 + i] = self.theta_sd[i] * self._theta_derivative(theta, i, b, lam, vectors)
+        if self.k:  # (a reduced model's mode shapes are made on access: only when needed)
+            vectors = modal.vectors[:, self.modes]
+            for i in range(self.k):
+                J[:, 6 + i] = self.theta_sd[i] * self._theta_derivative(theta, i, b, lam, vectors)
         if self.scale is not None:
             lam, J = lam * self.scale, J * self.scale[:, None]
         return lam, J, modal

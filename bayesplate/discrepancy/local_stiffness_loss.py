@@ -99,9 +99,9 @@ class LocalStiffnessLoss(Physics):
         """``V^T K_j V + (d_j - 1) sum_e frac_e V_e^T K_j^e V_e`` over the cut elements.
 
         Every element of the plate has the same matrices ``K_j^e``; only the elements the
-        rectangle touches are projected at each evaluation, and a difference in a place or a
-        side only the elements along the edges that moved
-        (:class:`~.pencil.RegionProjection`).
+        rectangle touches are projected at each evaluation (the sum of those wholly inside
+        kept while they stay the same: :meth:`~.pencil.RegionProjection.inside`), and a
+        difference in a place or a side only the elements along the edges that moved.
         """
         terms, constant, mass = project(model, basis)
         lost = np.flatnonzero(_KEPT == 0.0)
@@ -115,13 +115,13 @@ class LocalStiffnessLoss(Physics):
 
         def matrices(theta):
             out = terms.copy()
-            out[lost] += (theta[4] - 1.0) * region(fractions(theta))
+            out[lost] += (theta[4] - 1.0) * region.inside(fractions(theta))
             return out, constant, mass
 
         def difference(theta, i, h):
             out = np.zeros_like(terms)
-            if i == 4:  # linear in the factor
-                out[lost] = region(fractions(theta))
+            if i == 4:  # linear in the factor (the region's sum at theta kept by ``inside``)
+                out[lost] = region.inside(fractions(theta))
             else:
                 up, down = np.array(theta, dtype=float), np.array(theta, dtype=float)
                 up[i] += h
