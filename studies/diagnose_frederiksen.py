@@ -4,7 +4,7 @@ Two runs on the bundled case `frederiksen_t300` (14 measured frequencies, T300/e
 100.1 x 53.0 x 3.36 mm): with the deviations the case states (1 % of each frequency, the
 paper's choice), and again with 0.2 %, about what a careful tap test repeats to, to see
 whether anything the model leaves out shows once the recordings are taken more seriously.
-Each run writes its residual figure and both location maps.
+Each run writes its residual figure and its location maps.
 
 Writes ``diagnose_frederiksen.md`` and ``diagnose_frederiksen_{1pc,0p2pc}_*.png`` to
 ``out_dir``. Run: ``python studies/diagnose_frederiksen.py [--quick] [--out DIR]`` (quick:
@@ -13,6 +13,8 @@ half the case's mesh each way, one random start).
 
 # no `from __future__ import annotations`: loaded by tests with spec_from_file_location
 import argparse
+import datetime
+import os
 import pathlib
 import sys
 import time
@@ -26,6 +28,9 @@ from bayesplate.io import atomic_write_text, bundled_case_path, load_case
 from bayesplate.laminate import stiffness_from_engineering
 from bayesplate.model import PlateModel
 from bayesplate.posterior import observed_eigenvalues, prior_in_stiffness
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from _study_host import code_version, cpu  # noqa: E402  (this folder's helper)
 
 matplotlib.use("Agg")  # files only, never a window
 
@@ -73,6 +78,8 @@ def main(out_dir="reports", quick=False):
     out_dir = pathlib.Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     case = load_case(bundled_case_path("frederiksen_t300"))
+    started = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    load = os.getloadavg()[0]
     results, sections = {}, []  # {run: Diagnosis, run_published: JointFit}
     for key, (sigma_rel, label) in RUNS.items():
         model, d, seconds = run(case, sigma_rel, quick)
@@ -91,7 +98,11 @@ def main(out_dir="reports", quick=False):
         "",
         f"Made by `{cmd}` (seed {SEED}). Case `frederiksen_t300`: 14 measured frequencies "
         "of Frederiksen's T300/epoxy plate, prior as in the paper (Table 23). Figures: "
-        "residuals per mode before and after any refit, and the two location maps.",
+        "residuals per mode before and after any refit, and the location maps.",
+        "",
+        f"Run on {started} by code {code_version()} on {cpu()} ({os.cpu_count()} cores; "
+        f"1-minute load {load:.1f} before, {os.getloadavg()[0]:.1f} after); diagnose on "
+        "one worker (the function's default).",
         "",
     ]
     atomic_write_text(out_dir / REPORT, "\n".join(head + sections) + "\n")

@@ -209,6 +209,11 @@ def test_diagnose_frederiksen_quick(tmp_path):
     for key in ("1pc", "0p2pc"):
         local = results[f"{key}_published"]
         assert local.chi2 < 14  # within 1 sigma per frequency on average, at either sigma
+        # diagnose's global stage reaches the basin of the fit from his published constants
+        # (issue 12: at 0.2 % it once stopped at 18.4 against 14.1 on the case's mesh)
+        nominal = results[key].nominal
+        assert (nominal.chi2 + nominal.chi2_prior
+                <= local.chi2 + local.chi2_prior + module.SAME)  # fmt: skip
     text = (tmp_path / module.REPORT).read_text()
     assert text.count("**Verdict: consistent**") == 2
     assert text.count("Check of the global stage") == 2
