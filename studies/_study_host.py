@@ -1,8 +1,14 @@
 """The machine and the code a study ran on, for its report (a helper here, not a study)."""
 
+import datetime
 import pathlib
 import platform
 import subprocess
+
+
+def utc_now():
+    """The time now, to the minute, as reports date a run: ``2026-11-28 03:20 UTC``."""
+    return datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
 
 
 def cpu():

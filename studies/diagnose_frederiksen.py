@@ -13,7 +13,6 @@ half the case's mesh each way, one random start).
 
 # no `from __future__ import annotations`: loaded by tests with spec_from_file_location
 import argparse
-import datetime
 import os
 import pathlib
 import sys
@@ -30,7 +29,7 @@ from bayesplate.model import PlateModel
 from bayesplate.posterior import observed_eigenvalues, prior_in_stiffness
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from _study_host import code_version, cpu  # noqa: E402  (this folder's helper)
+from _study_host import code_version, cpu, utc_now  # noqa: E402  (this folder's helper)
 
 matplotlib.use("Agg")  # files only, never a window
 
@@ -78,7 +77,7 @@ def main(out_dir="reports", quick=False):
     out_dir = pathlib.Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     case = load_case(bundled_case_path("frederiksen_t300"))
-    started = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    started = utc_now()
     load = os.getloadavg()[0]
     results, sections = {}, []  # {run: Diagnosis, run_published: JointFit}
     for key, (sigma_rel, label) in RUNS.items():

@@ -26,7 +26,6 @@ measurement).
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import os
 import pathlib
@@ -39,7 +38,7 @@ from scipy.optimize import least_squares
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import calibration as cal  # noqa: E402  (this folder's study: its effects, sizes and meshes)
-from _study_host import code_version, cpu  # noqa: E402
+from _study_host import code_version, cpu, utc_now  # noqa: E402
 
 from bayesplate.io import atomic_write_text  # noqa: E402
 from bayesplate.laminate import (  # noqa: E402
@@ -231,7 +230,7 @@ def _changed(ratio):
 def _run_facts(workers, minutes):
     """When, where and by what code the rows were made (kept with them)."""
     return {"workers": workers, "minutes": minutes, "code": code_version(), "cpu": cpu(),
-            "made": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+            "made": utc_now(),
             "load": list(os.getloadavg())}  # fmt: skip
 
 
