@@ -107,7 +107,8 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
          stages=None):  # fmt: skip
     """Fit every candidate jointly with the constants; best evidence gain first.
 
-    In two phases, each over the candidates in parallel (``level["workers"]``):
+    In phases, each over the candidates in parallel (``level["workers"]``; a candidate goes
+    on from phase 1 to phase 2 in the same task):
 
     1. *rough*: every start fitted on a reduced model of the modified plate on the coarse
        mesh (:func:`.pencil.candidate_pencil`), corrected by the fine-to-coarse eigenvalue
@@ -225,16 +226,19 @@ def rank(model, level, Y, sigma, mu_b, V_b, modes, nominal, scans, physics_list,
                    key=lambda i: -len(physics_list[i].parameters(model, nominal.b)))  # fmt: skip
     results = [None] * len(physics_list)
     hits = [[] for _ in physics_list]  # the phases of each taken from the store
+
+    def refines(rough):  # phase 2's choice: on the candidate's own rough fit alone
+        chosen = _refines(rough, level["margin"])
+        log.debug("%s: rough gain %+.1f, %s", _label(rough), rough.log_evidence_gain,
+                  "refined" if chosen else "not refined")  # fmt: skip
+        return chosen
+
+    # phases 1 and 2 in one task per candidate: a worker refines its candidate while the
+    # other still fits its rough one (the same results as one phase after the other)
     _phase(stages, "rough", rough_stage, [(i, physics_list[i], None) for i in order],
-           results, hits, level["workers"], say)  # fmt: skip
+           results, hits, level["workers"], say, then=("settled", settled, refines))  # fmt: skip
     kept = [i for i, r in enumerate(results) if r is not None]  # a failed rough fit: left out
     physics_list, results, hits = ([x[i] for i in kept] for x in (physics_list, results, hits))
-    todo = _to_refine(results, level["margin"])
-    log.debug("rough gains: %s; refined: %s",
-              ", ".join(f"{_label(r)} {r.log_evidence_gain:+.1f}" for r in results),
-              ", ".join(_label(results[i]) for i in todo))  # fmt: skip
-    _phase(stages, "settled", settled, [(i, physics_list[i], results[i].fit) for i in todo],
-           results, hits, level["workers"], say)  # fmt: skip
     todo = _rivals(results, level.get("threshold", NAMED))
     _phase(stages, "settled", settled, [(i, physics_list[i], results[i].fit) for i in todo],
            results, hits, level["workers"], say)  # fmt: skip
@@ -260,7 +264,7 @@ def _label(result):
     return result.name + "".join(f" ({v})" for v in variant)
 
 
-def _phase(stages, name, compute, items, results, hits, workers, say):
+def _phase(stages, name, compute, items, results, hits, workers, say, then=None):
     """One phase of :func:`rank`: ``compute((physics, earlier fit))`` for each item, stored.
 
     ``items`` are ``(index, physics, earlier fit or None)``; each result goes to
@@ -270,42 +274,60 @@ def _phase(stages, name, compute, items, results, hits, workers, say):
     that cannot be solved (a far reduced model's mass no longer positive definite, say)
     keeps its earlier phase's result, marked ``failed`` (None for the first phase: the
     candidate is left out), and the failure is said; nothing is stored for it.
+
+    ``then``, optional ``(name, compute, wanted)``: the next phase, which an item goes on
+    to in the same task when ``wanted(its result of this one)``. Its results are those of
+    the two phases run one after the other, where that next phase depends on a candidate's
+    own result only: a worker then need not wait for the others' first phase.
     """
     if not items:
         return
+    steps = [(name, compute)] + ([tuple(then[:2])] if then is not None else [])
 
-    def key(physics, earlier):
+    def key(name, physics, earlier):
         return stages.key(name, physics, *(() if earlier is None else (fit_digest(earlier),)))
 
-    def task(item):
+    def step(name, compute, physics, earlier):
         """``(result, taken from the store, why it failed or "")``."""
-        _, physics, earlier = item
         try:
             if stages is None:
                 return compute((physics, earlier) if earlier is not None else physics), False, ""
-            found, value = stages.get(key(physics, earlier))
+            found, value = stages.get(key(name, physics, earlier))
             if not found:
                 value = compute((physics, earlier) if earlier is not None else physics)
-                stages.put(key(physics, earlier), value)
+                stages.put(key(name, physics, earlier), value)
         except np.linalg.LinAlgError as error:
             log.warning("%s: %s fit failed: %s", physics.name, name, error)
             return None, False, f"its {name} fit failed ({type(error).__name__}: {error})"
         return value, found, ""
 
+    def task(item):
+        """The outcome of each phase the item went through (the first, maybe the next)."""
+        _, physics, earlier = item
+        done = [step(*steps[0], physics, earlier)]
+        value, _, failed = done[0]
+        if then is not None and not failed and then[2](value):
+            done.append(step(*steps[1], physics, replace(value.fit, physics=physics)))
+        return done
+
     done = fork_map(task, items, workers)
-    for (i, physics, earlier), (value, found, failed) in zip(items, done, strict=True):
-        if failed:
-            failed += "; left out" if results[i] is None else "; the phase before kept"
-            say(f"{physics.name}{''.join(f' ({v})' for v in physics.settings().values())}: "
-                f"{failed}")  # fmt: skip
-            if results[i] is not None:
-                results[i] = replace(results[i], failed=failed)
-            continue
-        results[i] = replace(value, fit=replace(value.fit, physics=physics))
-        if found:
-            hits[i].append(name)
-        if stages is not None and workers > 1 and not found:  # a worker's put may not arrive
-            stages.put(key(physics, earlier), value)
+    for (i, physics, earlier), outcomes in zip(items, done, strict=True):
+        for n, ((name, _), (value, found, failed)) in enumerate(
+                zip(steps[: len(outcomes)], outcomes, strict=True)):
+            if failed:
+                failed += "; left out" if results[i] is None else "; the phase before kept"
+                say(f"{physics.name}{''.join(f' ({v})' for v in physics.settings().values())}"
+                    f": {failed}")  # fmt: skip
+                if results[i] is not None:
+                    results[i] = replace(results[i], failed=failed)
+                break
+            if n > 0:  # the next phase, built on the result of this one
+                earlier = results[i].fit
+            results[i] = replace(value, fit=replace(value.fit, physics=physics))
+            if found:
+                hits[i].append(name)
+            if stages is not None and workers > 1 and not found:  # a worker's put may not arrive
+                stages.put(key(name, physics, earlier), value)
 
 
 def _best_refined(results):
@@ -360,16 +382,16 @@ def _result(physics, model, nominal, fitted):
     return CandidateResult(physics.name, fitted, gain, params, sds, mirrors)
 
 
-def _to_refine(results, margin):
-    """Indices of the rough fits to refine on the working mesh (phase 2 of :func:`rank`).
+def _refines(rough, margin):
+    """Whether a rough fit is refined on the working mesh (phase 2 of :func:`rank`).
 
-    Those that gain more than ``margin`` on their reduced coarse model. Not fewer: a reduced
+    When it gains more than ``margin`` on its reduced coarse model. Not fewer: a reduced
     coarse model misjudges a gain by ten nats and more either way (a taper's +17 on it was
     +2.6 on the working mesh, a point mass's +116 was +126), and its optima move with the
     round-off of its many starts; the refined fits do not.
     """
-    rough = [i for i, r in enumerate(results) if not r.fit.refined and r.fit.rough_optima]
-    return [i for i in rough if results[i].log_evidence_gain > margin]
+    return (not rough.fit.refined and bool(rough.fit.rough_optima)
+            and rough.log_evidence_gain > margin)  # fmt: skip
 
 
 def _polisher(problem, physics, model, modes, scale=None):
