@@ -15,7 +15,6 @@ d = 1/3 only, shorter chains, seconds).
 
 # no `from __future__ import annotations`: loaded by tests with spec_from_file_location
 import argparse
-import datetime
 import pathlib
 import sys
 import time
@@ -31,6 +30,9 @@ from bayesplate.posterior import GaussianProblem
 from bayesplate.reduced import Box, fast_model
 from bayesplate.sampling import posterior_box, prepare, sample
 from bayesplate.sampling.setup import FAST_DEFAULTS, PILOT_TOL
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from _study_host import utc_now  # noqa: E402  (this folder's helper)
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -211,7 +213,7 @@ def write_report(results, out_dir):
     """``prior_bias.md``."""
     runs = results["runs"]
     command = "python studies/prior_bias.py" + (" --quick" if results["quick"] else "")
-    date = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    date = utc_now()
     fast = results["fast"]
     lines = [
         f"Made by `{command}` (seed {SEED}) on {date}, {results['seconds']:.0f} s.",
