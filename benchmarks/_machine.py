@@ -6,6 +6,7 @@ Shared by every script of this folder (each puts the folder on ``sys.path`` to i
 from __future__ import annotations
 
 import contextlib
+import datetime
 import importlib
 import os
 import pathlib
@@ -15,7 +16,7 @@ import tempfile
 
 import numpy as np
 
-__all__ = ["add_base_arguments", "base_checkout", "commit", "machine"]
+__all__ = ["add_base_arguments", "base_checkout", "commit", "machine", "utc_now"]
 
 
 def _proc_field(path, key):
@@ -54,6 +55,11 @@ def machine(*libraries):
     for name in ("numpy", "scipy", *libraries):
         info[name] = importlib.import_module(name).__version__
     return info
+
+
+def utc_now():
+    """The present time to the minute, as a report dates its measurement: "2026-11-28 06:20 UTC"."""
+    return datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
 
 
 def commit(tree):

@@ -15,7 +15,6 @@ Writes ``benchmark_batch.md``. Run: ``python benchmarks/bench_batch.py [--runs 2
 from __future__ import annotations
 
 import argparse
-import datetime
 import os
 import pathlib
 import pickle
@@ -139,7 +138,7 @@ def run_benchmark(runs, copies, mesh):
 
 
 def write_report(bench, info, out_dir):
-    date = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    date = _machine.utc_now()
     machine = ", ".join(f"{k} {v}" for k, v in info.items())
     (l1, l5, l15), (a1, _, _) = bench["load"]
     n = bench["n_cases"]

@@ -21,7 +21,6 @@ TREE`` the pairs rows alone.
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import os
 import pathlib
@@ -242,7 +241,7 @@ def write_pairs(rows, info, out_dir, base_label, started):
 
 def main(out_dir, runs, workers, base=None, base_runs=(), quick=False, scaling=False,
          pairs=0):  # fmt: skip
-    started = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    started = _machine.utc_now()
     rows, base_rows, scale_rows = [], [], []
     info = _machine.machine()
     for i in runs:

@@ -15,7 +15,6 @@ Writes ``benchmark_diagnose_resume.md``. Run: ``python benchmarks/bench_diagnose
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import os
 import pathlib
@@ -84,7 +83,7 @@ def main(case, mesh, at, out_dir):
     lines = [
         "# diagnose: what the stage store saves after a kill",
         "",
-        f"Measured {datetime.date.today().isoformat()} by `python benchmarks/"
+        f"Measured {_machine.utc_now()} by `python benchmarks/"
         f"bench_diagnose_resume.py --case {case} --mesh {mesh[0]} {mesh[1]} --at {at}` "
         "(one run of each; see the script's docstring for what is timed).",
         "",

@@ -25,7 +25,6 @@ Writes ``benchmark_estimators.md``. Run:
 from __future__ import annotations
 
 import argparse
-import datetime
 import os
 import pathlib
 import statistics
@@ -85,7 +84,7 @@ def measure_case(name, runs, n_measured=None):
 def markdown(results, runs, load):
     info = _machine.machine()
     out = [
-        f"Made by `python benchmarks/bench_estimators.py` on {datetime.date.today()}.",
+        f"Made by `python benchmarks/bench_estimators.py` on {_machine.utc_now()}.",
         "",
         "# The estimators on the certified fast model against the full model",
         "",

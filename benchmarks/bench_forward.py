@@ -26,7 +26,6 @@ Run: ``python benchmarks/bench_forward.py [--quick] [--runs N]``.
 from __future__ import annotations
 
 import argparse
-import datetime
 import os
 import pathlib
 import sys
@@ -263,7 +262,7 @@ def write_report(bench, info, out_dir, quick=False, date=None):
     flag = " --quick" if quick else ""
     if bench["runs"] != (2 if quick else 7):
         flag += f" --runs {bench['runs']}"
-    date = date or datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    date = date or _machine.utc_now()
     loads = np.array(bench["load"])
     t = bench["target"]
     mesh = f"{t['mesh'][0]}x{t['mesh'][1]}"

@@ -16,7 +16,6 @@ Writes ``benchmark_pool.md`` (the raw timings to ``.cache/benchmark_pool.json``)
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import os
 import pathlib
@@ -78,7 +77,7 @@ def run_benchmark(runs, case, mesh):
 
 
 def write_report(bench, info, out_dir):
-    date = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    date = _machine.utc_now()
     machine = ", ".join(f"{k} {v}" for k, v in info.items())
     (l1, l5, l15), (a1, _, _) = bench["load"]
     mesh = "x".join(str(m) for m in bench["mesh"])

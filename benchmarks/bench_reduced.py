@@ -25,7 +25,6 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import argparse  # noqa: E402 - BLAS threads are fixed before numpy loads
-import datetime  # noqa: E402
 import pathlib  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
@@ -158,7 +157,7 @@ def write_report(m, info, out_dir, quick=False, date=None):
     fast, reduced = m["fast"], m["fast"].reduced
     cert, val = fast.certificate, m["validation"]
     flag = " --quick" if quick else ""
-    date = date or datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    date = date or _machine.utc_now()
     loads = np.array(m["load"])
     full = float(np.mean(m["full_wall_s"]))
     full_cpu = float(np.mean(m["full_cpu_s"]))

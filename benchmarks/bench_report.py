@@ -14,7 +14,6 @@ Writes ``benchmark_report.md``. Run: ``python benchmarks/bench_report.py [--runs
 from __future__ import annotations
 
 import argparse
-import datetime
 import os
 import pathlib
 import re
@@ -80,7 +79,7 @@ def _steps_table(runs_of, label):
 
 def write_report(bench, info, out_dir, base_rev=None):
     """Write the Markdown report; returns its path."""
-    date = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    date = _machine.utc_now()
     machine = ", ".join(f"{k} {v}" for k, v in info.items())
     (l1, l5, l15), (a1, _, _) = bench["load"]
     now_runs = bench["times"][ROOT]

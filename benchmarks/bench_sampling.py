@@ -22,7 +22,6 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import argparse  # noqa: E402 - BLAS threads are fixed before numpy loads
-import datetime  # noqa: E402
 import pathlib  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
@@ -189,7 +188,7 @@ def write_report(m, plate1, out_dir, date=None):
     info = machine()
     r, setup = m["result"], m["setup"]
     cert = setup.certificate
-    date = date or datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    date = date or _machine.utc_now()
     ratio = m["full_wall"] / m["fast_s"]
     ess_per_s = r.ess_min / r.wall_time
     t = r.timings

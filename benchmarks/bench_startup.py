@@ -17,7 +17,6 @@ Writes ``benchmark_startup.md`` to ``out_dir``. Run:
 from __future__ import annotations
 
 import argparse
-import datetime
 import os
 import pathlib
 import statistics
@@ -97,7 +96,7 @@ def _span(values):
 
 def write_report(bench, info, out_dir, base_rev=None, date=None):
     """Write the Markdown report; returns its path."""
-    date = date or datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    date = date or _machine.utc_now()
     machine = ", ".join(f"{k} {v}" for k, v in info.items())
     (l1, l5, l15), (a1, _, _) = bench["load"]
     lines = [
