@@ -6,15 +6,20 @@ Shared by every script of this folder (each puts the folder on ``sys.path`` to i
 from __future__ import annotations
 
 import contextlib
-import datetime
 import importlib
 import os
 import pathlib
 import platform
 import subprocess
+import sys
 import tempfile
 
 import numpy as np
+
+# the studies' helper dates their reports; the benchmarks date theirs by the same function
+# (appended, not put first: the studies' modules never shadow another import)
+sys.path.append(str(pathlib.Path(__file__).resolve().parents[1] / "studies"))
+from _study_host import utc_now  # noqa: E402
 
 __all__ = ["add_base_arguments", "base_checkout", "commit", "machine", "utc_now"]
 
@@ -55,11 +60,6 @@ def machine(*libraries):
     for name in ("numpy", "scipy", *libraries):
         info[name] = importlib.import_module(name).__version__
     return info
-
-
-def utc_now():
-    """The present time to the minute, as a report dates its measurement: "2026-11-28 06:20 UTC"."""
-    return datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
 
 
 def commit(tree):
