@@ -214,6 +214,9 @@ class GaussianProblem:
     ):
         """The problem of a case file on a forward model.
 
+        The case's ``measured.error_scale`` (None when absent) becomes the problem's
+        ``error_scale``.
+
         Parameters
         ----------
         case : bayesplate.io.Case
@@ -235,9 +238,6 @@ class GaussianProblem:
         inputs_at : array_like, shape (6,), optional
             Stiffness coefficients (Pa) where ``J_p`` is evaluated; default the prior mean.
             Six full solves; none when every input deviation is 0.
-
-        The case's ``measured.error_scale`` (None when absent) becomes the problem's
-        ``error_scale``.
 
         Returns
         -------

@@ -210,6 +210,8 @@ def diagnose(
 ):
     """Diagnose a case: nominal fit, location, candidate ranking, refit, verdict.
 
+    The defaults are those of :data:`DEFAULTS`.
+
     Parameters
     ----------
     case : bayesplate.io.Case
@@ -279,8 +281,6 @@ def diagnose(
         so that a run again after an interruption resumes (:mod:`.store`; on disk:
         :class:`bayesplate.io.stage_store.DirectoryStore`). The results are the same bit for
         bit with or without it, with any worker count. None: nothing is kept.
-
-    The defaults are those of :data:`DEFAULTS`.
 
     Returns
     -------
