@@ -1,5 +1,9 @@
 """Fuzzing `bayesplate import`: CSV tables, UFF files, FRFs, impulse recordings, poles files.
 
+Impulse recordings include CSV time series as a DAQ writes them (issue 37): the column
+names, units, separators and time formats of :mod:`bayesplate.io.time_csv`, with and without
+``--rate-Hz``, ``--force-column`` and ``--response-column``.
+
 Each valid test file is damaged at one place (a cell, a line, a byte, a dataset number, the
 units, a non-ASCII character, a cut). The in-process readers are the oracle: a damage they
 accept is not a corruption (a cut after the last row) and is not counted; anything else they
@@ -21,8 +25,10 @@ from scipy.io import wavfile
 from test_fuzz_cli import assert_refused_cleanly, fuzz_settings
 
 from bayesplate.io import CaseError, bundled_plate_path, case_from_modal_data
+from bayesplate.io.impulse import is_recording
 from bayesplate.io.modal_file import is_tap_test, read_modal_data, read_spectra
 from bayesplate.io.poles_file import read_poles
+from bayesplate.io.taps import read_taps
 
 SHEET = bundled_plate_path("frederiksen_plate")
 RATE_HZ = 8192.0
@@ -356,6 +362,103 @@ def test_a_damaged_tap_test_is_refused(fuzz_ledger, data):
         path = Path(tmp, name)
         path.write_bytes(raw)
         _import_refused(fuzz_ledger, path, reader=read_spectra)
+
+
+# ----------------------------------------------------------------------------- DAQ CSV taps
+
+DAQ_HEADERS = [
+    ("Time (s)", "Force (N)", "Acceleration (m/s^2)"),
+    ("time [ms]", "hammer", "mic"),
+    ("t", "F", "a"),
+    ("time_s", "force", "signal"),
+    (None, "force", "acceleration"),
+    (None, "Hammer [N]", "Accel 1"),
+]
+DAQ_NAMES = ["acc", "acc2", "force", "Time (min)", "time_s", "t", "", "frequency_Hz", "H1_re"]
+DAQ_NAMES += ["signal", "Velocity (mm/s)", "ch0", "F", "a", "Time [us]", '"mic"', "time;s"]
+DAQ_CELLS = BAD_CELLS + ["1,5", "0,001", "1e-3;", "１", "\u2212" + "1", '"1"', "1e5", "0e99999"]
+
+
+def _daq_csv(data):
+    """A DAQ-style CSV tap (header, separator, time format drawn) and its options."""
+    header = data.draw(st.sampled_from(DAQ_HEADERS))
+    separator = data.draw(st.sampled_from([",", ";", "\t"]))
+    t, y = _impulse(256)
+    force = np.where(np.arange(t.size) < 4, 1.0, 0.0)
+    columns = [f"{a!r}{separator}{b!r}" for a, b in zip(force.tolist(), y.tolist(), strict=True)]
+    options = {}
+    if header[0] is None:
+        options["rate_Hz"] = data.draw(st.sampled_from([RATE_HZ, 8000.0, 1e-3]))
+    else:
+        scale = 1e3 if "ms" in header[0] else 1.0
+        form = data.draw(st.sampled_from(["{:.9f}", "{:.10g}", "{!r}", "{:.4f}"]))
+        columns = [form.format(a * scale) + separator + c for a, c in zip(t, columns, strict=True)]
+        if data.draw(st.booleans()):
+            options["rate_Hz"] = data.draw(st.sampled_from([RATE_HZ, 8000.0]))
+    names = separator.join(name for name in header if name is not None)
+    return names + "\n" + "\n".join(columns) + "\n", separator, options
+
+
+def _daq_damage(data, text, separator, options):
+    """One damage of a DAQ CSV: a cell, a header name, an option, the lines, the bytes."""
+    lines = text.splitlines()
+    kind = data.draw(st.sampled_from(["cell", "header", "option", "axis", "bytes", "lines",
+                                      "body"]))  # fmt: skip
+    if kind == "cell":
+        i = data.draw(st.integers(1, len(lines) - 1))
+        cells = lines[i].split(separator)
+        cells[data.draw(st.integers(0, len(cells) - 1))] = data.draw(st.sampled_from(DAQ_CELLS))
+        lines[i] = separator.join(cells)
+    elif kind == "header":  # a name replaced, or one more column
+        cells = lines[0].split(separator)
+        name = data.draw(st.one_of(st.sampled_from(DAQ_NAMES), st.text(max_size=12)))
+        j = data.draw(st.integers(0, len(cells)))
+        cells[j : j + 1] = [name]
+        lines[0] = separator.join(cells)
+    elif kind == "option":
+        option = data.draw(st.sampled_from(["rate_Hz", "force_column", "response_column"]))
+        values = [1e-3, 8000.0, 4096.5] if option == "rate_Hz" else DAQ_NAMES + ["ACC", "F "]
+        options[option] = data.draw(st.sampled_from(values))
+    elif kind == "axis":  # two samples swapped: no longer ascending or evenly spaced
+        i = data.draw(st.integers(2, len(lines) - 2))
+        lines[i], lines[i + 1] = lines[i + 1], lines[i]
+    elif kind == "bytes":
+        return _damage_bytes(data, text.encode()), options
+    elif kind == "lines":
+        return _damage_lines(data, text).encode(), options
+    else:
+        lines[1:] = data.draw(st.text(string.printable + "µé°;\t", max_size=200)).splitlines()
+    return ("\n".join(lines) + "\n").encode(), options
+
+
+def _daq_reader(options):
+    """The in-process readers as `bayesplate import` chooses them for these options."""
+
+    def reader(path):
+        named = (options.get("force_column"), options.get("response_column"))
+        if not is_tap_test(path):
+            return _modes_reader(path)
+        if is_recording(path, named):
+            return read_taps([path], **options)
+        if options:
+            raise CaseError("--rate-Hz", rule="is for impulse recordings: the CLI refuses it")
+        return read_spectra(path)
+
+    return reader
+
+
+@fuzz_settings(200)
+@given(data=st.data())
+def test_a_damaged_daq_csv_is_refused(fuzz_ledger, data):
+    text, separator, options = _daq_csv(data)
+    raw, options = _daq_damage(data, text, separator, options)
+    extra = []
+    for option, value in options.items():
+        extra += ["--" + option.replace("_", "-"), str(value)]
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp, "daq.csv")
+        path.write_bytes(raw)
+        _import_refused(fuzz_ledger, path, extra=extra, reader=_daq_reader(options))
 
 
 POLES_TEXT = "keep,frequency_Hz,damping\n1,700.0,0.01\n0,1200.0,0.02\n1,1900.0,0.01\n"

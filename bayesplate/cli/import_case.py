@@ -101,17 +101,19 @@ def _read_spectra(args, tests):
     from ..io.taps import read_taps
 
     window = args.window or "auto"
-    if len(tests) > 1 or is_recording(tests[0]):
+    named = (args.force_column, args.response_column)
+    if len(tests) > 1 or is_recording(tests[0], named):
         for test in tests:
-            if not is_recording(test):
+            if not is_recording(test, named):
                 rule = "several files are taps of one test: each must be a WAV or a CSV time series"
                 raise CaseError("TEST", rule=rule, path=test)
         force = {None: "auto", "none": None}.get(args.force_channel, args.force_channel)
-        return read_taps(tests, window, force, args.channel, args.points)
-    for option in ("force_channel", "channel"):
+        return read_taps(tests, window, force, args.channel, args.points, args.rate_Hz,
+                         args.force_column, args.response_column)  # fmt: skip
+    for option in ("force_channel", "channel", "rate_Hz", "force_column", "response_column"):
         if getattr(args, option) is not None:
             name = "--" + option.replace("_", "-")
-            rule = f"is for impulse recordings (WAV); {tests[0]} holds FRFs"
+            rule = f"is for impulse recordings (WAV or CSV time series); {tests[0]} holds FRFs"
             raise CaseError(name, getattr(args, option), rule)
     if args.points is not None:
         if not tests[0].lower().endswith(".csv"):
@@ -147,6 +149,8 @@ def _written(option, path, write, *args):
 
 def register(sub):
     """Add the ``import`` subcommand."""
+    from .options import positive_float
+
     p = sub.add_parser(
         "import",
         help="make a case file from a modal test (UFF, CSV or a WAV tap) and a plate sheet",
@@ -156,7 +160,10 @@ def register(sub):
         "component of each shape is kept. CSV: a header with frequency_Hz and optionally "
         "sigma_Hz or sigma_rel, and mode. Tap tests: FRFs (UFF dataset 58 per response "
         "node; CSV frequency_Hz, H1_re, H1_im, ...) or an impulse recording (WAV: channel 0 "
-        "response, 1 force, or as --force-channel says; CSV time_s, signal[, force]); the "
+        "response, 1 force, or as --force-channel says; CSV time series: one row per "
+        "sample, columns found by name: time (time_s, Time (s), time [ms]; else give "
+        "--rate-Hz), a response (signal, acceleration, mic, ...) and a force (force, hammer, "
+        "...), or as --force-column and --response-column say); the "
         "modes are the LSCF poles (sdypy-EMA) stable over the last model orders, or those "
         "kept in --use-poles. Several recordings are taps averaged (H1 and its coherence "
         "with a force channel).",
@@ -213,6 +220,25 @@ def register(sub):
         type=_channel,
         metavar="N",
         help="keep only this WAV response channel (from 0)",
+    )
+    tap.add_argument(
+        "--rate-Hz",
+        type=positive_float,
+        metavar="HZ",
+        help="sampling rate of CSV time series, Hz: required without a time column; checked "
+        "against a time column or a WAV header",
+    )
+    tap.add_argument(
+        "--force-column",
+        metavar="NAME",
+        help="the CSV column of the hammer's force, by its header (default: the one named "
+        "force, hammer, F, impact, ...)",
+    )
+    tap.add_argument(
+        "--response-column",
+        metavar="NAME",
+        help="the CSV column of the response, by its header (default: the one named "
+        "signal, response, acceleration, accel, acc, a, velocity, mic, ...)",
     )
     tap.add_argument(
         "--points",

@@ -235,12 +235,14 @@ def _coordinates(points_path, names: list[str], path: str) -> np.ndarray:
     return xy[[given.index(name) for name in names]]
 
 
-def read_csv_rows(path: str, min_rows: int = 8) -> tuple[int, list[str], list]:
+def read_csv_rows(path: str, min_rows: int = 8, lines=None) -> tuple[int, list[str], list]:
     """Header line number, header cells and ``(line number, cells)`` rows of a CSV file.
 
-    The lines of :func:`bayesplate.io.csv_table.csv_lines`, cells stripped.
+    The lines of :func:`bayesplate.io.csv_table.csv_lines`, or `lines` (``(line number,
+    cells)`` already split, e.g. at another separator), cells stripped.
     """
-    lines = [(number, [cell.strip() for cell in cells]) for number, cells in csv_lines(path)]
+    lines = csv_lines(path) if lines is None else lines
+    lines = [(number, [cell.strip() for cell in cells]) for number, cells in lines]
     if not lines:
         raise CaseError(None, rule="the file is empty: give a header line and data rows")
     (header_line, header), rows = lines[0], lines[1:]

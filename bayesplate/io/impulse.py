@@ -16,8 +16,10 @@ to 1 % at the end of the record, which forces the decay and adds ``1 / tau`` to 
 pole's decay rate; :attr:`FRFData.added_decay_per_s` carries it and the pole estimates are
 corrected by it (the usual correction for exponential windows).
 
-:func:`read_recording` reads the channels of one tap (:class:`Recording`); several channels
-and several taps, their points and their average are the subject of :mod:`bayesplate.io.taps`.
+:func:`read_recording` reads the channels of one tap (:class:`Recording`); a CSV time series
+is read by :mod:`bayesplate.io.time_csv` (columns found by the names a DAQ writes, the rate
+from a time column or given). Several channels and several taps, their points and their
+average are the subject of :mod:`bayesplate.io.taps`.
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import CaseError
-from .frf import FRFData, numeric_table, read_csv_rows
+from .frf import FRFData
 
 __all__ = [
     "Recording",
@@ -50,13 +52,16 @@ _DECAYED = 0.01  # ... below this fraction of the peak; also the exponential win
 
 
 def read_impulse(path, window: str = "auto", force_channel="auto", channel=None,
-                 points=None) -> FRFData:  # fmt: skip
+                 points=None, rate_Hz=None, force_column=None,
+                 response_column=None) -> FRFData:  # fmt: skip
     """Read an impulse recording (``.wav`` or a CSV time series) and return its spectrum.
 
     WAV (scipy.io.wavfile, any sample format): one channel, the response; two, the response
     then the force (channels 0 and 1); more, see :mod:`bayesplate.io.taps` (``force_channel``,
-    ``channel``, ``points``). CSV: a header line with ``time_s`` (s, evenly spaced,
-    ascending) and ``signal`` (the response), optionally ``force``; ``#`` starts a comment.
+    ``channel``, ``points``). CSV: a header line, then one row per sample: a time column
+    (optional: else give `rate_Hz`), a response and optionally a force, found by their
+    names as a DAQ writes them (``time_s``, ``Time (s)``, ``signal``, ``acceleration``,
+    ``force``, ...; :mod:`bayesplate.io.time_csv`); ``#`` starts a comment.
 
     Parameters
     ----------
@@ -64,7 +69,7 @@ def read_impulse(path, window: str = "auto", force_channel="auto", channel=None,
         The recording.
     window : {"auto", "none", "exponential"}
         See the module docstring.
-    force_channel, channel, points
+    force_channel, channel, points, rate_Hz, force_column, response_column
         See :func:`bayesplate.io.taps.read_taps`.
 
     Returns
@@ -81,7 +86,8 @@ def read_impulse(path, window: str = "auto", force_channel="auto", channel=None,
 
     path = os.fspath(path)
     try:
-        return read_taps([path], window, force_channel, channel, points)
+        return read_taps([path], window, force_channel, channel, points, rate_Hz,
+                         force_column, response_column)  # fmt: skip
     except CaseError as err:
         raise err if err.path else err.with_path(path) from None
 
@@ -99,9 +105,11 @@ class Recording:
     force : numpy.ndarray, shape (n,), optional
         Force samples of an instrumented hammer; None without.
     channels : tuple of int
-        The file's channel number of each response row (0-based; 0 for a CSV ``signal``).
+        The file's channel number of each response row (0-based; 0 for a CSV's response).
     source : str
         The file.
+    notes : tuple of str
+        What the reader found or assumed (a CSV's columns, where its rate came from).
     """
 
     rate_Hz: float
@@ -109,27 +117,42 @@ class Recording:
     force: np.ndarray | None
     channels: tuple[int, ...]
     source: str
+    notes: tuple[str, ...] = ()
 
 
-def is_recording(path) -> bool:
-    """Whether `path` is an impulse recording: ``.wav``, or ``.csv`` with a ``time_s`` column."""
-    from .modal_file import _csv_header
+def is_recording(path, named=()) -> bool:
+    """Whether `path` is an impulse recording: ``.wav``, or a ``.csv`` time series.
+
+    A CSV is a time series when its header has a time or a response column, or one of the
+    columns `named` (``--force-column``, ``--response-column``), and no frequency column
+    (``frequency_Hz``: modes; ``Hk_re``: FRFs); see :func:`bayesplate.io.time_csv.column_role`.
+    """
+    from .time_csv import is_time_series_header, sniff_header
 
     suffix = pathlib.Path(path).suffix.lower()
-    return suffix == ".wav" or (suffix == ".csv" and "time_s" in _csv_header(path))
+    if suffix != ".csv":
+        return suffix == ".wav"
+    return is_time_series_header(sniff_header(path)[1], [n for n in named if n is not None])
 
 
-def read_recording(path, force_channel="auto", channel=None) -> Recording:
-    """Read one tap (WAV or CSV ``time_s, signal[, force]``) and keep the channels asked for.
+def read_recording(path, force_channel="auto", channel=None, rate_Hz=None, force_column=None,
+                   response_column=None) -> Recording:  # fmt: skip
+    """Read one tap (WAV or CSV time series) and keep the channels asked for.
 
     Parameters
     ----------
     path : str or os.PathLike
     force_channel : int, None or "auto"
-        WAV channel of the force (see the module docstring); a CSV's force is its ``force``
+        WAV channel of the force (see the module docstring); a CSV's force is its force
         column, whatever this says.
     channel : int, optional
         The one WAV response channel to keep; default all but the force.
+    rate_Hz : float, optional
+        Sampling rate, Hz: required for a CSV without a time column; must agree with the
+        time column or the WAV header when they give one.
+    force_column, response_column : str, optional
+        The CSV's force and response columns by their header cells, when the names do not
+        say which they are (:mod:`bayesplate.io.time_csv`); refused for a WAV file.
 
     Returns
     -------
@@ -140,17 +163,27 @@ def read_recording(path, force_channel="auto", channel=None) -> Recording:
     CaseError
         Naming the file and the part of it, or the option, and the rule.
     """
+    from .time_csv import read_time_csv
+
     path = os.fspath(path)
     try:
         if pathlib.Path(path).suffix.lower() == ".wav":
-            rate_Hz, data = _read_wav(path)
-            return _channels(path, rate_Hz, data, force_channel, channel)
-        rate_Hz, signal, force = _read_time_csv(path)
+            for option, name in (("--force-column", force_column),
+                                 ("--response-column", response_column)):  # fmt: skip
+                if name is not None:
+                    raise CaseError(option, name, "is for a CSV time series (WAV: --channel)")
+            wav_rate_Hz, data = _read_wav(path)
+            if rate_Hz is not None and rate_Hz != wav_rate_Hz:
+                rule = f"disagrees with the WAV file's sampling rate ({wav_rate_Hz:g} Hz)"
+                raise CaseError("--rate-Hz", rate_Hz, rule)
+            return _channels(path, wav_rate_Hz, data, force_channel, channel)
+        rate_Hz, signal, force, notes = read_time_csv(path, rate_Hz, force_column,
+                                                      response_column)  # fmt: skip
     except CaseError as err:
         raise err if err.path else err.with_path(path) from None
     if channel not in (None, 0):
-        raise CaseError("--channel", channel, f"must be 0: {path} has one response (signal)")
-    return Recording(rate_Hz, signal[None, :], force, (0,), path)
+        raise CaseError("--channel", channel, f"must be 0: {path} has one response column")
+    return Recording(rate_Hz, signal[None, :], force, (0,), path, notes)
 
 
 def _channels(path, rate_Hz, data, force_channel, channel) -> Recording:
@@ -184,23 +217,6 @@ def _read_wav(path: str):
         raise CaseError(None, rule=rule) from None
     data = np.asarray(data, dtype=float)
     return float(rate), data[:, None] if data.ndim == 1 else data
-
-
-def _read_time_csv(path: str):
-    header_line, header, rows = read_csv_rows(path)
-    for name in ("time_s", "signal"):
-        if name not in header:
-            rule = f"required column is missing from the header ({', '.join(header)})"
-            raise CaseError(f"line {header_line}, column {name}", rule=rule)
-    for name in header:
-        if name not in ("time_s", "signal", "force"):
-            rule = "unknown column; allowed: time_s, signal, force"
-            raise CaseError(f"line {header_line}, column {name}", name, rule)
-    table = numeric_table(header, rows)
-    step = np.diff(table["time_s"])
-    if not np.all(step > 0) or np.ptp(step) > 1e-6 * step.mean():
-        raise CaseError("column time_s", rule="times must be ascending and evenly spaced (s)")
-    return 1.0 / step.mean(), table["signal"], table.get("force")
 
 
 def time_window(y, rate_Hz: float, window: str = "auto"):

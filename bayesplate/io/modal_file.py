@@ -60,16 +60,18 @@ def read_modal_data(path) -> ModalData:
 def is_tap_test(path) -> bool:
     """Whether `path` holds a tap test rather than modes.
 
-    True for a ``.wav`` file, a CSV whose header names ``time_s`` (a time series) or ``Hk_re``
-    columns (FRFs), and a UFF file with dataset 58 (FRFs) and no dataset 55 (modes). A file
-    that cannot be read is not a tap test (its reader says why).
+    True for a ``.wav`` file, a CSV time series (a time or response column and no frequency:
+    :func:`bayesplate.io.impulse.is_recording`) or a CSV with ``Hk_re`` columns (FRFs), and a
+    UFF file with dataset 58 (FRFs) and no dataset 55 (modes). A file that cannot be read is
+    not a tap test (its reader says why).
     """
+    from .impulse import is_recording
+
     suffix = pathlib.Path(path).suffix.lower()
-    if suffix in _TAP_SUFFIXES:
+    if suffix in _TAP_SUFFIXES or is_recording(path):
         return True
     if suffix == ".csv":
-        header = _csv_header(path)
-        return "time_s" in header or any(n.startswith("H") and n.endswith("_re") for n in header)
+        return any(n.startswith("H") and n.endswith("_re") for n in _csv_header(path))
     if suffix in UFF_SUFFIXES:
         try:
             import pyuff
@@ -111,8 +113,10 @@ def read_spectra(path, window: str = "auto"):
     CaseError
         For another suffix, or anything the chosen reader refuses.
     """
+    from .impulse import is_recording
+
     suffix = pathlib.Path(path).suffix.lower()
-    if suffix in _TAP_SUFFIXES or (suffix == ".csv" and "time_s" in _csv_header(path)):
+    if suffix in _TAP_SUFFIXES or is_recording(path):
         from .impulse import read_impulse
 
         return read_impulse(path, window=window)

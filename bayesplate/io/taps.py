@@ -32,6 +32,7 @@ the shapes need to know where they were measured.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 
@@ -223,7 +224,8 @@ def _aligned(spectrum: np.ndarray, reference: np.ndarray, frequency: np.ndarray)
     return scale * moved
 
 
-def read_taps(paths, window="auto", force_channel="auto", channel=None, points=None) -> FRFData:
+def read_taps(paths, window="auto", force_channel="auto", channel=None, points=None,
+              rate_Hz=None, force_column=None, response_column=None) -> FRFData:  # fmt: skip
     """Read and average the taps in `paths`, with the points of their response channels.
 
     Parameters
@@ -236,10 +238,16 @@ def read_taps(paths, window="auto", force_channel="auto", channel=None, points=N
         See the module docstring.
     points : str or os.PathLike, optional
         Points file (:func:`read_points`), one row per response channel in channel order.
+    rate_Hz : float, optional
+        Sampling rate, Hz, of CSV time series without a time column (checked against a
+        time column or a WAV header that gives one).
+    force_column, response_column : str, optional
+        A CSV's force and response columns by name (:mod:`bayesplate.io.time_csv`).
 
     Returns
     -------
     FRFData
+        With the readers' notes (a CSV's columns, its rate) before the average's.
 
     Raises
     ------
@@ -247,7 +255,8 @@ def read_taps(paths, window="auto", force_channel="auto", channel=None, points=N
         Naming the file (or option) and the rule, e.g. several response channels without
         points, or a points file whose rows do not match the response channels.
     """
-    recordings = [read_recording(path, force_channel, channel) for path in paths]
+    recordings = [read_recording(path, force_channel, channel, rate_Hz, force_column,
+                                 response_column) for path in paths]  # fmt: skip
     count = len(recordings[0].channels)
     points_mm = None
     if points is not None:
@@ -261,7 +270,9 @@ def read_taps(paths, window="auto", force_channel="auto", channel=None, points=N
             "--points (point,x_mm,y_mm, one row per channel) or pick one with --channel"
         )
         raise CaseError("WAV channels", count, rule, path=recordings[0].source)
-    return average_taps(recordings, window, points_mm)
+    frf = average_taps(recordings, window, points_mm)
+    notes = tuple(dict.fromkeys(note for rec in recordings for note in rec.notes))
+    return dataclasses.replace(frf, notes=notes + frf.notes)
 
 
 def coherence_at_poles(frf: FRFData, poles) -> list[tuple[float, float]]:
