@@ -46,7 +46,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.stats import t as student_t
 
-from .quantities import eigenvalue_from_hz, eigenvalue_sd, hz_from_eigenvalue, hz_sd
+from .quantities import eigenvalue_from_hz, eigenvalue_sd, hz_from_eigenvalue, predictive_sd_Hz
 
 __all__ = [
     "P_UNOBSERVED",
@@ -145,30 +145,6 @@ class Assignment:
         return "; ".join(parts) if parts else "every peak in order, none missed"
 
 
-def predictive_sd_Hz(frequency_Hz, sensitivities, covariance_b):
-    """Deviation of computed frequencies from the constants' uncertainty (first order).
-
-    ``var(lambda_j) = S_j P S_j^T``, and ``d f = d lambda / (8 pi^2 f)``.
-
-    Parameters
-    ----------
-    frequency_Hz : array_like, shape (n,)
-    sensitivities : array_like, shape (n, 6)
-        ``d lambda / d b``, rad^2/s^2/Pa.
-    covariance_b : array_like, shape (6, 6)
-        Covariance of ``b``, Pa^2.
-
-    Returns
-    -------
-    numpy.ndarray, shape (n,)
-        Hz.
-    """
-    S = np.asarray(sensitivities, dtype=float)
-    var = np.einsum("ij,jk,ik->i", S, np.asarray(covariance_b, dtype=float), S)
-    f = np.asarray(frequency_Hz, dtype=float)
-    return hz_sd(f, np.sqrt(np.maximum(var, 0.0)))
-
-
 def assign(
     measured_Hz,
     sigma_Hz,
@@ -189,7 +165,9 @@ def assign(
     computed_sd_Hz : array_like, shape (n,), optional
         Predictive deviations of the computed frequencies (:func:`predictive_sd_Hz`); zero
         when None.
-    p_unobserved, p_spurious : float
+    p_unobserved, p_spurious : float or array_like
+        Prior probabilities in (0, 1): of each computed mode (n,) going unobserved and of
+        each peak (m,) being spurious, or one for all.
         Prior probabilities, in (0, 1).
 
     Returns
@@ -199,7 +177,7 @@ def assign(
     log_pair, in_band, band = _log_pair(
         measured_Hz, sigma_Hz, computed_Hz, computed_sd_Hz, p_unobserved, p_spurious
     )
-    return _solve(log_pair, np.log(p_spurious) - np.log(band), in_band, band, p_unobserved)
+    return _solve(log_pair, p_spurious, in_band, band, p_unobserved)
 
 
 def assign_with_shapes(
@@ -234,7 +212,9 @@ def assign_with_shapes(
         Smallest MAC of an allowed pair.
     mac_scale : float
         ``s_MAC`` > 0.
-    p_unobserved, p_spurious : float
+    p_unobserved, p_spurious : float or array_like
+        Prior probabilities in (0, 1): of each computed mode (n,) going unobserved and of
+        each peak (m,) being spurious, or one for all.
         Prior probabilities, in (0, 1).
     dof : float
         Degrees of freedom of the frequency residual's Student-t, > 0.
@@ -254,7 +234,7 @@ def assign_with_shapes(
         raise ValueError(f"mac has shape {mac.shape}: needs {log_pair.shape} (peaks, modes)")
     log_pair = log_pair - np.log(mac_scale) - (1.0 - mac) / mac_scale
     log_pair[mac < threshold] = -_FORBIDDEN
-    return _solve(log_pair, np.log(p_spurious) - np.log(band), in_band, band, p_unobserved)
+    return _solve(log_pair, p_spurious, in_band, band, p_unobserved)
 
 
 def _log_pair(f, s, c, t, p_unobserved, p_spurious, dof=None):
@@ -266,9 +246,7 @@ def _log_pair(f, s, c, t, p_unobserved, p_spurious, dof=None):
     s = np.asarray(s, dtype=float)
     c = np.asarray(c, dtype=float)
     t = np.zeros_like(c) if t is None else np.asarray(t, dtype=float)
-    for name, p in (("p_unobserved", p_unobserved), ("p_spurious", p_spurious)):
-        if not 0.0 < p < 1.0:
-            raise ValueError(f"{name} = {p}: must lie strictly between 0 and 1")
+    p_unobserved, p_spurious = _priors(p_unobserved, p_spurious, f.size, c.size)
     band = spurious_band_Hz(f, s)
     in_band = c <= np.max(f)
     var = s[:, None] ** 2 + t[None, :] ** 2
@@ -277,16 +255,28 @@ def _log_pair(f, s, c, t, p_unobserved, p_spurious, dof=None):
     else:
         log_pair = student_t.logpdf(f[:, None] - c[None, :], dof, scale=np.sqrt(var))
     log_pair += (
-        np.log1p(-p_spurious)
+        np.log1p(-p_spurious)[:, None]
         + np.where(in_band, np.log1p(-p_unobserved) - np.log(p_unobserved), 0.0)[None, :]
     )
     return log_pair, in_band, band
 
 
-def _solve(log_pair, log_spurious, in_band, band, p_unobserved):
+def _priors(p_unobserved, p_spurious, m, n):
+    """``p_u`` (n,) and ``p_s`` (m,) as arrays, each checked to lie in (0, 1)."""
+    out = []
+    for name, p, size in (("p_unobserved", p_unobserved, n), ("p_spurious", p_spurious, m)):
+        array = np.broadcast_to(np.asarray(p, dtype=float), (size,))
+        if not np.all((array > 0.0) & (array < 1.0)):
+            raise ValueError(f"{name} = {p}: must lie strictly between 0 and 1")
+        out.append(array)
+    return out
+
+
+def _solve(log_pair, p_spurious, in_band, band, p_unobserved):
     """The assignment maximising the summed pair and spurious scores (Hungarian)."""
-    modes, total = best_assignment(log_pair, log_spurious)
-    log_p = total + np.count_nonzero(in_band) * np.log(p_unobserved)
+    p_unobserved, p_spurious = _priors(p_unobserved, p_spurious, *log_pair.shape)
+    modes, total = best_assignment(log_pair, np.log(p_spurious) - np.log(band))
+    log_p = total + np.sum(np.log(p_unobserved[in_band]))
     unobserved = np.setdiff1d(np.flatnonzero(in_band), modes[modes >= 0])
     return Assignment(modes, unobserved, float(log_p), band)
 
@@ -359,7 +349,9 @@ def assignment_terms(modes, in_band, log_B, p_unobserved=P_UNOBSERVED, p_spuriou
     log_B : float
         ``log`` of the range a spurious peak is uniform over, in the units of the pairs'
         densities (Hz, or rad^2/s^2 for densities in eigenvalues).
-    p_unobserved, p_spurious : float
+    p_unobserved, p_spurious : float or array_like
+        Prior probabilities in (0, 1): of each computed mode (n,) going unobserved and of
+        each peak (m,) being spurious, or one for all.
 
     Returns
     -------
@@ -367,13 +359,15 @@ def assignment_terms(modes, in_band, log_B, p_unobserved=P_UNOBSERVED, p_spuriou
     """
     modes = np.asarray(modes)
     in_band = np.asarray(in_band, dtype=bool)
-    j = modes[modes >= 0]
-    seen = np.count_nonzero(in_band[j])
+    p_unobserved, p_spurious = _priors(p_unobserved, p_spurious, modes.size, in_band.size)
+    paired = modes >= 0
+    seen = np.zeros(in_band.size, dtype=bool)
+    seen[modes[paired]] = True
     return float(
-        j.size * np.log1p(-p_spurious)
-        + (modes.size - j.size) * (np.log(p_spurious) - log_B)
-        + seen * np.log1p(-p_unobserved)
-        + (np.count_nonzero(in_band) - seen) * np.log(p_unobserved)
+        np.sum(np.log1p(-p_spurious[paired]))
+        + np.sum(np.log(p_spurious[~paired]) - log_B)
+        + np.sum(np.log1p(-p_unobserved[in_band & seen]))
+        + np.sum(np.log(p_unobserved[in_band & ~seen]))
     )
 
 
@@ -450,7 +444,9 @@ def most_probable(
         Linearisation point and prior mean of the stiffness coefficients, Pa.
     prior_covariance_b : array_like, shape (6, 6)
         Pa^2.
-    p_unobserved, p_spurious : float
+    p_unobserved, p_spurious : float or array_like
+        Prior probabilities in (0, 1): of each computed mode (n,) going unobserved and of
+        each peak (m,) being spurious, or one for all.
     start : array_like of int, shape (m,), optional
         An assignment to search from as well (e.g. the one in use).
 

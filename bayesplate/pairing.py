@@ -31,6 +31,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from .assignment import MAC_SCALE, assign_with_shapes, most_probable, predictive_sd_Hz
+from .peak_prior import assignment_priors
 from .quantities import stiffness_covariance
 
 __all__ = [
@@ -321,8 +322,10 @@ def resolve_pairing(measured, how="auto"):
         the sampler and diagnose check at their answer
         (:func:`bayesplate.checked_order.checks_order`).
         ``"likelihood"`` (the most probable assignment of frequencies made before the fit)
-        is chosen by name: as the default it let diagnose explain concealed defects away as
-        missed modes and spurious peaks (see the README).
+        is chosen by name, or by default for a measurement that carries each peak's
+        ``p_spurious`` (a tap test imported with its poles' evidence, where spurious peaks
+        and missed modes are expected): as the default for every measurement it let
+        diagnose explain concealed defects away as missed modes and spurious peaks.
 
     Returns
     -------
@@ -335,7 +338,9 @@ def resolve_pairing(measured, how="auto"):
         return how
     if measured.shapes is not None and measured.points is not None:
         return "mac"
-    return "order" if measured.mode is None else "index"
+    if measured.mode is not None:
+        return "index"
+    return "order" if getattr(measured, "p_spurious", None) is None else "likelihood"
 
 
 def shape_mac(measurement, model, vectors):
@@ -476,6 +481,7 @@ def _pair_by_likelihood(measured, model, b, extra_modes, modal, prior, start):
         b,
         mu_b,
         V_b,
+        *assignment_priors(measured, n),
         start=initial,
     )
     kept = a.paired

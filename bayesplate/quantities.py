@@ -22,6 +22,7 @@ import numpy as np
 from . import laminate
 
 __all__ = [
+    "predictive_sd_Hz",
     "ENGINEERING_NAMES",
     "ENGINEERING_UNITS",
     "ENGINEERING_KEYS",
@@ -145,3 +146,27 @@ def hz_sd(frequency_Hz, eigenvalue_sd):
 def eigenvalue_sd_from_relative(eigenvalue, relative):
     """Eigenvalue deviation of a relative frequency deviation ``r``: ``2 r lambda``."""
     return 2.0 * np.asarray(relative, dtype=float) * np.asarray(eigenvalue, dtype=float)
+
+
+def predictive_sd_Hz(frequency_Hz, sensitivities, covariance_b):
+    """Deviation of computed frequencies from the constants' uncertainty (first order).
+
+    ``var(lambda_j) = S_j P S_j^T``, and ``d f = d lambda / (8 pi^2 f)``.
+
+    Parameters
+    ----------
+    frequency_Hz : array_like, shape (n,)
+    sensitivities : array_like, shape (n, 6)
+        ``d lambda / d b``, rad^2/s^2/Pa.
+    covariance_b : array_like, shape (6, 6)
+        Covariance of ``b``, Pa^2.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n,)
+        Hz.
+    """
+    S = np.asarray(sensitivities, dtype=float)
+    var = np.einsum("ij,jk,ik->i", S, np.asarray(covariance_b, dtype=float), S)
+    f = np.asarray(frequency_Hz, dtype=float)
+    return hz_sd(f, np.sqrt(np.maximum(var, 0.0)))

@@ -24,6 +24,7 @@ NUMERICS = (
     "forward",
     "pairing",
     "assignment",
+    "peak_prior",
     "checked_order",
     "posterior",
     "error_scale",

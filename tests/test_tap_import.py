@@ -10,9 +10,12 @@ from scipy.io import wavfile
 
 from bayesplate.cli import main
 from bayesplate.io import CaseError, bundled_case_path, load_case
+from bayesplate.io.band import prior_band_Hz
+from bayesplate.io.case_writer import _to_digits as to_digits
+from bayesplate.io.case_writer import sheet_case
 from bayesplate.io.frf import read_frf_csv, read_uff_frf
 from bayesplate.io.impulse import read_impulse
-from bayesplate.io.modal_file import is_tap_test, read_modal_data
+from bayesplate.io.modal_file import is_tap_test, read_spectra
 from bayesplate.io.poles import extract_poles, modal_data_from_poles
 from bayesplate.io.poles_file import read_poles
 from bayesplate.laminate import stiffness_from_engineering
@@ -113,8 +116,14 @@ def test_synthetic_tap_gives_the_model_frequencies(tmp_path, capsys, sheet, plat
     error = case.measured.frequency_Hz / frequency - 1
     print(f"{kind}: max frequency error {100 * np.abs(error).max():.4f} %")
     assert np.abs(error).max() < FREQUENCY_RTOL, error
-    modal = read_modal_data(test)  # the library path agrees with the CLI
-    np.testing.assert_allclose(modal.frequency_Hz, case.measured.frequency_Hz, rtol=1e-12)
+    lower, upper, top = prior_band_Hz(sheet_case(sheet), 10)  # the CLI's default band
+    spectra = read_spectra(test)  # the library path agrees with the CLI
+    poles = extract_poles(spectra, (lower, top), keep_below_Hz=upper).kept
+    modal = modal_data_from_poles(spectra, poles, (lower, top))
+    written = [
+        to_digits(f, s) for f, s in zip(modal.frequency_Hz, case.measured.sigma_Hz, strict=True)
+    ]
+    np.testing.assert_array_equal(written, case.measured.frequency_Hz)  # to its digits
     np.testing.assert_allclose(modal.damping, damping_of(frequency), rtol=0.2)
 
 
@@ -227,7 +236,10 @@ def test_poles_file_edit_and_use(tmp_path, capsys, sheet, plate1, rng):
     assert status == 0
     assert "9 poles kept" in stdout
     expected = [float(row.split(",")[1]) for row in kept_rows if row != dropped]
-    np.testing.assert_array_equal(load_case(out2).measured.frequency_Hz, expected)
+    measured = load_case(out2).measured  # written to the digits its spread supports
+    written = [to_digits(f, s) for f, s in zip(expected, measured.sigma_Hz, strict=True)]
+    np.testing.assert_array_equal(measured.frequency_Hz, written)
+    assert measured.p_spurious is not None  # the poles file carries the evidence
     assert [p.frequency_Hz for p in read_poles(poles)] == expected
 
     # marking a row 0 leaves it out too

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pathlib
 
+from ..io.band import BAND_HIGH_FACTOR, BAND_LOW_FACTOR, DEFAULT_BAND_MODES
 from .options import finite_float, positive_int
 
 __all__ = ["register"]
@@ -18,6 +19,7 @@ _TAP_OPTIONS = (
     "force_channel",
     "channel",
     "points",
+    "modes",
 )
 
 
@@ -25,8 +27,6 @@ def run(args):
     """Read the test file, combine it with the plate sheet, write the case file."""
     from ..io import (
         CaseError,
-        bundled_plate_names,
-        bundled_plate_path,
         case_from_modal_data,
         read_modal_data,
         write_case,
@@ -38,9 +38,7 @@ def run(args):
         raise CaseError("--sigma-rel", args.sigma_rel, "must be > 0 and < 1")
     if args.sigma_rel is not None:  # here, else the sheet would be blamed for it
         check_plausible(args.sigma_rel, "sigma_rel", "--sigma-rel")
-    plate = args.plate
-    if not pathlib.Path(plate).exists() and plate in bundled_plate_names():
-        plate = bundled_plate_path(plate)
+    plate = _plate_path(args.plate)
     tests = [str(test) for test in args.test]
     tap_options = any(getattr(args, name) is not None for name in _TAP_OPTIONS)
     if tap_options or len(tests) > 1 or is_tap_test(tests[0]):
@@ -67,8 +65,11 @@ def _tap_modal_data(args, tests):
     spectra = _read_spectra(args, tests)
     order = DEFAULT_ORDER if args.order is None else args.order
     analysis = None
+    band, keep_below = args.band, None
     if kept is None or args.poles is not None or args.chart is not None:
-        analysis = extract_poles(spectra, band_Hz=args.band, order=order)
+        if band is None:
+            band, keep_below = _prior_band(args, spectra)
+        analysis = extract_poles(spectra, band_Hz=band, order=order, keep_below_Hz=keep_below)
     if kept is None:
         kept = analysis.kept
         if not kept:
@@ -89,7 +90,31 @@ def _tap_modal_data(args, tests):
         _written("--chart", args.chart, write_chart, args.chart, analysis,
                  spectra.frequency_Hz, spectra.frf, kept, spectra.coherence)  # fmt: skip
         print(f"stabilisation chart -> {args.chart}")
-    return modal_data_from_poles(spectra, kept, band_Hz=args.band)
+    return modal_data_from_poles(spectra, kept, band_Hz=band)
+
+
+def _prior_band(args, spectra):
+    """The fit's band and the top of the poles kept, from the sheet's prior (``--modes``)."""
+    from ..io.band import prior_band_Hz
+    from ..io.case_writer import sheet_case
+
+    n_modes = args.modes or DEFAULT_BAND_MODES
+    lower, upper, top = prior_band_Hz(sheet_case(_plate_path(args.plate)), n_modes)
+    axis = spectra.frequency_Hz
+    lower, top = max(lower, float(axis[axis > 0][0])), min(top, float(axis[-1]))
+    print(f"band {lower:.4g}-{upper:.4g} Hz (poles fitted up to {top:.4g} Hz): the lowest "
+          f"{n_modes} modes at the sheet's prior mean, x {BAND_LOW_FACTOR:g} and "
+          f"x {BAND_HIGH_FACTOR:g} (--band, --modes)")
+    return (lower, top), upper
+
+
+def _plate_path(plate):
+    """The sheet's path: a file, or the name of a bundled plate sheet."""
+    from ..io import bundled_plate_names, bundled_plate_path
+
+    if not pathlib.Path(plate).exists() and plate in bundled_plate_names():
+        return bundled_plate_path(plate)
+    return plate
 
 
 def _read_spectra(args, tests):
@@ -199,7 +224,15 @@ def register(sub):
         nargs=2,
         type=finite_float,
         metavar=("LOW_HZ", "HIGH_HZ"),
-        help="frequency band of the fit, Hz (default: all the data above 0 Hz)",
+        help="frequency band of the fit, Hz (default: from the plate sheet, see --modes)",
+    )
+    tap.add_argument(
+        "--modes",
+        type=positive_int,
+        metavar="N",
+        help=f"without --band, fit the band where the sheet's prior mean puts the lowest N "
+        f"elastic modes: {BAND_LOW_FACTOR:g} x the first to {BAND_HIGH_FACTOR:g} x the N-th "
+        f"(default {DEFAULT_BAND_MODES})",
     )
     tap.add_argument("--order", type=positive_int, help="highest LSCF model order (default 60)")
     tap.add_argument(

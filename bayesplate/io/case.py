@@ -159,6 +159,10 @@ class Measurement(_EqualByValue):
     error_scale : bayesplate.error_scale.ErrorScalePrior, optional
         Prior of a common, unknown scale ``s`` of the deviations (`sigma_Hz` times ``s``),
         inferred with the constants; None: ``s = 1`` (the deviations as declared).
+    p_spurious : array_like, shape (m,), optional
+        Prior probability that each frequency is no mode of the plate, in (0, 1), from the
+        test's own evidence (a tap-test import: :mod:`bayesplate.peak_prior`). Given, the
+        frequencies are paired with modes by the most probable assignment by default.
     """
 
     frequency_Hz: np.ndarray
@@ -167,6 +171,7 @@ class Measurement(_EqualByValue):
     points: np.ndarray | None = None
     shapes: np.ndarray | None = None
     error_scale: object = None
+    p_spurious: np.ndarray | None = None
 
     def __post_init__(self):
         frequency = _array(self.frequency_Hz, "measured.frequency_Hz", ndim=1)
@@ -185,6 +190,14 @@ class Measurement(_EqualByValue):
             from ..error_scale import ErrorScalePrior
 
             _require_type(self.error_scale, ErrorScalePrior, "measured.error_scale")
+        if self.p_spurious is not None:
+            p = _array(self.p_spurious, "measured.p_spurious", ndim=1)
+            _check_length(p, frequency.size, "measured.p_spurious", "entry per frequency")
+            bad = np.flatnonzero(~((p > 0) & (p < 1)))
+            if bad.size:
+                key = f"measured.p_spurious[{bad[0]}]"
+                raise CaseError(key, float(p[bad[0]]), "must be a probability > 0 and < 1")
+            _set(self, "p_spurious", p)
 
     @property
     def size(self) -> int:
@@ -212,6 +225,7 @@ class Measurement(_EqualByValue):
             sigma_Hz=self.sigma_Hz[rows],
             mode=None if self.mode is None else self.mode[rows],
             shapes=None if self.shapes is None else self.shapes[rows],
+            p_spurious=None if self.p_spurious is None else self.p_spurious[rows],
         )
 
 

@@ -120,7 +120,7 @@ _PLATE_SD_KEYS = (
     ("density_sd_kg_m3", "density_sd", 1.0),
 )
 _MEASURED_KEYS = ("frequency_Hz", "sigma_rel", "sigma_Hz", "mode", "points_mm", "shapes",
-                  "error_scale")  # fmt: skip
+                  "error_scale", "p_spurious")  # fmt: skip
 _ERROR_SCALE_KEYS = ("median", "upper95")
 _ERROR_SCALE_ENTRY = "a table { median = ..., upper95 = ... } (quantiles of the scale s)"
 _PRIOR_ENTRY_KEYS = ("mean", "sd")
@@ -327,7 +327,10 @@ def _parse_measured(raw, extent_mm: tuple[float, float]) -> Measurement:
         mode = _integers(table["mode"], "measured.mode", 1, _MAX_MODE_INDEX)
     points, shapes = _parse_shapes(table, extent_mm)
     scale = _parse_error_scale(table["error_scale"]) if "error_scale" in table else None
-    return Measurement(frequency, sigma, mode, points, shapes, scale)
+    p_spurious = None
+    if "p_spurious" in table:
+        p_spurious = _numbers(table["p_spurious"], "measured.p_spurious")
+    return Measurement(frequency, sigma, mode, points, shapes, scale, p_spurious)
 
 
 def _parse_error_scale(raw):

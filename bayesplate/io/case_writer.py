@@ -22,6 +22,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from .case import Case
 from .case_file import parse_case
 from .errors import CaseError
 from .export import atomic_write_text
@@ -35,6 +36,7 @@ else:  # pragma: no cover - Python 3.10 only
 __all__ = [
     "DEFAULT_SIGMA_REL",
     "case_from_modal_data",
+    "sheet_case",
     "write_case",
     "bundled_plate_names",
     "bundled_plate_path",
@@ -101,6 +103,35 @@ def case_from_modal_data(plate, modal: ModalData, sigma_rel: float | None = None
     if parse_case(tomllib.loads(text)) != case:  # pragma: no cover - an emitter bug
         raise RuntimeError("the written case file does not read back as the same case")
     return text
+
+
+def sheet_case(plate) -> Case:
+    """A plate sheet read as a case, for predictions before any test is read.
+
+    Its plate, prior, model and reference as in the sheet; its measurement a placeholder
+    (one frequency) that nothing should read.
+
+    Parameters
+    ----------
+    plate : str, os.PathLike or mapping
+        The plate sheet (see :func:`case_from_modal_data`).
+
+    Returns
+    -------
+    Case
+
+    Raises
+    ------
+    CaseError
+        Naming the sheet and the key that breaks its rules.
+    """
+    sheet_path = None if isinstance(plate, Mapping) else os.fspath(plate)
+    sheet = dict(plate) if sheet_path is None else _read_sheet(sheet_path)
+    try:
+        sigma_rel = _sheet_sigma_rel(sheet)
+        return parse_case({**sheet, "measured": {"frequency_Hz": [100.0], "sigma_rel": sigma_rel}})
+    except CaseError as err:
+        raise _blame(err, sheet_path) from None
 
 
 def write_case(path, text: str):
@@ -196,17 +227,33 @@ def _check_sigma_rel(value, key: str) -> float:
 
 def _measured_table(modal: ModalData, sigma_rel: float) -> dict:
     """The [measured] table: the data of `modal`, and `sigma_rel` unless it has sigma_Hz."""
-    table = {"frequency_Hz": _floats(modal.frequency_Hz)}
-    if modal.sigma_Hz is not None:
-        table["sigma_Hz"] = _floats(modal.sigma_Hz)
+    frequency = np.asarray(modal.frequency_Hz, dtype=float)
+    sigma = modal.sigma_Hz
+    if sigma is None and modal.spread_Hz is not None:
+        spread = np.asarray(modal.spread_Hz, dtype=float)
+        sigma = None if np.all(spread <= sigma_rel * frequency) else np.maximum(
+            spread, sigma_rel * frequency)  # fmt: skip
+    if modal.spread_Hz is not None:  # the digits the data support
+        sd = sigma_rel * frequency if sigma is None else np.asarray(sigma, dtype=float)
+        frequency = np.array([_to_digits(f, s) for f, s in zip(frequency, sd, strict=True)])
+    table = {"frequency_Hz": _floats(frequency)}
+    if sigma is not None:
+        table["sigma_Hz"] = [float(f"{s:.2g}") for s in np.asarray(sigma, dtype=float)]
     else:
         table["sigma_rel"] = sigma_rel
     if modal.mode is not None:
         table["mode"] = [int(v) for v in np.asarray(modal.mode).ravel()]
+    if modal.p_spurious is not None:
+        table["p_spurious"] = [float(f"{v:.2g}") for v in np.asarray(modal.p_spurious).ravel()]
     if modal.points_mm is not None:
         table["points_mm"] = [_floats(row) for row in np.asarray(modal.points_mm)]
         table["shapes"] = [_floats(row) for row in np.asarray(modal.shapes)]
     return table
+
+
+def _to_digits(value: float, sd: float) -> float:
+    """`value` rounded to a hundredth of its deviation's leading digit."""
+    return round(value, max(0, 2 - int(np.floor(np.log10(sd))))) if sd > 0 else value
 
 
 def _floats(values) -> list[float]:

@@ -41,6 +41,11 @@ class ModalData:
         One standard deviation of each frequency, Hz, when the file gives it.
     mode : numpy.ndarray of int, shape (m,), optional
         1-based elastic-mode index of each frequency, when the file gives it.
+    p_spurious : numpy.ndarray, shape (m,), optional
+        Prior probability that each mode is spurious, from a tap test's pole evidence.
+    spread_Hz : numpy.ndarray, shape (m,), optional
+        Spread of each frequency over the fit's model orders, Hz: a frequency is written
+        with a deviation at least this large (and to the digits it supports).
     source : str
         The file the data came from.
     notes : tuple of str
@@ -54,6 +59,8 @@ class ModalData:
     damping: np.ndarray | None = None
     sigma_Hz: np.ndarray | None = None
     mode: np.ndarray | None = None
+    p_spurious: np.ndarray | None = None
+    spread_Hz: np.ndarray | None = None
     source: str = ""
     notes: tuple[str, ...] = ()
 

@@ -3,14 +3,18 @@
 The poles file is a CSV table, one candidate mode per row::
 
     # comments
-    keep,frequency_Hz,damping,orders_stable
-    1,611.2336,0.00701,58
-    0,1499.87,0.0432,6
+    keep,frequency_Hz,damping,orders_stable,p_spurious,coherence,phase_deviation_deg,amplitude,spread_Hz
+    1,611.2336,0.00701,58,0.031,0.998,2.1,1.3,0.0004
+    0,1499.87,0.0432,6,,,,,
 
 ``keep`` is 1 (take the pole into the case) or 0 (leave it out); deleting a row leaves it
 out too. ``frequency_Hz`` (undamped natural frequency, Hz) and ``damping`` (viscous
-damping ratio) define the pole; ``orders_stable`` is information only. Frequencies are
-written with full precision so that a pole read back is the pole written.
+damping ratio) define the pole. ``p_spurious`` is the prior probability that the pole is no
+mode of the plate (:mod:`bayesplate.peak_prior`), which the assignment of peaks to modes
+weighs: edit it to say what you know (empty: not assessed; a case then pairs by order).
+``orders_stable``, ``coherence``, ``phase_deviation_deg``, ``amplitude`` and ``spread_Hz``
+are the evidence it came from (:class:`~bayesplate.io.poles.Pole`), information only.
+Frequencies are written with full precision so that a pole read back is the pole written.
 """
 
 from __future__ import annotations
@@ -26,7 +30,9 @@ from .poles import Pole, PoleAnalysis
 
 __all__ = ["write_poles", "read_poles", "write_chart"]
 
-_COLUMNS = ("keep", "frequency_Hz", "damping", "orders_stable")
+_COLUMNS = ("keep", "frequency_Hz", "damping", "orders_stable", "p_spurious", "coherence",
+            "phase_deviation_deg", "amplitude", "spread_Hz")  # fmt: skip
+_EVIDENCE = _COLUMNS[4:]
 _KEEP = {"1": True, "0": False, "true": True, "false": False, "yes": True, "no": False}
 
 
@@ -49,8 +55,10 @@ def write_poles(path, analysis: PoleAnalysis, source: str = "") -> None:
         ",".join(_COLUMNS),
     ]
     for pole in analysis.candidates:
+        evidence = ",".join("" if np.isnan(v) else f"{v:.4g}"
+                            for v in (getattr(pole, name) for name in _EVIDENCE))  # fmt: skip
         lines.append(f"{int(pole.keep)},{pole.frequency_Hz!r},{pole.damping!r},"
-                     f"{pole.orders_stable}")  # fmt: skip
+                     f"{pole.orders_stable},{evidence}")  # fmt: skip
     atomic_write_text(path, "\n".join(lines) + "\n")
 
 
@@ -105,7 +113,8 @@ def _read_poles(path: str) -> tuple[Pole, ...]:
         if not 0 <= damping < 1:
             raise CaseError(f"line {number}, column damping", damping, "must be >= 0 and < 1")
         if keep:
-            kept.append((number, Pole(frequency, damping, 0, True)))
+            evidence = {name: _optional(row, name, number) for name in _EVIDENCE}
+            kept.append((number, Pole(frequency, damping, 0, True, **evidence)))
     if not kept:
         raise CaseError("keep", rule="no pole is kept: mark at least one row with keep = 1")
     kept.sort(key=lambda item: item[1].frequency_Hz)
@@ -114,6 +123,17 @@ def _read_poles(path: str) -> tuple[Pole, ...]:
             rule = "two kept poles have the same frequency"
             raise CaseError(f"line {number}, column frequency_Hz", pole.frequency_Hz, rule)
     return tuple(pole for _, pole in kept)
+
+
+def _optional(row: dict, name: str, number: int) -> float:
+    """An evidence column's value: NaN where absent or empty; p_spurious in (0, 1)."""
+    if not row.get(name, "").strip():
+        return float("nan")
+    value = _number(row, name, number)
+    if name == "p_spurious" and not 0 < value < 1:
+        rule = "must be a probability > 0 and < 1 (or empty)"
+        raise CaseError(f"line {number}, column p_spurious", value, rule)
+    return value
 
 
 def _number(row: dict, name: str, number: int) -> float:
