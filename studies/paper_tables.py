@@ -177,12 +177,18 @@ def fast_rows(specs, models, full_lines, log=print):
             rows.append({"table": spec.table, "source": spec.source, "test": spec.test or "",
                          "label": spec.label, "stage": line.stage, "diff": float(diff),
                          "iterations": (line.ours.iterations, ref.ours.iterations),
-                         "status": (result.status, ref.run.status),
+                         "status": (_stopped(result), _stopped(ref.run)),
                          "agrees": (line.agrees, ref.agrees), "check": result.check,
                          "seconds": time.perf_counter() - started})  # fmt: skip
         log(f"  fast: Table {spec.table} {spec.source} {spec.test or ''} {spec.label}: "
             f"{rows[-1]['diff']:.1e}")  # fmt: skip
     return rows
+
+
+def _stopped(result):
+    """How the iteration ended: "converged" when it stopped, whatever the fit's assessment
+    (issue 37: ``status`` is "rejected" or "implausible" for a flagged answer)."""
+    return "converged" if result.converged else result.status
 
 
 def fast_markdown(rows, quick):

@@ -124,7 +124,8 @@ def test_iterates_off_the_box_are_checked_and_the_path_is_the_full_one(plate1):
     case, model = plate1
     full = estimate(case, "MVE", model=model, forward="full", pairing="order")
     fast = estimate(case, "MVE", model=model, forward="fast", pairing="order")
-    assert fast.status == full.status == "converged"
+    # both stopped; the answer is flagged alike (G23 six prior sd from this prior's mean)
+    assert fast.converged and full.converged and fast.status == full.status
     assert fast.iterations == full.iterations
     assert 0 < fast.check.n_full_solves < full.n_solves / 4
     np.testing.assert_allclose(fast.b, full.b, rtol=TOL)

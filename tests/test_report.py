@@ -434,7 +434,10 @@ def test_the_estimate_steps_share_one_fast_model_checked_by_the_full_one(tmp_pat
     for method in ("B", "MVE", "MVE-mod"):
         check = data.results[method]["check"]
         assert check["confirmed"] and check["max_rel_error"] <= check["tolerance"]
-        assert data.results[method]["status"] == "converged"
+        # stopped and confirmed (MVE's answers are flagged implausible: the case's prior is 6
+        # sd from the plate's G23)
+        assert data.results[method]["converged"]
+        assert data.results[method]["status"] in ("converged", "implausible")
     np.testing.assert_allclose(data.results["B"]["b"], full.b, rtol=1e-3)
     assert "| full-model check | confirmed" in path.read_text(encoding="utf-8")
 

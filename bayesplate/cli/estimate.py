@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import sys
 from pathlib import Path
 
 from .options import (
@@ -27,13 +28,13 @@ def estimate_text(case, model, result):
     """Human-readable table of ``bayesplate estimate``."""
     from ..quantities import ENGINEERING_KEYS, to_case_units
 
-    status = "converged" if result.converged else "NOT converged"
     lines = [
         f"{case.name}",
-        f"{result.method}, mesh {model.mesh.nx} x {model.mesh.ny}: {status} after "
+        f"{result.method}, mesh {model.mesh.nx} x {model.mesh.ny}: {status_word(result)} "
         f"{result.iterations} iterations ({result.n_solves} forward solves, "
         f"{result.wall_time:.1f} s)",
         f"  {result.message}",
+        *([f"  {result.fit}"] if result.fit is not None else []),
         *_check_lines(result),
         f"{'constant':>9} {'estimate':>10} {'sd':>9} {'initial':>9}",
     ]
@@ -48,6 +49,21 @@ def estimate_text(case, model, result):
         d = fc - fm
         lines.append(f"{result.modes[i]:>4} {fm:12.1f} {fc:12.1f} {d:9.1f} {100 * d / fm:7.2f}")
     return "\n".join(lines)
+
+
+def status_word(result):
+    """How the run ended, before "N iterations": never "converged" for a flagged answer."""
+    if not result.converged:
+        return "NOT converged after"
+    if result.status == "converged":
+        return "converged after"
+    return f"{result.status} (the iteration stopped; see the warnings) after"
+
+
+def print_warnings(result):
+    """Each of the result's warnings as one line on standard error."""
+    for text in result.warnings:
+        print(f"bayesplate: warning: {text}", file=sys.stderr)
 
 
 def scale_text(scale):
@@ -136,6 +152,8 @@ def run(args):
                       "error scale widens the frequencies' share")  # fmt: skip
         if budget is not None:
             print(budget_text(budget))
+        sys.stdout.flush()  # the warnings follow the table
+    print_warnings(result)
     if args.plots and budget is not None:
         from ..plots import variance_budget_bars
 
@@ -151,8 +169,13 @@ def register(sub):
         help="estimate the elastic constants with the paper's B, MVE or MVE-mod",
         description="Iterate the Bayesian estimator B (eq. 9), the minimum variance "
         "estimator MVE (eq. 12) or the two-stage MVE-mod (section 5) of Daghia et al. "
-        "(2007) from the case's prior to the measured frequencies. The exit status is 1 "
-        "when the run does not converge. Progress goes to standard error.",
+        "(2007) from the case's prior to the measured frequencies. Every estimate states its "
+        "fit (chi-square of the paired peaks with the declared deviations, degrees of "
+        "freedom, p-value, worst residuals); an answer that should not be trusted (fit "
+        "rejected, a constant far from its prior, most low modes unobserved) is reported "
+        "as 'rejected' or 'implausible', with a warning on standard error. The exit status "
+        "is 1 when the run does not converge (0 for a flagged answer). Progress goes to "
+        "standard error.",
     )
     add_case_argument(p)
     p.add_argument(

@@ -29,9 +29,12 @@ correlations of the propagated prior; ``"printed"`` is section 3.6 to the letter
 Modules: :mod:`~.conventions` (the open choices), :mod:`~.steps` (one B or MVE update),
 :mod:`~.iteration` (:func:`run`: the iteration and its stopping rules), :mod:`~.estimate`
 (:func:`estimate`: a case, MVE-mod's two stages), :mod:`~.fast` (the same on the certified
-fast model, each answer confirmed by the full model), :mod:`~.result` (:class:`EstimateResult`).
+fast model, each answer confirmed by the full model), :mod:`~.result` (:class:`EstimateResult`),
+:mod:`~.assess` (:func:`assess`: every estimate's fit statement and warnings; "converged" is
+the status of a run that stopped with nothing flagged, ``converged`` only that it stopped).
 """
 
+from .assess import FitStatement, WorstResidual, assess, fit_statement
 from .conventions import CONVENTIONS, Conventions, resolve_conventions
 from .estimate import OrderRefuted, estimate, estimate_on_fast, settle_pairing
 from .fast import (
@@ -56,6 +59,10 @@ __all__ = [
     "resolve_conventions",
     "EstimateResult",
     "FullModelCheck",
+    "FitStatement",
+    "WorstResidual",
+    "assess",
+    "fit_statement",
     "FAST_MIN_DOFS",
     "FORWARDS",
     "FastModelWarning",

@@ -12,6 +12,7 @@ from ..checked_order import assignment_at, checks_order, refuted_order
 from ..model import PlateModel
 from ..pairing import Pairing, pair_measured, resolve_pairing
 from ..posterior import GaussianProblem, prior_in_stiffness
+from .assess import assess
 from .conventions import resolve_conventions
 from .fast import case_fast_model, confirmed_run, modes_to_certify, resolve_forward
 from .iteration import DEFAULT_MAX_ITER, run
@@ -108,7 +109,36 @@ def estimate(
     Returns
     -------
     EstimateResult
+        Assessed (:func:`.assess.assess`): its ``fit``, its ``warnings`` and a status
+        ``"rejected"`` or ``"implausible"`` when the answer should not be trusted.
     """
+    result = _estimate(
+        case, method, model, tol, max_iter, convention, prior_mean, prior_sd, stage1_tol,
+        stage2_factor, stage2_sd, pairing, tracking, forward=forward, fast=fast, rng=rng,
+    )  # fmt: skip
+    return assess(result, case)
+
+
+def _estimate(
+    case,
+    method="MVE",
+    model=None,
+    tol=1e-3,
+    max_iter=DEFAULT_MAX_ITER,
+    convention="paper",
+    prior_mean=None,
+    prior_sd=None,
+    stage1_tol=1e-2,
+    stage2_factor=2.0,
+    stage2_sd=None,
+    pairing="auto",
+    tracking="auto",
+    *,
+    forward="auto",
+    fast=None,
+    rng=None,
+):
+    """:func:`estimate` without its assessment (what the calls inside this module make)."""
     if method not in METHODS:
         raise ValueError(f"method = {method!r}: must be one of {METHODS}")
     model = model or PlateModel.from_case(case)
@@ -117,7 +147,7 @@ def estimate(
                    "prior_mean": prior_mean, "prior_sd": prior_sd, "stage1_tol": stage1_tol,
                    "stage2_factor": stage2_factor, "stage2_sd": stage2_sd, "pairing": pairing,
                    "tracking": tracking}  # fmt: skip
-        return estimate_on_fast(case, method, model, fast, rng=rng, **options)[0]
+        return _estimate_on_fast(case, method, model, fast, rng=rng, **options)[0]
     conventions = resolve_conventions(convention)
     mean = np.asarray(case.prior.mean if prior_mean is None else prior_mean, dtype=float)
     sd = np.asarray(case.prior.sd if prior_sd is None else prior_sd, dtype=float)
@@ -147,7 +177,7 @@ def estimate(
         if not isinstance(model, PlateModel):
             # a fast model holds the order's modes only: the caller redoes it by likelihood
             raise OrderRefuted(found)
-        by_likelihood = estimate(
+        by_likelihood = _estimate(
             case, method, model=model, tol=tol, max_iter=max_iter, convention=convention,
             prior_mean=prior_mean, prior_sd=prior_sd, stage1_tol=stage1_tol,
             stage2_factor=stage2_factor, stage2_sd=stage2_sd, pairing="likelihood",
@@ -205,6 +235,12 @@ def estimate_on_fast(case, method="MVE", model=None, fast=None, *, rng=None, **o
     fast : CertifiedModel
         The fast model, enriched where the full model corrected it: share it.
     """
+    result, fast = _estimate_on_fast(case, method, model, fast, rng=rng, **options)
+    return assess(result, case), fast
+
+
+def _estimate_on_fast(case, method="MVE", model=None, fast=None, *, rng=None, **options):
+    """:func:`estimate_on_fast` without its assessment."""
     model = model or PlateModel.from_case(case)
     pairing = options.pop("pairing", "auto")
     checked = checks_order(case.measured, pairing)
@@ -223,7 +259,7 @@ def estimate_on_fast(case, method="MVE", model=None, fast=None, *, rng=None, **o
         )
 
     def run_on(reduced):
-        return estimate(case, method, model=reduced, pairing=pairing, forward="full", **options)
+        return _estimate(case, method, model=reduced, pairing=pairing, forward="full", **options)
 
     try:
         return confirmed_run(run_on, model, fast)
@@ -231,8 +267,8 @@ def estimate_on_fast(case, method="MVE", model=None, fast=None, *, rng=None, **o
         # order checked and set aside at the estimate: by likelihood, on a fast model that
         # holds the modes the assignment may reach (a new one: this one holds the order's)
         log.info("%s", refuted)
-        result, fast = estimate_on_fast(case, method, model, None, rng=rng,
-                                        **{**options, "pairing": "likelihood"})  # fmt: skip
+        result, fast = _estimate_on_fast(case, method, model, None, rng=rng,
+                                         **{**options, "pairing": "likelihood"})  # fmt: skip
         return replace(result, message=f"{result.message}; {refuted}"), fast
 
 

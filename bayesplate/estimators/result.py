@@ -10,9 +10,14 @@ __all__ = ["METHODS", "STATUSES", "EstimateResult", "FullModelCheck"]
 
 METHODS = ("B", "MVE", "MVE-mod")
 #: How a run ended (:attr:`EstimateResult.status`); only the first is a success.
+#: "rejected": the iteration stopped but the fit is rejected (chi-square p < 0.01);
+#: "implausible": it stopped but a constant is far from its prior, most low modes are
+#: unobserved or a second basin rivals it (:mod:`bayesplate.estimators.assess`).
 #: "unidentified": MVE stopped drifting along directions the data barely determine.
 STATUSES = (
     "converged",
+    "rejected",
+    "implausible",
     "oscillating",
     "iteration_cap",
     "unidentified",
@@ -106,7 +111,8 @@ class EstimateResult:
     iterations : int
         Updates performed.
     converged : bool
-        ``status == "converged"``.
+        Whether the iteration stopped normally (its stopping rule met). It says nothing of
+        the fit: ``status`` is ``"converged"`` only when, besides, nothing was flagged.
     message : str
         Why the run ended, in words.
     n_solves : int
@@ -133,12 +139,20 @@ class EstimateResult:
         iterations).
     status : str
         How the run ended, one of :data:`STATUSES`: test this, never the message's text.
+        ``"rejected"`` and ``"implausible"`` (set by
+        :func:`bayesplate.estimators.assess.assess`) are runs that stopped (``converged``
+        True) with an answer that should not be trusted: see ``warnings``.
     pairing : bayesplate.pairing.Pairing or None
         The measured-to-computed pairing the run used (for ``"likelihood"``, the settled
         assignment, with its unobserved modes and spurious peaks).
     check : FullModelCheck or None
         When the run was on the fast model: the full model at its answer (status
         ``"unconfirmed"`` when they disagree beyond the certificate); None on the full model.
+    fit : bayesplate.estimators.assess.FitStatement or None
+        Chi-square of the paired peaks with the declared deviations, its degrees of freedom,
+        p-value and worst residuals (None until assessed; :func:`estimate` assesses).
+    warnings : tuple of str
+        Why the answer should not be trusted, one sentence each (empty when nothing is).
     """
 
     method: str
@@ -164,6 +178,8 @@ class EstimateResult:
     status: str = ""
     pairing: object = field(default=None, repr=False, compare=False)
     check: object = field(default=None, repr=False, compare=False)
+    fit: object = field(default=None, repr=False, compare=False)
+    warnings: tuple = ()
 
     def __post_init__(self):
         if not self.status:

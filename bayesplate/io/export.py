@@ -200,7 +200,12 @@ def estimate_to_dict(result, case, model, budget=None, scale=None):
     -------
     dict
         Constants ``{"E1_GPa": {"mean", "sd"}, ...}`` in case units, stiffness in GPa,
-        frequencies and residuals in Hz, per-stage constants for a two-stage method.
+        frequencies and residuals in Hz, per-stage constants for a two-stage method;
+        ``"status"`` (:data:`bayesplate.estimators.STATUSES`: ``"converged"`` only when the
+        iteration stopped and nothing was flagged; ``"converged"`` the boolean is that it
+        stopped), ``"fit"`` (``chi2``, ``dof``, ``p_value``, ``p_effective``, ``n_paired``
+        and ``worst_residuals``: ``peak`` 1-based, ``measured_Hz``, ``computed_Hz``, ``sd``;
+        None when the result was not assessed) and ``"warnings"`` (sentences).
     """
 
     def constants(r):
@@ -217,6 +222,9 @@ def estimate_to_dict(result, case, model, budget=None, scale=None):
         "convention": None if conventions is None else vars(conventions),
         "mesh": [model.mesh.nx, model.mesh.ny],
         "converged": bool(result.converged),
+        "status": result.status,
+        "fit": None if result.fit is None else result.fit.to_dict(),
+        "warnings": list(result.warnings),
         "iterations": int(result.iterations),
         "message": result.message,
         "n_solves": int(result.n_solves),

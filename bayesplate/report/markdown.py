@@ -135,6 +135,7 @@ def _estimates_section(data, figures):
     rows += [
         ["iterations", *[r[m]["iterations"] for m in methods]],
         ["converged", *["yes" if r[m]["converged"] else "**no**" for m in methods]],
+        ["status", *[_status_cell(r[m]) for m in methods]],
         ["forward solves", *[r[m]["n_solves"] for m in methods]],
         ["time (s)", *[f"{r[m]['wall_time']:.0f}" for m in methods]],
     ]
@@ -153,6 +154,7 @@ def _estimates_section(data, figures):
         "",
     ]
     lines += [f"- {m}: {r[m]['message']}" for m in methods] + [""]
+    lines += _fit_lines(r, methods)
     scaled = [m for m in methods if r[m].get("error_scale")]
     if scaled:
         lines += [f"- {m}: {r[m]['error_scale']['text']}; s_hat "
@@ -176,6 +178,28 @@ def _estimates_section(data, figures):
             "Per-mode residuals at each estimate: (measured - computed) / sigma",
         )
     )
+
+
+def _status_cell(result):
+    """An estimator's status: "converged" only when it stopped with nothing flagged."""
+    status = result.get("status") or ("converged" if result["converged"] else "stopped")
+    return status if status == "converged" else f"**{status}**"
+
+
+def _fit_lines(r, methods):
+    """Each estimate's fit statement and its warnings (absent from caches made before)."""
+    lines = []
+    for m in methods:
+        fit = r[m].get("fit")
+        if fit is None:
+            continue
+        worst = ", ".join(f"peak {w['peak']} {w['sd']:+.1f} sd" for w in fit["worst_residuals"])
+        lines.append(
+            f"- {m} fit: chi-square {fit['chi2']:.3g} on {fit['dof']:.1f} degrees of freedom, "
+            f"p {fit['p_value']:.2g}; worst residuals: {worst or 'none'}"
+        )
+        lines += [f"  - **warning**: {w}" for w in r[m].get("warnings", ())]
+    return lines + ([""] if lines else [])
 
 
 def _check_cell(check):

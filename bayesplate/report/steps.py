@@ -95,6 +95,8 @@ def estimate_step(case, model, method, pairing, fast=None):
             for s in r.stages
         ],
         "status": r.status,
+        "fit": None if r.fit is None else r.fit.to_dict(),
+        "warnings": list(r.warnings),
         "check": None if r.check is None else _check_data(r.check),
         "error_scale": scale,
     }
