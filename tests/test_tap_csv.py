@@ -332,15 +332,17 @@ def test_csv_options_are_refused_for_a_wav_or_frfs(tmp_path, capsys, sheet):
     wav = tmp_path / "tap.wav"
     wavfile.write(wav, int(RATE_HZ), np.column_stack([response, force]))
     out = tmp_path / "case.toml"
-    status, _, err = run_import(capsys, wav, sheet, out, "--response-column", "signal")
+    status, _, err = run_import(
+        capsys, wav, sheet, out, "--band", *BAND, "--response-column", "signal"
+    )
     assert_refused(status, err, "tap.wav", "--response-column", "CSV time series")
-    status, _, err = run_import(capsys, wav, sheet, out, "--rate-Hz", "44100")
+    status, _, err = run_import(capsys, wav, sheet, out, "--band", *BAND, "--rate-Hz", "44100")
     assert_refused(status, err, "tap.wav", "--rate-Hz = 44100.0", "48000 Hz")
     frf = tmp_path / "frf.csv"
     frf.write_text("frequency_Hz,H1_re,H1_im\n" + "".join(f"{i},1.0,0.5\n" for i in range(64)))
-    status, _, err = run_import(capsys, frf, sheet, out, "--rate-Hz", "48000")
+    status, _, err = run_import(capsys, frf, sheet, out, "--band", *BAND, "--rate-Hz", "48000")
     assert_refused(status, err, "frf.csv", "--rate-Hz", "holds FRFs")
-    status, _, err = run_import(capsys, wav, sheet, out, "--rate-Hz", "-5")
+    status, _, err = run_import(capsys, wav, sheet, out, "--band", *BAND, "--rate-Hz", "-5")
     assert_refused(status, err, "--rate-Hz", "'-5': must be a positive number")
     assert not out.exists()
 
