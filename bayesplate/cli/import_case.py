@@ -20,6 +20,9 @@ _TAP_OPTIONS = (
     "channel",
     "points",
     "modes",
+    "rate_Hz",
+    "force_column",
+    "response_column",
 )
 
 
