@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -17,6 +17,7 @@ from .conventions import resolve_conventions
 from .fast import case_fast_model, confirmed_run, modes_to_certify, resolve_forward
 from .iteration import DEFAULT_MAX_ITER, run
 from .result import METHODS
+from .starts import log_evidence, rivals_of, start_points
 
 log = logging.getLogger(__name__)
 
@@ -99,7 +100,8 @@ def estimate(
     forward : {"auto", "fast", "full"}
         Iterate on the certified fast model, the answer confirmed by the full one
         (:mod:`bayesplate.estimators.fast`; the result's ``check``), or on the full model
-        throughout; ``"auto"``: fast on meshes of more than ``FAST_MIN_DOFS`` unknowns.
+        throughout; ``"auto"``: fast on meshes of more than ``FAST_MIN_DOFS`` unknowns,
+        except for B (a handful of solves, fewer than the fast model's build).
     fast : bayesplate.reduced.CertifiedModel, optional
         A fast model already built for this case (implies the fast path); see
         :func:`estimate_on_fast` to get it back enriched.
@@ -142,7 +144,7 @@ def _estimate(
     if method not in METHODS:
         raise ValueError(f"method = {method!r}: must be one of {METHODS}")
     model = model or PlateModel.from_case(case)
-    if fast is not None or resolve_forward(forward, model) == "fast":
+    if fast is not None or resolve_forward(forward, model, method) == "fast":
         options = {"tol": tol, "max_iter": max_iter, "convention": convention,
                    "prior_mean": prior_mean, "prior_sd": prior_sd, "stage1_tol": stage1_tol,
                    "stage2_factor": stage2_factor, "stage2_sd": stage2_sd, "pairing": pairing,
@@ -194,10 +196,10 @@ def _estimate(
     # one more probable at its own estimate wins. B settles it (its prior anchors it).
     first = _most_probable(case, model, b0, V, "B", mean, sd, options)
     if method == "B":
-        return _assigned(first.result, first.pair, first.rounds, first.note)
+        return _assigned(first.result, first.pair, first.rounds, first.note, first.rivals)
     if not first.result.converged:  # no estimate to start from: the method's own rounds
         own = _most_probable(case, model, b0, V, method, mean, sd, options)
-        return _assigned(own.result, own.pair, own.rounds, own.note)
+        return _assigned(own.result, own.pair, own.rounds, own.note, own.rivals)
     # MVE and MVE-mod from B's estimate, the assigned modes followed by MAC between iterates
     # (identified where B converged, not at a far prior): re-pairing by sorted index lets two
     # close modes swap places every iteration while MVE moves a weakly determined constant
@@ -208,7 +210,7 @@ def _estimate(
     s = _settle(case, model, b0, V, method, mean, sd, follow, first.pair, first.result.b)
     note = "" if s.settled else f"; the assignment did not settle in {s.rounds} rounds"
     note += f"; started from B's estimate (assignment settled in {first.rounds} rounds)"
-    return _assigned(s.result, s.pair, first.rounds + s.rounds, note)
+    return _assigned(s.result, s.pair, first.rounds + s.rounds, note, first.rivals)
 
 
 def estimate_on_fast(case, method="MVE", model=None, fast=None, *, rng=None, **options):
@@ -316,17 +318,74 @@ def settle_pairing(
 
 
 def _most_probable(case, model, b0, V, method, mean, sd, options):
-    """Two starts (by order; lowest peaks first), each settled; the more probable one."""
+    """Starts by order, lowest peaks first and over the constants, each settled; the best.
+
+    The most probable by its evidence (:func:`.starts.log_evidence`), the other answers its
+    rivals (:func:`.starts.rivals_of`). A start over the constants (:func:`.starts.start_points`)
+    is settled only when its assignment at its own point is one not tried yet.
+    """
     settle = (case, model, b0, V, method, mean, sd, options)
-    a = _settle(*settle, pair_measured(case, model, b0, "order"), None)
-    if a.settled and a.pair.assignment.in_order and a.result.converged:
-        return a
-    b = _settle(*settle, *_lowest_first(*settle))
-    best = max((b, a), key=lambda x: (x.settled, x.result.converged, x.log_probability))
+    tried = [_settle(*settle, pair_measured(case, model, b0, "order"), None)]
+    a = tried[0]
+    if not (a.settled and a.pair.assignment.in_order and a.result.converged):
+        tried.append(_settle(*settle, *_lowest_first(*settle)))
+    tried += _other_starts(settle, tried)
+    scored = [(t, log_evidence(case, t.result, t.pair.assignment, (b0, V))) for t in tried]
+    best, evidence = max(scored, key=lambda x: (x[0].result.converged, x[1], x[0].settled))
+    rivals = rivals_of((best.result, evidence), [(t.result, e) for t, e in scored])
     note = "" if best.settled else (
         f"; the assignment did not settle in {best.rounds} rounds: kept the most probable"
     )  # fmt: skip
-    return replace(best, rounds=a.rounds + b.rounds, note=note)
+    if len(tried) > 1:
+        note += (f"; {len(tried)} starts settled, the most probable kept"
+                 f" ({len(rivals)} other answer{'s' if len(rivals) != 1 else ''})")  # fmt: skip
+    rounds = sum(t.rounds for t in tried)
+    return replace(best, rounds=rounds, note=note, rivals=rivals)
+
+
+def _other_starts(settle, tried):
+    """Settled answers from the starts over the constants that might beat those `tried`.
+
+    Each start is screened by the assignment made at it, its probability integrated over
+    the prior (linearised there: one solve); those within :data:`SCREEN_NATS` of the best
+    tried answer's, screened the same way, and new, are settled (at most
+    :data:`MAX_OTHER_STARTS`, the most probable first).
+    """
+    case, model, b0, V, method, mean, sd, options = settle
+    m = case.measured.size
+    done = [t for t in tried if t.result.converged and laminate.is_physical(t.result.b)]
+    level = max(
+        (_screen(case, model, t.result.b, V, b0, t.pair) for t in done),
+        key=lambda p: p.assignment.log_probability,
+        default=None,
+    )
+    screened = [t.pair for t in tried]
+    found = []
+    for e in start_points(mean):
+        pair = _screen(case, model, laminate.stiffness_from_engineering(e), V, b0)
+        if any(_same(pair, other, m) for other in screened):
+            continue
+        screened.append(pair)
+        if level is None or pair.assignment.log_probability > (
+            level.assignment.log_probability - SCREEN_NATS
+        ):
+            found.append(
+                (pair.assignment.log_probability, laminate.stiffness_from_engineering(e), pair)
+            )
+    found.sort(key=lambda x: -x[0])
+    return [_settle(*settle, pair, b) for _, b, pair in found[:MAX_OTHER_STARTS]]
+
+
+def _screen(case, model, b, V, b0, start=None):
+    """The most probable assignment at `b`, the constants integrated over the prior at b0."""
+    return pair_measured(case, model, b, "likelihood", prior=(b0, V), start=start)
+
+
+#: A start over the constants is settled when its screened assignment is at most this many
+#: nats less probable than the best tried answer's.
+SCREEN_NATS = 5.0
+#: Starts over the constants settled at most.
+MAX_OTHER_STARTS = 3
 
 
 @dataclass
@@ -339,6 +398,7 @@ class _Settled:
     rounds: int
     settled: bool
     note: str = ""
+    rivals: list = field(default_factory=list)  # (constants, nats behind), other answers
 
 
 def _settle(case, model, b0, V, method, mean, sd, options, pair, start):
@@ -411,8 +471,8 @@ def _order_checked(result, pair):
     return replace(result, settings=settings, message=f"{result.message}; {note}", pairing=pair)
 
 
-def _assigned(result, pair, rounds, note):
-    """The result with its assignment (`pair`'s) in ``settings`` and said in its message."""
+def _assigned(result, pair, rounds, note, rivals=()):
+    """The result with its assignment (`pair`'s) and `rivals` in ``settings``, said too."""
     a = pair.assignment
     settings = {
         **result.settings,
@@ -420,6 +480,7 @@ def _assigned(result, pair, rounds, note):
         "assignment_rounds": rounds,
         "unobserved_modes": (a.unobserved + 1).tolist(),
         "spurious_peaks": (a.spurious + 1).tolist(),
+        "rivals": list(rivals),
     }
     message = f"{result.message}; assignment: {a.describe()}{note}"
     return replace(result, settings=settings, message=message, pairing=pair)

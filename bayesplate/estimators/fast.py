@@ -75,12 +75,18 @@ class FastModelWarning(UserWarning):
     """The full model disagrees with the fast model's answer beyond the certificate."""
 
 
-def resolve_forward(forward, model):
-    """``"fast"`` or ``"full"`` for a ``forward`` choice on `model` (see :data:`FORWARDS`)."""
+def resolve_forward(forward, model, method=None):
+    """``"fast"`` or ``"full"`` for a ``forward`` choice on `model` (see :data:`FORWARDS`).
+
+    ``"auto"``: fast above :data:`FAST_MIN_DOFS` unknowns, except for ``method="B"``, whose
+    few iterations (5-10 solves a start) cost less than the fast model's build (about 20).
+    """
     if forward not in FORWARDS:
         raise ValueError(f"forward = {forward!r}: must be one of {FORWARDS}")
     if forward != "auto":
         return forward
+    if method == "B":
+        return "full"
     return "fast" if model.mesh.n_dofs > FAST_MIN_DOFS else "full"
 
 
