@@ -6,30 +6,170 @@ a plate model of tens of megabytes. Forked worker processes inherit it from the
 parent instead of receiving a pickled copy; only the small task indices go out and the
 results come back. Where ``fork`` is not available (Windows) or one worker is asked for,
 the tasks run in this process, in order, with the same results.
+
+No process outlives the command that started it (issue 39). A forked process leaves Ctrl-C,
+SIGHUP and SIGTERM's handling to its parent (it ignores the first two and dies of the
+third, as :meth:`multiprocessing.Pool.terminate` and :meth:`Forked.stop` send it), closes
+the pipe ends it does not use (the parent's ends of :class:`Forked` results: otherwise a
+child writing a large result into a pipe it holds open itself blocks for good), and ends
+when its parent ends, also when the parent is killed with SIGKILL (:func:`die_with_parent`:
+the parent-death signal on Linux, a thread watching the parent elsewhere). The parent ends
+its children on every way out: the ``with`` blocks of :func:`fork_map` and :class:`Forked`,
+and :func:`end_children` for the command line's last word.
 """
 
 from __future__ import annotations
 
+import ctypes
 import multiprocessing
 import os
 import signal
+import sys
+import threading
+import time
 
 from threadpoolctl import threadpool_limits
 
-__all__ = ["Forked", "available_cores", "fork_map"]
+__all__ = ["Forked", "available_cores", "die_with_parent", "end_children", "fork_map"]
 
 _TASK = None  # (function, items) of the map in progress, inherited by forked workers
+#: The parent's read ends of the running :class:`Forked` calls: every forked child closes
+#: them (a child holding a read end open keeps a writer blocked after the parent is gone).
+_PARENT_ENDS = set()
+#: How often a child without the parent-death signal looks whether its parent is gone (s).
+WATCH_INTERVAL = 0.25
+_PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
 
 
-def _start_worker():
-    """Set up a worker: Ctrl-C ignored, one BLAS thread.
+def die_with_parent(parent=None, *, watch=False):
+    """End this process as soon as its parent process ends, however the parent ends.
+
+    On Linux the kernel sends SIGKILL when the parent dies (``prctl(PR_SET_PDEATHSIG)``),
+    strictly when the parent's thread that forked this process ends: call it in a child
+    forked by a thread that lives as long as the parent needs the child (the main thread,
+    a pool's). Elsewhere, or with `watch` (a child started by a thread of unknown life),
+    a daemon thread looks every
+    :data:`WATCH_INTERVAL` s whether the parent is still the one it was and ends the
+    process (``os._exit(1)``) once it is not.
+
+    Parameters
+    ----------
+    parent : int, optional
+        The parent's process id as the parent knew it before forking (default: the
+        parent now). A parent that already ended before this call ends the process here.
+    watch : bool
+        Watch with a thread even where the parent-death signal is available.
+    """
+    parent = os.getppid() if parent is None else int(parent)
+    if not watch and sys.platform.startswith("linux"):
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            armed = libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0) == 0
+        except (OSError, AttributeError):  # no libc prctl (another C library)
+            armed = False
+        if armed:
+            if os.getppid() != parent:  # the parent ended between the fork and the prctl
+                os._exit(1)
+            return
+    if os.getppid() != parent:
+        os._exit(1)
+    threading.Thread(target=_watch_parent, args=(parent,), name="bayesplate-parent-watch",
+                     daemon=True).start()  # fmt: skip
+
+
+def _watch_parent(parent):
+    while os.getppid() == parent:
+        time.sleep(WATCH_INTERVAL)
+    os._exit(1)
+
+
+#: Signals held (blocked) from before a fork until the child has set its own handling.
+_HELD = frozenset(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP")
+                  if hasattr(signal, name))  # fmt: skip
+
+
+class _signals_held:
+    """A block in which :data:`_HELD` signals wait (blocked); a fork inherits the block.
+
+    A child forked in the block starts with the signals blocked and unblocks them in
+    :func:`_child_setup`, once it has its own handling: a SIGTERM that ends it while it is
+    still in Python's fork hooks would otherwise run the handler inherited from the parent
+    (the command line's: a ``KeyboardInterrupt`` and a traceback in the child). Signals to
+    this process wait until the block ends, then act (a ``KeyboardInterrupt`` raised on
+    leaving it).
+    """
+
+    def __enter__(self):
+        self.saved = None
+        if hasattr(signal, "pthread_sigmask"):
+            self.saved = signal.pthread_sigmask(signal.SIG_BLOCK, _HELD)
+        return self
+
+    def __exit__(self, *exc):
+        if self.saved is not None:
+            signal.pthread_sigmask(signal.SIG_SETMASK, self.saved)
+        return False
+
+
+def _child_setup(parent):
+    """In a forked child, first: the signals left to the parent, its pipe ends closed.
+
+    SIGINT (Ctrl-C reaches the whole foreground process group) and SIGHUP are ignored: the
+    parent stops the child. SIGTERM kills it (the default; a handler inherited from the
+    command line would turn it into a KeyboardInterrupt and a traceback here): it is what
+    the parent sends to end it, and what a batch system sends to every process of a job.
+    Held since before the fork (:class:`_signals_held`), the signals act from here on.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, _HELD)
+    die_with_parent(parent)
+    for end in list(_PARENT_ENDS):
+        end.close()
+    _PARENT_ENDS.clear()
+
+
+def _start_worker(parent):
+    """Set up a worker: signals left to the parent, ended with it; one BLAS thread.
 
     Workers leave Ctrl-C to the parent, which stops them (no traceback from each). Each uses
     one BLAS thread: the workers share the cores, more would oversubscribe them (two workers
     at two threads each were 0.57 x as fast as one process, ``reports/benchmark_pool.md``).
     """
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _child_setup(parent)
     threadpool_limits(limits=1)
+
+
+def end_children(keep=(), timeout=5.0):
+    """Terminate and reap this process's children (:mod:`multiprocessing`'s) but `keep`.
+
+    SIGTERM first; SIGKILL for any still alive after `timeout` s. The command line's last
+    step on every way out: the ``with`` blocks end their own children, this ends any a
+    block left (an interruption while a pool was starting, say).
+
+    Parameters
+    ----------
+    keep : collection of multiprocessing.Process
+        Children to leave alone (those that were there before, for a caller in-process).
+    timeout : float
+
+    Returns
+    -------
+    int
+        How many children were still running and were ended.
+    """
+    children = [p for p in multiprocessing.active_children() if p not in keep]
+    for child in children:
+        child.terminate()
+    deadline = time.monotonic() + timeout
+    for child in children:
+        child.join(max(0.0, deadline - time.monotonic()))
+        if child.exitcode is None:
+            child.kill()
+            child.join()
+    return len(children)
 
 
 def _call(index):
@@ -72,18 +212,22 @@ def fork_map(function, items, workers=1):
         with threadpool_limits(limits=1, user_api="blas"):
             return [function(item) for item in items]
     _TASK = (function, items)
+    pool = None
     try:
         context = multiprocessing.get_context("fork")
-        # a Pool, not a ProcessPoolExecutor: on Ctrl-C (or a failed task) leaving the block
-        # terminates the workers at once, where the executor waits for their tasks
-        with context.Pool(n, initializer=_start_worker) as pool:
-            return pool.map(_call, range(len(items)), chunksize=1)
+        # a Pool, not a ProcessPoolExecutor: on Ctrl-C (or a failed task) terminate() ends
+        # the workers at once, where the executor waits for their tasks
+        with _signals_held():  # the workers (and the pool's threads) start with them held
+            pool = context.Pool(n, initializer=_start_worker, initargs=(os.getpid(),))
+        return pool.map(_call, range(len(items)), chunksize=1)
     finally:
         _TASK = None
+        if pool is not None:
+            pool.terminate()  # as leaving ``with pool`` does: the workers ended and reaped
 
 
-def _run_and_send(function, send):
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent stops this process
+def _run_and_send(function, send, parent):
+    _child_setup(parent)  # the parent stops this process; its read end closed here
     try:
         outcome = (True, function())
     except BaseException as err:  # noqa: BLE001 - every failure goes back to the parent
@@ -101,7 +245,8 @@ class Forked:
 
     The process inherits everything (the plate, a fast model) and sends back only the
     result, which must be picklable. It ignores Ctrl-C: the parent stops it (:meth:`stop`,
-    or leaving a ``with`` block). It is daemonic, so maps inside it run serially
+    or leaving a ``with`` block), and it ends when the parent ends (:func:`die_with_parent`).
+    It is daemonic, so maps inside it run serially
     (:func:`fork_map`). Where ``fork`` is not available, ``function`` runs in this process
     when the result is asked for.
 
@@ -116,10 +261,18 @@ class Forked:
         if "fork" in multiprocessing.get_all_start_methods():
             context = multiprocessing.get_context("fork")
             self._receive, send = context.Pipe(duplex=False)
-            self._process = context.Process(target=_run_and_send, args=(function, send),
-                                            daemon=True)  # fmt: skip
-            self._process.start()
-            send.close()
+            _PARENT_ENDS.add(self._receive)  # closed in the child, as in any child forked later
+            try:
+                self._process = context.Process(
+                    target=_run_and_send, args=(function, send, os.getpid()), daemon=True
+                )
+                with _signals_held():
+                    self._process.start()
+            except BaseException:  # a signal held during the start acts on leaving the block
+                self.stop()
+                raise
+            finally:
+                send.close()
 
     def result(self):
         """The function's return value; its exception is raised here."""
@@ -132,17 +285,30 @@ class Forked:
             raise RuntimeError(f"the forked process ended without a result "
                                f"(exit code {self._process.exitcode})") from None  # fmt: skip
         finally:
-            self._receive.close()
+            self._close()
         self._process.join()
         if ok:
             return value
         raise value
 
-    def stop(self):
-        """End the process if it is still running."""
-        if self._process is not None and self._process.is_alive():
+    def _close(self):
+        _PARENT_ENDS.discard(self._receive)
+        self._receive.close()
+
+    def stop(self, timeout=5.0):
+        """End the process if it is still running (SIGTERM; SIGKILL after `timeout` s)."""
+        if self._receive is None:  # no fork here
+            return
+        if self._process is None or self._process.pid is None:  # not started
+            self._close()
+            return
+        if self._process.is_alive():
             self._process.terminate()
-            self._process.join()
+            self._process.join(timeout)
+            if self._process.exitcode is None:
+                self._process.kill()
+        self._process.join()
+        self._close()
 
     def __enter__(self):
         return self

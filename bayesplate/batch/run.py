@@ -14,6 +14,7 @@ import glob
 import logging
 import os
 import pathlib
+import sys
 from dataclasses import dataclass, field
 
 from ..io import CaseError, save_figure
@@ -195,7 +196,15 @@ def _result_of(future, name, step):
 
 
 class _client:
-    """A ``distributed.Client``: on `scheduler`, or on a LocalCluster started here."""
+    """A ``distributed.Client``: on `scheduler`, or on a LocalCluster started here.
+
+    A cluster started here is closed on every way out (the block's end, an error, Ctrl-C or
+    SIGTERM: :mod:`bayesplate.cli.main` makes them one), also when starting it is what was
+    interrupted. If this process is killed (SIGKILL), its workers end at once by
+    themselves: each holds a pipe from this process open and exits when it closes
+    (``distributed.process``; the processes this one forks die with it, so that none keeps
+    the pipe open, :func:`bayesplate.parallel.die_with_parent`).
+    """
 
     def __init__(self, scheduler, workers):
         self.scheduler, self.workers = scheduler, workers
@@ -204,11 +213,21 @@ class _client:
         self.level = self.logger.level
 
     def __enter__(self):
-        from distributed import Client, LocalCluster
-
         # Dask's INFO records (workers starting, connections) would reach the command
         # line's root handler: only its warnings are progress worth showing.
         self.logger.setLevel(max(self.level, logging.WARNING))
+        try:
+            return self._open()
+        except BaseException:
+            self.__exit__(*sys.exc_info())  # a cluster half started is closed too
+            # interrupted inside LocalCluster(): its start goes on in Dask's thread until
+            # this process ends (its workers are ended by the command line), and its INFO
+            # records would follow the command's last line: Dask's logger stays quiet
+            self.logger.setLevel(max(self.level, logging.ERROR))
+            raise
+
+    def _open(self):
+        from distributed import Client, LocalCluster
 
         if self.scheduler is not None and not isinstance(self.scheduler, str):
             return self.scheduler  # a client given by the caller: theirs to close
@@ -220,26 +239,41 @@ class _client:
                 raise CaseError(
                     "--scheduler", self.scheduler, rule=" ".join(rule.split())
                 ) from None
-        else:
-            n = self.workers or _cores()
-            cluster = LocalCluster(
-                n_workers=n,
-                threads_per_worker=1,
-                processes=True,
-                dashboard_address=None,
-                env=_ONE_THREAD,
-            )
-            self.owned.append(cluster)
-            client = Client(cluster)
+            self.owned.insert(0, client)
+            return client
+        n = self.workers or _cores()
+        cluster = LocalCluster(
+            n_workers=n,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            env=_ONE_THREAD,
+        )
+        self.owned.append(cluster)
+        client = Client(cluster)
         self.owned.insert(0, client)
         return client
 
-    def __exit__(self, *exc):
+    def __exit__(self, kind, *exc):
+        owned, self.owned = self.owned, []
+        if kind is not None:
+            # stopped (an error, Ctrl-C, SIGTERM): the tasks under way are dropped, and
+            # Dask's warnings that it had to kill their workers would follow the command's
+            # own one line
+            self.logger.setLevel(max(self.level, logging.ERROR))
         try:
-            for thing in self.owned:
-                thing.close()
+            _close_all(owned)
         finally:
             self.logger.setLevel(self.level)
+
+
+def _close_all(things):
+    """Close each in turn (the client, then its cluster), the rest even if one fails."""
+    if things:
+        try:
+            things[0].close()
+        finally:
+            _close_all(things[1:])
 
 
 #: BLAS and OpenMP threads of each local worker (a task also limits them by threadpoolctl).
