@@ -137,7 +137,13 @@ def test_sample_command_on_dask_workers_gives_the_same_chain(client, tmp_path, c
     for doc in (want, got):
         doc.pop("timings_s", None)
         doc.pop("n_evaluations", None)  # counted in this process only: 0 on the workers
-    assert got["constants"] == want["constants"]
+    # the same chain to round-off: a worker's OpenBLAS starts with one thread
+    # (OPENBLAS_NUM_THREADS=1) where this process is limited to one by threadpoolctl, and
+    # the two pick kernels that sum in another order (1e-13 relative measured with numpy
+    # 2.4 / OpenBLAS 0.3.31; this process with and without the limit differ by as much)
+    for key, value in want["constants"].items():
+        for stat, number in value.items():
+            assert got["constants"][key][stat] == pytest.approx(number, rel=1e-9), (key, stat)
     assert got["constants"]["E1_GPa"]["mean"] > 0
     assert client.status == "running"  # a cluster reached by address is not shut down
     capsys.readouterr()

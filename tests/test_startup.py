@@ -237,6 +237,15 @@ def test_the_parser_choices_match_the_estimators():
     assert options.DEFAULT_MAX_ITER == DEFAULT_MAX_ITER
 
 
+def test_the_parser_band_defaults_match_the_import():
+    from bayesplate.cli import options
+    from bayesplate.io import band
+
+    assert options.DEFAULT_BAND_MODES == band.DEFAULT_BAND_MODES
+    assert options.BAND_LOW_FACTOR == band.BAND_LOW_FACTOR
+    assert options.BAND_HIGH_FACTOR == band.BAND_HIGH_FACTOR
+
+
 def test_a_closed_standard_output_ends_in_one_line_without_traceback():
     # `bayesplate cases | head -0`: the reader is gone before the first line is written
     env = dict(os.environ, PYTHONPATH=str(ROOT))

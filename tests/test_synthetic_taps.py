@@ -309,3 +309,33 @@ def test_plate_a_little_thicker_denser_or_tapered(plate1):
     shift = np.abs(f3 / f0 - 1)
     print(f"taper 5 %: frequency shifts {shift.round(5)}")
     assert 1e-4 < shift.max() < 0.02
+
+
+def test_report_from_taps_shows_the_tap_test(tmp_path, capsys, sheet, plate1, rng):
+    # `bayesplate report --taps ... --plate ...`: the import with no options into DIR/case.toml,
+    # then the report, with the peaks' evidence and roles and the FRF and stabilisation chart.
+    # The sensor at (200, 70) mm, near a nodal line of mode 3 (a search over a 5 mm grid:
+    # mode 3's amplitude there below 1 % of its largest, every other mode's above 42 %), set
+    # to the line itself (amplitude 0): the taps miss mode 3, and the report must name it as
+    # the computed mode no peak explains.
+    model, b = plate1
+    frequency, amplitude = plate_modes_at(model, b, TAP_MM, (200.0, 70.0), 10)
+    assert np.abs(amplitude[2]) < 0.01 * np.abs(amplitude).max()
+    amplitude[2] = 0.0
+    seen = amplitude != 0.0
+    paths = write_taps(tmp_path / "taps", taps_of(frequency, amplitude, rng), RATE_HZ)
+    out = tmp_path / "report"
+    words = ["report", "--taps", *map(str, paths), "--plate", str(sheet), "-o", str(out)]
+    status = main([*words, "--no-diagnose", "--no-sample"])  # plate1: 8 x 4 already
+    assert status == 0, capsys.readouterr().err
+    text = (out / "report.md").read_text(encoding="utf-8")
+    assert "## Tap test" in text and "| p spurious | role |" in text
+    for name in ("frf.png", "stabilisation.png"):
+        assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    case = load_case(out / "case.toml")
+    assert case.measured.p_spurious is not None
+    found = case.measured.frequency_Hz
+    assert len(found) == int(seen.sum())  # the modes the sensor sees, no more
+    np.testing.assert_allclose(found, frequency[seen], rtol=1e-3)
+    missed = ", ".join(str(j + 1) for j in np.flatnonzero(~seen) if frequency[j] < found.max())
+    assert f"unobserved: a node at the tap or the sensor, or too weak): {missed}." in text

@@ -4,8 +4,13 @@ from __future__ import annotations
 
 import pathlib
 
-from ..io.band import BAND_HIGH_FACTOR, BAND_LOW_FACTOR, DEFAULT_BAND_MODES
-from .options import finite_float, positive_int
+from .options import (
+    BAND_HIGH_FACTOR,
+    BAND_LOW_FACTOR,
+    DEFAULT_BAND_MODES,
+    finite_float,
+    positive_int,
+)
 
 __all__ = ["register"]
 
@@ -28,6 +33,30 @@ _TAP_OPTIONS = (
 
 def run(args):
     """Read the test file, combine it with the plate sheet, write the case file."""
+    import_test(args)
+    return 0
+
+
+def import_taps(tests, plate, output, modes=None):
+    """``bayesplate import TESTS --plate PLATE -o OUTPUT [--modes N]``, its tap test returned.
+
+    What ``bayesplate report --taps`` runs first.
+
+    Returns
+    -------
+    bayesplate.report.data.TapTest
+    """
+    import argparse
+
+    parser = argparse.ArgumentParser(prog="bayesplate")
+    register(parser.add_subparsers())
+    words = ["import", *map(str, tests), "--plate", str(plate), "-o", str(output)]
+    words += [] if modes is None else ["--modes", str(modes)]
+    return import_test(parser.parse_args(words))
+
+
+def import_test(args):
+    """:func:`run`'s work: the case file written; the tap test (None for a file of modes)."""
     from ..io import (
         CaseError,
         case_from_modal_data,
@@ -44,8 +73,9 @@ def run(args):
     plate = _plate_path(args.plate)
     tests = [str(test) for test in args.test]
     tap_options = any(getattr(args, name) is not None for name in _TAP_OPTIONS)
+    taps = None
     if tap_options or len(tests) > 1 or is_tap_test(tests[0]):
-        modal = _tap_modal_data(args, tests)
+        modal, taps = _tap_modal_data(args, tests)
     else:
         modal = read_modal_data(tests[0])
     text = case_from_modal_data(plate, modal, sigma_rel=args.sigma_rel)
@@ -55,11 +85,11 @@ def run(args):
         raise CaseError("-o", args.output, f"cannot write ({err.strerror or err})") from None
     named = tests[0] if len(tests) == 1 else f"{len(tests)} taps ({tests[0]}, ...)"
     print(f"{modal.size} modes, {modal.n_points} points from {named} -> {args.output}")
-    return 0
+    return taps
 
 
 def _tap_modal_data(args, tests):
-    """Modes of a tap test: poles extracted, written and charted on request, then chosen."""
+    """Modes of a tap test and the test: poles extracted, written and charted on request."""
     from ..io import CaseError
     from ..io.poles import DEFAULT_ORDER, extract_poles, modal_data_from_poles
     from ..io.poles_file import read_poles, write_chart, write_poles
@@ -93,7 +123,10 @@ def _tap_modal_data(args, tests):
         _written("--chart", args.chart, write_chart, args.chart, analysis,
                  spectra.frequency_Hz, spectra.frf, kept, spectra.coherence)  # fmt: skip
         print(f"stabilisation chart -> {args.chart}")
-    return modal_data_from_poles(spectra, kept, band_Hz=band)
+    from ..report.data import TapTest
+
+    taps = TapTest(spectra, analysis, tuple(kept), tuple(tests))
+    return modal_data_from_poles(spectra, kept, band_Hz=band), taps
 
 
 def _prior_band(args, spectra):

@@ -159,6 +159,11 @@ METHOD_CHOICES = ("B", "MVE", "MVE-mod")
 #: :data:`bayesplate.discrepancy.mesh_error.MESH_ERROR_PARTS`, the first the default.
 MESH_ERROR_CHOICES = ("whole", "unabsorbed")
 CONVENTION_CHOICES = ("paper", "full-prior", "printed")
+#: :data:`bayesplate.io.band.DEFAULT_BAND_MODES`, ``BAND_LOW_FACTOR`` and ``BAND_HIGH_FACTOR``,
+#: spelled here so that the parser does not import :mod:`bayesplate.io` at start-up.
+DEFAULT_BAND_MODES = 10
+BAND_LOW_FACTOR = 0.5
+BAND_HIGH_FACTOR = 1.25
 FORWARD_CHOICES = ("auto", "fast", "full")
 DEFAULT_MAX_ITER = 200
 

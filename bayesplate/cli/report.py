@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 from .options import (
-    add_case_argument,
     add_mesh_option,
     add_pairing_option,
     mesh_of,
+    positive_int,
     resolve_case,
     seed_int,
 )
@@ -16,9 +16,15 @@ __all__ = ["register"]
 
 def run(args):
     """Make (or update) the report folder of a case."""
+    from ..io import CaseError
     from ..report import ReportOptions, make_report
 
-    case = resolve_case(args.case)
+    case_file, taps = args.case, None
+    if args.taps:
+        case_file, taps = _from_taps(args)
+    elif args.case is None:
+        raise CaseError("CASE", rule="give a case file, or --taps with --plate")
+    case = resolve_case(case_file)
     options = ReportOptions(
         quick=args.quick,
         mesh=mesh_of(args),
@@ -27,9 +33,26 @@ def run(args):
         sample=not args.no_sample,
         pairing=args.pairing,
     )
-    path, data = make_report(case.path, args.output, options, label=args.case)
+    path, data = make_report(case.path, args.output, options, label=str(case_file), taps=taps)
     print(f"{path}: {len(data.computed)} steps computed, {len(data.reused)} reused from the cache")
     return 0
+
+
+def _from_taps(args):
+    """``--taps``: the case written into the report's folder by ``import``; the tap test."""
+    import pathlib
+
+    from ..io import CaseError
+    from .import_case import import_taps
+
+    if args.plate is None:
+        raise CaseError("--plate", rule="required with --taps: the plate sheet (TOML)")
+    if args.case is not None:
+        raise CaseError("CASE", args.case, "give a case file or --taps, not both")
+    out = pathlib.Path(args.output)
+    out.mkdir(parents=True, exist_ok=True)
+    case_file = out / "case.toml"
+    return case_file, import_taps(args.taps, args.plate, case_file, args.modes)
 
 
 def register(sub):
@@ -45,7 +68,14 @@ def register(sub):
         "DIR/.cache: a re-run reuses what still matches the case file and options. Progress "
         "goes to standard error.",
     )
-    add_case_argument(p)
+    p.add_argument("case", nargs="?", help="case file (TOML) or the name of a bundled case")
+    taps = p.add_argument_group("from a tap test (instead of CASE)")
+    taps.add_argument("--taps", nargs="+", metavar="TAP",
+                      help="the recordings (WAV or CSV time series), imported as "
+                      "`bayesplate import` does with no options into DIR/case.toml")  # fmt: skip
+    taps.add_argument("--plate", metavar="SHEET", help="the plate sheet (TOML), with --taps")
+    taps.add_argument("--modes", type=positive_int, metavar="N",
+                      help="modes wanted from the taps (`bayesplate import --modes`)")  # fmt: skip
     p.add_argument("-o", "--output", default="report", metavar="DIR",
                    help="folder of the report (default: ./report)")  # fmt: skip
     p.add_argument(

@@ -400,15 +400,6 @@ def _p_effective(result, case):
 
 
 def _case_ref(case):
-    """How to name the case to the CLI: a bundled case by its name, else its file's path."""
+    """How to name the case to the command line: its file's path, else ``CASE``."""
     path = getattr(case, "path", None)
-    if not path:
-        return "CASE"
-    from pathlib import Path
-
-    from ..io import bundled_case_names, bundled_case_path
-
-    stem = Path(path).stem
-    if stem in bundled_case_names() and Path(bundled_case_path(stem)) == Path(path):
-        return stem
-    return str(path)
+    return str(path) if path else "CASE"

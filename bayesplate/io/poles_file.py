@@ -28,7 +28,7 @@ from .export import atomic_write_text, save_figure
 from .frf import read_csv_rows
 from .poles import Pole, PoleAnalysis
 
-__all__ = ["write_poles", "read_poles", "write_chart"]
+__all__ = ["write_poles", "read_poles", "write_chart", "stabilisation_chart"]
 
 _COLUMNS = ("keep", "frequency_Hz", "damping", "orders_stable", "p_spurious", "coherence",
             "phase_deviation_deg", "amplitude", "spread_Hz")  # fmt: skip
@@ -147,7 +147,12 @@ def _number(row: dict, name: str, number: int) -> float:
 
 
 def write_chart(path, analysis: PoleAnalysis, frequency_Hz, frf, kept=(), coherence=None) -> None:
-    """Write the stabilisation chart as a PNG (matplotlib, imported here).
+    """Write the stabilisation chart (:func:`stabilisation_chart`) as a PNG."""
+    save_figure(stabilisation_chart(analysis, frequency_Hz, frf, kept, coherence), path)
+
+
+def stabilisation_chart(analysis: PoleAnalysis, frequency_Hz, frf, kept=(), coherence=None):
+    """The stabilisation chart as a matplotlib Figure (matplotlib imported here).
 
     Poles of each model order at their frequency: stable in frequency and damping (green
     x), in frequency only (blue dot), unstable (grey dot); the kept poles are marked at the
@@ -166,6 +171,10 @@ def write_chart(path, analysis: PoleAnalysis, frequency_Hz, frf, kept=(), cohere
     coherence : numpy.ndarray, shape (p, n), optional
         Coherence of each FRF (several taps with a force): drawn in a second panel below,
         with the kept poles and the warning level 0.9.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
     """
     from matplotlib.figure import Figure
 
@@ -203,7 +212,7 @@ def write_chart(path, analysis: PoleAnalysis, frequency_Hz, frf, kept=(), cohere
     ax.set_ylabel("model order (pole pairs)")
     ax.set_title("Stabilisation chart (LSCF, sdypy-EMA)")
     ax.legend(loc="lower center", ncol=4, fontsize="small", framealpha=0.9)
-    save_figure(fig, path)
+    return fig
 
 
 def _coherence_panel(ax, frequency_Hz, coherence, kept) -> None:

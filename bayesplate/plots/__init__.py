@@ -27,6 +27,7 @@ from .posterior import (
     sampling_figures,
     trace_plot,
 )
+from .taps import tap_frf
 
 __all__ = [
     "CONSTANT_LABELS",
@@ -38,6 +39,7 @@ __all__ = [
     "location_map",
     "mac_matrix_plot",
     "mode_shapes",
+    "tap_frf",
     "posterior_corner",
     "residual_comparison",
     "sampling_figures",

@@ -18,7 +18,7 @@ from ..model import PlateModel
 from ..pairing import DEFAULT_EXTRA_MODES, Pairing
 from .options import ReportOptions
 
-__all__ = ["ESTIMATORS", "ReportData", "sampling_available"]
+__all__ = ["ESTIMATORS", "ReportData", "TapTest", "sampling_available"]
 
 #: The estimators run and shown, in order: :data:`bayesplate.estimators.METHODS`.
 ESTIMATORS = METHODS
@@ -49,6 +49,8 @@ class ReportData:
         Step name -> wall time of this run (small for reused steps).
     notes : list of str
         Why a section is missing, warnings met on the way.
+    taps : TapTest, optional
+        The tap test the case was imported from (``bayesplate report --taps``).
     """
 
     case: Case
@@ -64,6 +66,7 @@ class ReportData:
     label: str = ""
     model: object = field(default=None, repr=False)
     fast: object = field(default=None, repr=False)
+    taps: object = field(default=None, repr=False)
 
     def plate_model(self):
         """The working :class:`bayesplate.model.PlateModel` (built when first needed)."""
@@ -113,6 +116,28 @@ class ReportData:
         return Pairing(
             p["modes"], p["how"], DEFAULT_EXTRA_MODES, measured, p.get("mac"), p.get("threshold")
         )
+
+
+@dataclass(frozen=True, eq=False)
+class TapTest:
+    """A tap test as imported: its spectra and its pole analysis.
+
+    Attributes
+    ----------
+    spectra : bayesplate.io.frf.FRFData
+        The averaged FRFs (H1 and coherence with a force channel).
+    analysis : bayesplate.io.poles.PoleAnalysis
+        The LSCF poles over the model orders, the candidates and their evidence.
+    kept : tuple of bayesplate.io.poles.Pole
+        The poles taken into the case, ascending.
+    sources : tuple of str
+        The recordings.
+    """
+
+    spectra: object
+    analysis: object
+    kept: tuple
+    sources: tuple = ()
 
 
 def _estimate_for_modes(data):

@@ -43,6 +43,8 @@ def figure_groups(data):
 
     r = data.results
     groups = [lambda: {**_residuals_figure(data, plots), **_modes_figures(data, plots)}]
+    if data.taps is not None:
+        groups.append(lambda: _tap_figures(data, plots))
     if "sample" in r:
         groups.append(lambda: _sample_figures(r["sample"], plots))
     if "diagnose" in r:
@@ -102,6 +104,42 @@ def _modes_figures(data, plots):
             title="MAC of measured shapes against computed modes (prior mean); pairs outlined",
         )
     return figs
+
+
+def tap_roles(data):
+    """Each measured peak's role and the computed modes no peak explains (0-based).
+
+    Returns
+    -------
+    roles : list of str
+        ``"paired"`` or ``"spurious"`` for each measured peak (the pairing step's pairing).
+    computed_Hz : numpy.ndarray
+        The computed elastic frequencies at the modes' estimate, Hz.
+    unobserved : list of int
+        Computed modes up to the highest peak that no peak is paired with.
+    """
+    m = data.case.measured.size
+    pairing = data.pairing()
+    kept = set(int(i) for i in pairing.kept(m))
+    roles = ["paired" if i in kept else "spurious" for i in range(m)]
+    computed = np.sqrt(np.maximum(data.results["modes"]["eigenvalues"], 0.0)) / (2 * np.pi)
+    top = data.case.measured.frequency_Hz.max()
+    paired = set(int(j) for j in pairing.modes)
+    unobserved = [j for j, f in enumerate(computed) if f <= top and j not in paired]
+    return roles, computed, unobserved
+
+
+def _tap_figures(data, plots):
+    """The stabilisation chart and the FRF with the peaks' roles and the computed modes."""
+    from ..io.poles_file import stabilisation_chart
+
+    taps, spectra = data.taps, data.taps.spectra
+    chart = stabilisation_chart(taps.analysis, spectra.frequency_Hz, spectra.frf, taps.kept,
+                                spectra.coherence)  # fmt: skip
+    roles, computed, unobserved = tap_roles(data)
+    frf = plots.tap_frf(spectra.frequency_Hz, spectra.frf, taps.analysis.band_Hz,
+                        data.case.measured.frequency_Hz, roles, computed, unobserved)  # fmt: skip
+    return {"stabilisation": chart, "frf": frf}
 
 
 def _sample_figures(result, plots):

@@ -26,7 +26,8 @@ __all__ = ["compute_report"]
 DIAGNOSE_STAGES = "diagnose-stages"
 
 
-def compute_report(case_file, options=None, cache_dir=None, progress=None, label=None):
+def compute_report(case_file, options=None, cache_dir=None, progress=None, label=None,
+                   taps=None):  # fmt: skip
     """Run (or reuse) every step of the report of one case file.
 
     Parameters
@@ -40,6 +41,8 @@ def compute_report(case_file, options=None, cache_dir=None, progress=None, label
         ``progress(line)``; default: lines on standard error.
     label : str, optional
         How the case was named (``frederiksen_t300``), for the report; default the path.
+    taps : TapTest, optional
+        The tap test the case was imported from: shown in the report.
 
     Returns
     -------
@@ -59,6 +62,7 @@ def compute_report(case_file, options=None, cache_dir=None, progress=None, label
         reused=cache.reused,
         computed=cache.computed,
         label=label or str(case_file),
+        taps=taps,
     )
     say(
         f"report of {case.name!r} on a {mesh[0]} x {mesh[1]} mesh"

@@ -58,8 +58,10 @@ def _rendered(group):
     return out
 
 
-def make_report(case_file, out_dir, options=None, progress=None, label=None):
+def make_report(case_file, out_dir, options=None, progress=None, label=None, taps=None):
     """Compute (reusing ``out_dir/.cache``) and write the report of one case file.
+
+    `taps` (a :class:`~bayesplate.report.data.TapTest`): the tap test the case came from.
 
     Returns
     -------
@@ -67,7 +69,8 @@ def make_report(case_file, out_dir, options=None, progress=None, label=None):
         ``report.md`` and the data it shows.
     """
     say = _Progress(progress)
-    data = compute_report(case_file, options, pathlib.Path(out_dir) / ".cache", say, label)
+    cache = pathlib.Path(out_dir) / ".cache"
+    data = compute_report(case_file, options, cache, say, label, taps)
     path = write_report(data, out_dir, say)
     say(f"report written: {path}")
     return path, data
