@@ -71,7 +71,7 @@ def test_directory_store_round_trip_and_atomic_write(tmp_path, monkeypatch):
     assert np.array_equal(got["x"], np.arange(3.0)) and got["n"] is None and store.hits == 1
     # a write interrupted before its rename (as a kill would) leaves the previous file whole
     # and no temporary file behind
-    import bayesplate.io.export as export
+    import bayesplate.io.files as export  # where the atomic writers live
 
     def killed(*args):
         raise KeyboardInterrupt

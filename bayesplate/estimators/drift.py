@@ -14,12 +14,16 @@ import numpy as np
 
 from ..quantities import STIFFNESS_NAMES
 
-__all__ = ["DRIFT_WINDOW", "drift", "slow_directions"]
+__all__ = ["DRIFT_WINDOW", "WEAK_INFORMATION", "drift", "slow_directions", "weakly_determined"]
 
 #: Consecutive MVE iterations drifting along directions the data determine no better as it
 #: goes (each predicted to need more iterations than remain) before the run stops as
 #: "unidentified" (:func:`drift`).
 DRIFT_WINDOW = 5
+#: A direction along which the data carry less than this fraction of the step covariance's
+#: information is weakly determined: an MVE run that moves without progress mostly along
+#: such a direction is stopped as "unidentified" rather than "oscillating".
+WEAK_INFORMATION = 1.0
 #: Relative growth of the information along the slowest direction below which it counts as
 #: the same (round-off: on a linear problem it varies by about 1e-12 from one iterate to the
 #: next, and a strict comparison restarted the window at random).
@@ -136,3 +140,39 @@ def drift(problem, state, V, step, tol, k, max_iter):
 def _information(c):
     """``lambda = 1 / c - 1``: the information along a direction contracting by ``c``."""
     return 1.0 / c - 1.0
+
+
+def weakly_determined(problem, state, V, step, tol):
+    """A message if an MVE run without progress moves mostly where the data barely see.
+
+    Called where the run has stopped making progress (cycling or stalling, which the
+    relative-change test sees first when a weakly determined coefficient wanders near zero):
+    the last step's largest part lies along a direction of :func:`slow_directions` whose
+    information, relative to the step covariance's, is below :data:`WEAK_INFORMATION`. The
+    message names the coefficients that carry it; else "" (a true oscillation).
+    """
+    try:
+        _, c, parts = slow_directions(state.b, state.prediction.S, problem.V_Y, V, step, tol)
+    except np.linalg.LinAlgError:
+        return ""
+    size = np.max(np.abs(parts), axis=1)
+    i = int(np.argmax(size))
+    information = _information(c[i])
+    if not information < WEAK_INFORMATION:
+        return ""
+    part = np.abs(parts[i])
+    named = [j for j in np.argsort(-part) if part[j] >= 0.5 * part.max()]
+    names = ", ".join(f"{STIFFNESS_NAMES[j]} ({_CARRIES[j]})" for j in named)
+    state.drifted = {
+        "coefficients": [STIFFNESS_NAMES[j] for j in named],
+        "constants": [_CARRIES[j] for j in named],
+        "information": [float(information)],
+        "contraction": float(c[i]),
+        "relative_change": float(part.max()),
+        "predicted_iterations": float("inf"),
+    }
+    return (
+        f"unidentified: no progress, the steps moving along {names}, where the data carry "
+        f"{information:.2g} of the step covariance's information (below "
+        f"{WEAK_INFORMATION:g}): the data do not determine it; the other directions settled"
+    )

@@ -216,6 +216,11 @@ def _iterate(problem, method, tol, max_iter, conventions, tracking, weight, star
             state.message = f"converged: relative change {np.max(change):.2g} <= TOL {tol:g}"
             return state
         state.message = _oscillation(_space(state.history[state.since :], conventions), tol)
+        if state.message and method == "MVE" and conventions.covariance == "fixed":
+            weak = _drift_rule.weakly_determined(problem, state, V, step, tol)
+            state.message, state.status = (weak, "unidentified") if weak else (
+                state.message, "oscillating")  # fmt: skip
+            return state
         if state.message:
             state.status = "oscillating"
             return state
