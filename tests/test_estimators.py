@@ -507,3 +507,31 @@ def test_estimates_do_not_depend_on_round_off(plate1, method, pairing):
         assert again.converged == reference.converged, again.message
         np.testing.assert_array_equal(again.modes, reference.modes)
         np.testing.assert_allclose(again.constants, reference.constants, rtol=1e-3)
+
+
+def test_no_progress_along_a_barely_seen_coefficient_is_unidentified():
+    # The flat problem sees C44 through a column 1 % of the others': the data carry far less
+    # information along it than the step covariance (a generalised eigenvalue well below 1,
+    # computed independently here). A run that stalls with its step along C44 is named
+    # unidentified there; one whose step lies along a well-seen coefficient (C11) is not.
+    from types import SimpleNamespace
+
+    import scipy.linalg
+
+    from bayesplate.estimators.drift import WEAK_INFORMATION, weakly_determined
+
+    problem, A = _flat_problem()
+    b = problem.mu_b.copy()
+    state = SimpleNamespace(b=b, prediction=problem.predict(b), drifted={})
+    x = np.abs(b)
+    F = (A * x).T @ np.linalg.solve(problem.V_Y, A * x)
+    lam = scipy.linalg.eigh(F, np.linalg.inv(problem.V_b / np.outer(x, x)), eigvals_only=True)
+    assert lam[0] < WEAK_INFORMATION < lam[1]  # one weak direction, the others well seen
+    along = np.zeros(6)
+    along[4] = 0.3
+    message = weakly_determined(problem, state, problem.V_b, along, 1e-3)
+    assert message.startswith("unidentified:") and "C44 (G23)" in message
+    assert state.drifted["information"][0] == pytest.approx(lam[0], rel=1e-6)
+    across = np.zeros(6)
+    across[0] = 0.3
+    assert weakly_determined(problem, state, problem.V_b, across, 1e-3) == ""
