@@ -8,8 +8,10 @@ from ._style import _MM, _axes
 
 __all__ = ["diagnosis_figures", "location_map", "residual_comparison"]
 
+_BOX = {"boxstyle": "round", "facecolor": "white", "edgecolor": "0.6"}
 
-def location_map(location, model, ax=None, title=None, mirrors=()):
+
+def location_map(location, model, ax=None, title=None, mirrors=(), nothing_found_chi2=None):
     """How much of the misfit a local change at each place explains (diagnose, step 2).
 
     Parameters
@@ -19,6 +21,10 @@ def location_map(location, model, ax=None, title=None, mirrors=()):
         For the plate outline.
     mirrors : sequence of (x_mm, y_mm)
         Places that fit equally by symmetry, marked with open circles.
+    nothing_found_chi2 : float, optional
+        The nominal fit's chi-square when diagnose found nothing (verdict "consistent"):
+        the map then marks no best place, and says in the figure how much of that
+        chi-square the best place would explain (a map of noise, not of a defect).
 
     Returns
     -------
@@ -30,18 +36,45 @@ def location_map(location, model, ax=None, title=None, mirrors=()):
     drop = np.where(location.physical, location.chi2_drop, 0.0).reshape(ny, nx)
     x = location.points_mm[:, 0].reshape(ny, nx)
     y = location.points_mm[:, 1].reshape(ny, nx)
-    mesh = ax.pcolormesh(x, y, drop, shading="nearest", cmap="magma")
+    nothing = nothing_found_chi2 is not None
+    # nothing found: the scale runs to the whole chi-square, so the map looks as faint as it is
+    scale = (
+        {"cmap": "Greys", "vmin": 0.0, "vmax": max(nothing_found_chi2, drop.max())}
+        if nothing
+        else {"cmap": "magma"}
+    )
+    mesh = ax.pcolormesh(x, y, drop, shading="nearest", **scale)
     fig.colorbar(mesh, ax=ax, label=r"$\chi^2$ explained (-)")
     best = location.best()
+    if nothing:
+        explained = 0.0 if best is None else float(drop.max())
+        best, mirrors = None, ()
     if best is not None:
         ax.plot(*location.points_mm[best], "c*", ms=14, label="best place")
     for i, (px, py) in enumerate(mirrors):
         ax.plot(px, py, "co", mfc="none", ms=10, label="mirror images" if i == 0 else None)
     if best is not None:
         ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.18), ncol=2, frameon=False)
+    if nothing:
+        title = f"{title}: nothing found" if title else "nothing found"
     ax.set(xlim=(0, a), ylim=(0, b), aspect="equal", xlabel="x (mm)", ylabel="y (mm)",
            title=title)  # fmt: skip
+    if nothing:  # under the x label (where the legend goes otherwise): the map stays in view
+        ax.annotate(_nothing_found(explained, nothing_found_chi2), (0.5, 0.0),
+                    xycoords=ax.xaxis.label, xytext=(0, -8), textcoords="offset points",
+                    ha="center", va="top", fontsize=9, bbox=_BOX)  # fmt: skip
     return fig
+
+
+def _nothing_found(explained, chi2):
+    """The sentence a map of a consistent plate carries in place of a best place."""
+    if explained <= 0:
+        return "nothing found: no place explains any of the misfit"
+    share = explained / chi2 if chi2 > 0 else 1.0
+    only = " only" if share < 0.25 else ""
+    return (f"nothing found: the best place explains{only} {explained:.2g} of the chi-square "
+            f"{chi2:.2g} ({100 * share:.0f} %),\na chi-square the plate model already fits "
+            "(verdict: consistent)")  # fmt: skip
 
 
 def residual_comparison(measured_Hz, before_sigma, after_sigma=None, kinds=None, ax=None,
@@ -88,9 +121,13 @@ def diagnosis_figures(model, diagnosis):
         "residuals": residual_comparison(d.measured_Hz, d.nominal.residual_sigma, after,
                                          d.mode_kinds, title=f"verdict: {d.verdict}"),
     }  # fmt: skip
+    # nothing found: the maps say so instead of marking a best place as if it meant a defect
+    chi2 = float(np.sum(np.square(d.nominal.residual_sigma)))
+    nothing = chi2 if d.verdict == "consistent" else None
     for key, lm in d.maps.items():  # keyed by the located candidates' physics names
         title = key.replace("_", " ")
         best = lm.best()
         mirrors = [] if best is None else mirror_positions(model, *lm.points_mm[best])
-        figs[f"map_{key}"] = location_map(lm, model, title=f"where: {title}", mirrors=mirrors)
+        figs[f"map_{key}"] = location_map(lm, model, title=f"where: {title}", mirrors=mirrors,
+                                          nothing_found_chi2=nothing)  # fmt: skip
     return figs

@@ -405,15 +405,22 @@ def _diagnose_section(data, figures):
     lines += _table(["candidate", "evidence gain (nats)", "chi-square", "parameters"], rows)
     lines.append("")
     located = [k for k in figures if k.startswith("diagnose_map_")]
+    # a consistent plate: the maps show how little any place would explain, not a defect
+    nothing = ""
+    if d["verdict"] == "consistent":
+        nothing = (": nothing found, the model fits without a local change, so the map shows "
+                   "where noise would be explained, not where a defect is")  # fmt: skip
     for name, caption in (
         ("diagnose_residuals", "Standardised residuals of the nominal fit (and of the refit)"),
-        *(
-            (k, f"Where a {k[len('diagnose_map_') :].replace('_', ' ')} would explain the misfit")
-            for k in located
-        ),
+        *((k, f"Where a {_located_name(k)} would explain the misfit{nothing}") for k in located),
     ):
         lines += _image(figures, name, caption)
     return lines
+
+
+def _located_name(figure):
+    """``"diagnose_map_point_mass"`` -> ``"point mass"``."""
+    return figure[len("diagnose_map_") :].replace("_", " ")
 
 
 def _plies(n):
@@ -458,8 +465,12 @@ def _taps_section(data, figures):
     lines += _image(figures, "frf", "the measured FRF (mean magnitude), the peaks paired and "
                     "those called spurious (top), the computed modes at the estimate "
                     "(dotted; dashed red: no peak explains them)")  # fmt: skip
-    return lines + _image(figures, "stabilisation", "stabilisation chart: poles of each LSCF "
-                          "model order, the kept ones marked at the top; below, the coherence")
+    return lines + _image(
+        figures,
+        "stabilisation",
+        "stabilisation chart: poles of each LSCF "
+        "model order, the kept ones marked at the top; below, the coherence",
+    )
 
 
 def render_markdown(data, figures):
@@ -475,7 +486,10 @@ def render_markdown(data, figures):
     -------
     str
     """
-    lines = _header(data) + _case_section(data) + _taps_section(data, figures)
+    from .html import report_summary, summary_lines
+
+    lines = _header(data) + summary_lines(report_summary(data))
+    lines += _case_section(data) + _taps_section(data, figures)
     lines += _measured_section(data, figures)
     lines += _estimates_section(data, figures) + _modes_section(data, figures)
     lines += _posterior_section(data, figures) + _diagnose_section(data, figures)
