@@ -11,7 +11,7 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "bayesplate"
 #: The edge: case files, importers, export, figures, report, command line.
-EDGE = ("io", "case", "importers", "plots", "report", "batch", "cli")
+EDGE = ("io", "case", "importers", "plots", "run", "report", "batch", "cli")
 #: Pure computation: everything below the edge.
 NUMERICS = (
     "quantities",

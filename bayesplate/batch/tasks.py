@@ -30,7 +30,6 @@ FAILED = "failed"
 #: Half-width of a central 94 % Gaussian interval in standard deviations (``norm.ppf(0.97)``),
 #: the probability of the sampler's HDI, so that every step's interval has the same level.
 Z94 = 1.8807936081512509
-_TOL = 1e-3  # bayesplate estimate's --tol default
 
 
 def run_step(name, path, case_bytes, step, options):
@@ -94,34 +93,22 @@ def _parse(case_bytes, path):
 def _model(case, options):
     from ..model import PlateModel
 
-    return PlateModel.from_case(case, mesh=None if options["mesh"] is None else options["mesh"])
+    return PlateModel.from_case(case, mesh=_mesh(options))
+
+
+def _mesh(options):
+    """The step's mesh (a JSON list in its options) as the run layer takes it."""
+    return None if options["mesh"] is None else tuple(options["mesh"])
 
 
 def _estimate(case, options):
     """``bayesplate estimate`` (its defaults: TOL 1e-3, the paper's conventions)."""
-    from ..estimators import DEFAULT_MAX_ITER, estimate
-    from ..io import estimate_to_dict
+    from ..run import EstimateOptions, run_estimate
 
-    model = _model(case, options)
-    r = estimate(
-        case,
-        options["method"],
-        model=model,
-        tol=_TOL,
-        max_iter=DEFAULT_MAX_ITER,
-        convention="paper",
-        pairing=options["pairing"],
-        forward=options["forward"],
-    )
-    from ..inputs import converged_budget
-
-    budget = converged_budget(case, r, model)
-    scale = None
-    if case.measured.error_scale is not None:  # as `bayesplate estimate`: the sd widened
-        from ..error_scale import scale_estimate
-
-        r, scale = scale_estimate(case, model, r)
-    doc = estimate_to_dict(r, case, model, budget, scale)
+    done = run_estimate(case, EstimateOptions(method=options["method"], mesh=_mesh(options),
+                                              pairing=options["pairing"],
+                                              forward=options["forward"]))  # fmt: skip
+    r, model, scale, doc = done.result, done.model, done.scale, done.document
     chi2, dof = _estimate_chi2(case, r)
     row = {
         "status": r.status,
@@ -160,30 +147,13 @@ def _estimate_chi2(case, r):
 
 def _sample(case, options):
     """``bayesplate sample --seed SEED`` (on the reduced model, with MVE beside B)."""
-    from ..io import sampling_to_dict
-    from ..sampling import prepare, sample
+    from ..run import SampleOptions, run_sample
 
-    model = _model(case, options)
-    setup = prepare(
-        case, model=model, forward="reduced", rng=options["seed"], pairing=options["pairing"]
-    )
-    r = sample(
-        case,
-        rng=options["seed"],
-        n_walkers=options["walkers"],
-        max_steps=options["max_steps"],
-        min_ess=options["min_ess"],
-        progress=False,
-        setup=setup,
-    )
-    mve = setup.run_estimator("MVE")
-    scale = None
-    if case.measured.error_scale is not None:  # as `bayesplate sample`
-        from ..error_scale import scale_from_draws
-
-        scale = scale_from_draws(setup.problem, r.samples_b, setup.sampling_forward(),
-                                 rng=options["seed"])[0]  # fmt: skip
-    doc = sampling_to_dict(r, case, mve, scale)
+    chain = SampleOptions(mesh=_mesh(options), walkers=options["walkers"],
+                          max_steps=options["max_steps"], min_ess=options["min_ess"],
+                          pairing=options["pairing"])  # fmt: skip
+    done = run_sample(case, chain, options["seed"])
+    r, doc = done.result, done.document
     columns = {}
     for key, c in doc["constants"].items():
         columns.update(
@@ -197,9 +167,9 @@ def _sample(case, options):
     row = {
         "status": "converged" if r.converged else "stopped",
         "reason": "" if r.converged else r.message,
-        "mesh": f"{model.mesh.nx}x{model.mesh.ny}",
+        "mesh": f"{done.model.mesh.nx}x{done.model.mesh.ny}",
         **columns,
-        **_scale_columns(scale),
+        **_scale_columns(done.scale),
     }
     return row, doc
 

@@ -115,36 +115,21 @@ def _check_lines(result):
 
 def run(args):
     """Estimate the constants; print the table, write JSON on request."""
-    from ..estimators import estimate
-    from ..io import estimate_to_dict, save_figure, write_json
-    from ..model import PlateModel
+    from ..io import save_figure, write_json
+    from ..run import EstimateOptions, run_estimate
 
     case = resolve_case(args.case)
-    model = PlateModel.from_case(case, mesh=mesh_of(args))
     if not args.quiet:
         logging.getLogger("bayesplate.estimators").setLevel(logging.INFO)  # progress
-    result = estimate(
-        case,
-        args.method,
-        model=model,
-        tol=args.tol,
-        max_iter=args.max_iter,
-        convention=args.convention,
-        pairing=args.pairing,
-        forward=args.forward,
-    )
-    from ..inputs import converged_budget
-
-    budget = converged_budget(case, result, model)
-    scale = None
-    if case.measured.error_scale is not None:
-        from ..error_scale import scale_estimate
-
-        result, scale = scale_estimate(case, model, result)
+    options = EstimateOptions(method=args.method, mesh=mesh_of(args), tol=args.tol,
+                              max_iter=args.max_iter, convention=args.convention,
+                              pairing=args.pairing, forward=args.forward)  # fmt: skip
+    done = run_estimate(case, options)
+    result, budget, scale = done.result, done.budget, done.scale
     if args.json:
-        write_json(estimate_to_dict(result, case, model, budget, scale), args.json)
+        write_json(done.document, args.json)
     if args.json != "-":
-        print(estimate_text(case, model, result))
+        print(estimate_text(case, done.model, result))
         if scale is not None:
             print(scale_text(scale))
             if budget is not None:

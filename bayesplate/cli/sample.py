@@ -130,49 +130,31 @@ def _refuse(rule):
 
 def _run_one(args):
     """One case: the posterior of its constants (the command's behaviour before issue 17)."""
-    from ..io import sampling_to_dict, save_figure, write_json, write_netcdf
-    from ..model import PlateModel
-    from ..sampling import prepare, sample
+    from ..io import save_figure, write_json, write_netcdf
+    from ..run import SampleOptions, run_sample
 
     case = resolve_case(args.case)
-    model = PlateModel.from_case(case, mesh=mesh_of(args))
     quiet = args.json == "-"
     if not quiet:
         logging.getLogger("bayesplate.sampling").setLevel(logging.INFO)  # progress
-    setup = prepare(case, model=model, forward="full" if args.full else "reduced", rng=args.seed,
-                    pairing=args.pairing, inputs=args.inputs or "auto")  # fmt: skip
+    options = SampleOptions(mesh=mesh_of(args), walkers=args.walkers, max_steps=args.max_steps,
+                            min_ess=args.min_ess, forward="full" if args.full else "reduced",
+                            pairing=args.pairing, inputs=args.inputs or "auto",
+                            backend=args.backend, mve=bool(args.plots or args.json))  # fmt: skip
     with _walker_pool(args) as pool:
-        result = sample(
-            case,
-            rng=args.seed,
-            n_walkers=args.walkers,
-            max_steps=args.max_steps,
-            min_ess=args.min_ess,
-            backend_path=args.backend,
-            progress=not quiet,
-            setup=setup,
-            pool=pool,
-        )
-    scale = None
-    if case.measured.error_scale is not None:
-        from ..error_scale import scale_from_draws
-
-        scale = scale_from_draws(setup.problem, result.samples_b, setup.sampling_forward(),
-                                 rng=args.seed)[0]  # fmt: skip
-    mve = None
-    if args.plots or args.json:
-        mve = setup.run_estimator("MVE")
+        done = run_sample(case, options, args.seed, pool=pool, progress=not quiet)
+    result, scale = done.result, done.scale
     if args.out:
         write_netcdf(result.idata, args.out)
     if args.plots:
         from ..plots import sampling_figures
 
-        estimates = {"B": result.estimate, "MVE": mve}
+        estimates = {"B": result.estimate, "MVE": done.mve}
         figs = sampling_figures(result, estimates, case.reference, title=case.name)
         for name, fig in figs.items():
             save_figure(fig, pathlib.Path(args.plots) / f"{name}.png")
     if args.json:
-        write_json(sampling_to_dict(result, case, mve, scale), args.json)
+        write_json(done.document, args.json)
     if not quiet:
         print(sample_text(case, result))
         if scale is not None:

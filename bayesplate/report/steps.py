@@ -59,22 +59,18 @@ def pairing_step(case, model, how="auto"):
 
 
 def estimate_step(case, model, method, pairing, fast=None):
-    """One of the paper's estimators (:func:`bayesplate.estimators.estimate`) as plain data.
+    """One of the paper's estimators (:func:`bayesplate.run.run_estimate`) as plain data.
 
     With a fast model (a :class:`bayesplate.reduced.CertifiedModel`) the estimator iterates
     on it and the full model checks the answer (the ``check`` entry).
     """
-    from ..estimators import estimate, estimate_on_fast
+    from ..run import run_estimate
 
-    if fast is None:
-        r = estimate(case, method, model=model, pairing=pairing, forward="full")
-    else:
-        r, _ = estimate_on_fast(case, method, model, fast, pairing=pairing)
+    options = estimate_options(method, pairing, model)
+    done = run_estimate(case, options, model=model, fast=fast)
+    r, lin = done.result, done.scale
     scale = None
-    if case.measured.error_scale is not None:  # the sd widened by the inferred scale
-        from ..error_scale import scale_estimate
-
-        r, lin = scale_estimate(case, model, r)
+    if lin is not None:  # the sd widened by the inferred scale
         scale = {**_scale_data(lin.summary), "s_hat": lin.s_hat, "dof": lin.dof}
     return {
         "method": r.method,
@@ -100,6 +96,20 @@ def estimate_step(case, model, method, pairing, fast=None):
         "check": None if r.check is None else _check_data(r.check),
         "error_scale": scale,
     }
+
+
+def estimate_options(method, pairing, model):
+    """The run layer's options of the report's estimate of `method`.
+
+    The command line's defaults; on the full model unless the step is given the report's
+    shared fast model (which the report builds where ``"auto"`` takes the fast path); no
+    variance budget (the report shows none).
+    """
+    from ..run import EstimateOptions
+
+    mesh = (model.mesh.nx, model.mesh.ny)
+    return EstimateOptions(method=method, mesh=mesh, pairing=pairing, forward="full",
+                           budget=False)  # fmt: skip
 
 
 def _scale_data(summary):
@@ -165,7 +175,7 @@ def diagnose_step(case, model, pairing, options, progress, store=None):
 
 
 def sample_step(case, model, pairing, options, fast=None):
-    """The posterior by :func:`bayesplate.sampling.sample` (only when the module exists).
+    """The posterior by :func:`bayesplate.run.run_sample` (only when the module exists).
 
     With `fast` (the report's shared :class:`bayesplate.reduced.CertifiedModel`) the sampler
     builds no fast model of its own, unless the case gives input deviations: the posterior
@@ -177,25 +187,12 @@ def sample_step(case, model, pairing, options, fast=None):
     """
     from ..inputs import describe_inputs
     from ..laminate import engineering_from_stiffness
-    from ..sampling import prepare, resolve_inputs, sample
-    from ..sampling.seeding import streams
+    from ..run import run_sample
 
-    chains = _QUICK_CHAINS if options.quick else _CHAINS
-    inputs = resolve_inputs(case)
-    fast = fast if inputs == "exact" else None
-    with warnings.catch_warnings(record=True) as caught:  # counted below, not repeated
-        warnings.simplefilter("always")
-        # the setup prepared here (as `sample` would, from the same stream) to be kept for s
-        setup = prepare(case, model=model, rng=streams(options.seed)[1], pairing=pairing,
-                        fast=fast, inputs=inputs)  # fmt: skip
-        r = sample(case, rng=options.seed, setup=setup, progress=False, **chains)
-    scale = None
-    if case.measured.error_scale is not None:
-        from ..error_scale import scale_from_draws
-
-        summary = scale_from_draws(setup.problem, r.samples_b, setup.sampling_forward(),
-                                   rng=options.seed)[0]  # fmt: skip
-        scale = _scale_data(summary)
+    done = run_sample(case, sample_options(options, pairing, model), options.seed,
+                      model=model, fast=fast, record_warnings=True)  # fmt: skip
+    r = done.result
+    scale = None if done.scale is None else _scale_data(done.scale)
     e = to_case_units(engineering_from_stiffness(r.samples_b))
     keep = np.linspace(0, len(e) - 1, min(len(e), _CORNER_DRAWS)).astype(int)
     return {
@@ -215,13 +212,26 @@ def sample_step(case, model, pairing, options, fast=None):
         "timings": {k: float(v) for k, v in r.timings.items()},
         "map": None if r.estimate is None else r.estimate.constants,
         "draws": e[keep],
-        "warnings": sorted({str(w.message) for w in caught}),
-        "inputs": inputs,
+        "warnings": list(done.warnings),  # counted in the report, not repeated
+        "inputs": done.setup.inputs,
         "inputs_given": describe_inputs(case.plate),
         "error_scale": scale,
         "inputs_posterior": None if r.input_posterior is None else r.input_posterior.table(),
         "input_certificate": _certificate_data(r.input_certificate),
     }
+
+
+def sample_options(options, pairing, model):
+    """The run layer's options of the report's posterior (a :class:`ReportOptions`' chains).
+
+    The sampler's defaults but the chain bounds (``_CHAINS``, or ``_QUICK_CHAINS`` for a
+    quick report) and no MVE beside B.
+    """
+    from ..run import SampleOptions
+
+    chains = _QUICK_CHAINS if options.quick else _CHAINS
+    mesh = (model.mesh.nx, model.mesh.ny)
+    return SampleOptions(mesh=mesh, pairing=pairing, mve=False, **chains)
 
 
 def _certificate_data(certificate):
