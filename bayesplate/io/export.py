@@ -158,6 +158,16 @@ def estimate_to_dict(result, case, model, budget=None, scale=None):
         "modes": result.modes,
         "mode_swaps": [list(s) for s in result.mode_swaps],
     }
+    for key in ("unobserved_modes", "spurious_peaks"):  # 1-based, a pairing by likelihood
+        if key in result.settings:
+            out[key] = [int(v) for v in result.settings[key]]
+    rivals = result.settings.get("rivals") or []
+    if rivals:  # other optima of the search: constants and the nats they trail by
+        out["rivals"] = [
+            {"constants": dict(zip(ENGINEERING_KEYS, to_case_units(c).tolist(), strict=True)),
+             "nats_behind": float(n)}
+            for c, n in rivals
+        ]  # fmt: skip
     if result.stages:
         out["stages"] = [
             {
