@@ -95,12 +95,15 @@ class Assignment:
     band_Hz : float
         Upper end of the range a spurious peak may lie in (the highest peak plus three
         deviations), Hz.
+    p_unobserved : numpy.ndarray, shape (n,), optional
+        The computed modes' prior of going unobserved that made it (:func:`most_probable`).
     """
 
     modes: np.ndarray
     unobserved: np.ndarray
     log_probability: float
     band_Hz: float
+    p_unobserved: np.ndarray | None = None
 
     @property
     def paired(self):
@@ -491,4 +494,5 @@ def most_probable(
         if current > best_score:
             best, best_score = modes, current
     unobserved = np.setdiff1d(np.flatnonzero(in_band), best[best >= 0])
-    return Assignment(best, unobserved, best_score, band)
+    p_u = np.broadcast_to(np.asarray(p_unobserved, dtype=float), (n,)).copy()
+    return Assignment(best, unobserved, best_score, band, p_u)

@@ -459,6 +459,15 @@ def pair_measured(
     return Pairing(assigned[kept], "mac", DEFAULT_EXTRA_MODES, kept, mac, float(threshold), a)
 
 
+def _tap_amplitude(measured, model, modal, n):
+    """``|phi_j(tap) phi_j(sensor)|`` of the `n` modes, or None without the points."""
+    points = getattr(measured, "tap_points", None)
+    if points is None or not hasattr(model, "interpolation") or modal.vectors is None:
+        return None
+    w = np.asarray(model.interpolation(points, "w") @ modal.vectors[:, :n])
+    return np.abs(w[0] * w[1])
+
+
 def _pair_by_likelihood(measured, model, b, extra_modes, modal, prior, start):
     """:func:`pair_measured` by the most probable assignment of frequencies."""
     m = measured.size
@@ -481,7 +490,7 @@ def _pair_by_likelihood(measured, model, b, extra_modes, modal, prior, start):
         b,
         mu_b,
         V_b,
-        *assignment_priors(measured, n),
+        *assignment_priors(measured, n, _tap_amplitude(measured, model, modal, n)),
         start=initial,
     )
     kept = a.paired

@@ -53,6 +53,7 @@ __all__ = [
     "DAMPING_FACTOR",
     "MAX_RATIO",
     "UNOBSERVED_STEP",
+    "P_NODE",
     "spurious_probability",
     "unobserved_probability",
     "unobserved_from_amplitude",
@@ -72,6 +73,9 @@ DAMPING_FACTOR = 2.0
 MAX_RATIO = 50.0
 #: ``p_u`` of the ``j``-th computed mode (0-based) is ``UNOBSERVED_STEP (j + 1)``, capped.
 UNOBSERVED_STEP = 0.02
+#: ``p_u`` of a mode with no amplitude at the known tap or sensor point (a node): the test
+#: all but certainly misses it.
+P_NODE = 0.9
 
 
 def spurious_probability(phase_deviation_deg, coherence, damping, stable_fraction, amplitude):
@@ -160,7 +164,7 @@ def unobserved_from_amplitude(amplitude, p_max, p_min=0.01):
     return np.maximum(p_max / (1.0 + (a / scale / 0.1) ** 2), p_min)
 
 
-def assignment_priors(measured, n):
+def assignment_priors(measured, n, amplitude=None):
     """``(p_unobserved, p_spurious)`` of the assignment for a measurement and `n` modes.
 
     Parameters
@@ -169,16 +173,23 @@ def assignment_priors(measured, n):
         With ``p_spurious`` (a tap-test import) or without.
     n : int
         Number of computed modes offered.
+    amplitude : array_like, shape (n,), optional
+        ``|phi_j(tap) phi_j(sensor)|`` of each computed mode, where the measurement gives
+        its tap and sensor points.
 
     Returns
     -------
     p_unobserved : float or numpy.ndarray, shape (n,)
+        :func:`unobserved_from_amplitude` (up to :data:`P_NODE`) with `amplitude`, else
         :func:`unobserved_probability` with ``p_spurious``, else
         :data:`~bayesplate.assignment.P_UNOBSERVED`.
     p_spurious : float or numpy.ndarray, shape (m,)
         The measurement's, else :data:`~bayesplate.assignment.P_SPURIOUS`.
     """
     p_spurious = getattr(measured, "p_spurious", None)
+    p_s = P_SPURIOUS if p_spurious is None else np.asarray(p_spurious, dtype=float)
+    if amplitude is not None:
+        return unobserved_from_amplitude(amplitude, P_NODE), p_s
     if p_spurious is None:
-        return P_UNOBSERVED, P_SPURIOUS
-    return unobserved_probability(n, P_UNOBSERVED), np.asarray(p_spurious, dtype=float)
+        return P_UNOBSERVED, p_s
+    return unobserved_probability(n, P_UNOBSERVED), p_s

@@ -92,6 +92,8 @@ def log_evidence(case, result, assignment, prior):
         return -np.inf
     n = int(max(np.max(assignment.modes, initial=-1), np.max(assignment.unobserved, initial=-1)))
     p_u, p_s = assignment_priors(measured, n + 1)
+    if assignment.p_unobserved is not None and assignment.p_unobserved.size > n:
+        p_u = assignment.p_unobserved[: n + 1]  # as the assignment was made (tap points)
     in_band = np.zeros(n + 1, dtype=bool)
     in_band[np.asarray(assignment.modes)[paired]] = True
     in_band[np.asarray(assignment.unobserved, dtype=int)] = True

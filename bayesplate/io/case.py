@@ -163,6 +163,10 @@ class Measurement(_EqualByValue):
         Prior probability that each frequency is no mode of the plate, in (0, 1), from the
         test's own evidence (a tap-test import: :mod:`bayesplate.peak_prior`). Given, the
         frequencies are paired with modes by the most probable assignment by default.
+    tap_points : array_like, shape (2, 2), optional
+        (x, y) of the tap and of the sensor of a one-point tap test, m: a computed mode weak
+        at either is more likely unobserved
+        (:func:`bayesplate.peak_prior.unobserved_from_amplitude`).
     """
 
     frequency_Hz: np.ndarray
@@ -172,6 +176,7 @@ class Measurement(_EqualByValue):
     shapes: np.ndarray | None = None
     error_scale: object = None
     p_spurious: np.ndarray | None = None
+    tap_points: np.ndarray | None = None
 
     def __post_init__(self):
         frequency = _array(self.frequency_Hz, "measured.frequency_Hz", ndim=1)
@@ -198,6 +203,8 @@ class Measurement(_EqualByValue):
                 key = f"measured.p_spurious[{bad[0]}]"
                 raise CaseError(key, float(p[bad[0]]), "must be a probability > 0 and < 1")
             _set(self, "p_spurious", p)
+        if self.tap_points is not None:
+            _set(self, "tap_points", _array(self.tap_points, "measured.tap_point_mm", ndim=2))
 
     @property
     def size(self) -> int:

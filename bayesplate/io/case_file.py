@@ -120,7 +120,7 @@ _PLATE_SD_KEYS = (
     ("density_sd_kg_m3", "density_sd", 1.0),
 )
 _MEASURED_KEYS = ("frequency_Hz", "sigma_rel", "sigma_Hz", "mode", "points_mm", "shapes",
-                  "error_scale", "p_spurious")  # fmt: skip
+                  "error_scale", "p_spurious", "tap_point_mm", "sensor_point_mm")  # fmt: skip
 _ERROR_SCALE_KEYS = ("median", "upper95")
 _ERROR_SCALE_ENTRY = "a table { median = ..., upper95 = ... } (quantiles of the scale s)"
 _PRIOR_ENTRY_KEYS = ("mean", "sd")
@@ -330,7 +330,20 @@ def _parse_measured(raw, extent_mm: tuple[float, float]) -> Measurement:
     p_spurious = None
     if "p_spurious" in table:
         p_spurious = _numbers(table["p_spurious"], "measured.p_spurious")
-    return Measurement(frequency, sigma, mode, points, shapes, scale, p_spurious)
+    tap = _tap_points(table, extent_mm)
+    return Measurement(frequency, sigma, mode, points, shapes, scale, p_spurious, tap)
+
+
+def _tap_points(table, extent_mm):
+    """``tap_point_mm`` and ``sensor_point_mm`` (both or neither) as an array (2, 2), m."""
+    keys = ("tap_point_mm", "sensor_point_mm")
+    given = [key for key in keys if key in table]
+    if not given:
+        return None
+    if len(given) == 1:
+        missing = next(key for key in keys if key not in table)
+        raise CaseError(f"measured.{missing}", rule=f"required with measured.{given[0]}")
+    return np.array([_point(table[key], f"measured.{key}", extent_mm) for key in keys]) * _MM
 
 
 def _parse_error_scale(raw):

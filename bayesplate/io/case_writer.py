@@ -45,7 +45,8 @@ __all__ = [
 DEFAULT_SIGMA_REL = 0.01
 """Relative standard deviation of each frequency when neither the data nor the sheet say."""
 
-_SHEET_MEASURED_KEYS = ("sigma_rel",)
+_SHEET_MEASURED_KEYS = ("sigma_rel", "tap_point_mm", "sensor_point_mm")
+_SET_UP_KEYS = _SHEET_MEASURED_KEYS[1:]  # where the test taps and listens: carried over
 _WIDTH = 100  # characters per line of the written case file
 _PACKED = 40  # list items up to this long (numbers, [x, y] points) share lines
 
@@ -89,6 +90,8 @@ def case_from_modal_data(plate, modal: ModalData, sigma_rel: float | None = None
             rule = "the imported file gives a sigma per frequency; do not give sigma_rel too"
             raise CaseError("sigma_rel", sigma_rel, rule)
     measured = _measured_table(modal, default if sigma_rel is None else sigma_rel)
+    sheet_measured = sheet.get("measured", {})
+    measured.update({key: sheet_measured[key] for key in _SET_UP_KEYS if key in sheet_measured})
     data = {**sheet, "measured": measured}
     source = sheet.get("source", "")
     if modal.source and isinstance(source, str):  # a non-string is refused by parse_case
@@ -129,7 +132,9 @@ def sheet_case(plate) -> Case:
     sheet = dict(plate) if sheet_path is None else _read_sheet(sheet_path)
     try:
         sigma_rel = _sheet_sigma_rel(sheet)
-        return parse_case({**sheet, "measured": {"frequency_Hz": [100.0], "sigma_rel": sigma_rel}})
+        set_up = {k: v for k, v in sheet.get("measured", {}).items() if k in _SET_UP_KEYS}
+        measured = {"frequency_Hz": [100.0], "sigma_rel": sigma_rel, **set_up}
+        return parse_case({**sheet, "measured": measured})
     except CaseError as err:
         raise _blame(err, sheet_path) from None
 
@@ -207,13 +212,14 @@ def _read_sheet(path: str) -> dict:
 
 
 def _sheet_sigma_rel(sheet: Mapping) -> float:
-    """The sheet's [measured] sigma_rel (its only key), or :data:`DEFAULT_SIGMA_REL`."""
+    """The sheet's [measured] sigma_rel, or :data:`DEFAULT_SIGMA_REL` (its keys checked)."""
     table = sheet.get("measured", {})
     if not isinstance(table, Mapping):
         raise CaseError("measured", table, "must be a table (with only sigma_rel)")
     for key, value in table.items():
         if key not in _SHEET_MEASURED_KEYS:
-            rule = "a plate sheet's [measured] holds only sigma_rel; the data come from the test"
+            rule = ("a plate sheet's [measured] holds only sigma_rel, tap_point_mm and "
+                    "sensor_point_mm; the data come from the test")  # fmt: skip
             raise CaseError(f"measured.{key}", value, rule)
     return _check_sigma_rel(table.get("sigma_rel", DEFAULT_SIGMA_REL), "measured.sigma_rel")
 
