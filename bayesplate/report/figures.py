@@ -13,7 +13,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from ..model import ModalResult
-from ..quantities import ENGINEERING_NAMES, ENGINEERING_UNITS, to_case_units
+from ..quantities import ENGINEERING_KEYS, ENGINEERING_NAMES, ENGINEERING_UNITS, to_case_units
 from .data import ESTIMATORS, _estimate_for_modes
 
 __all__ = ["figure_groups", "report_figures"]
@@ -42,11 +42,12 @@ def figure_groups(data):
     from .. import plots  # imported here, before any fork: the workers inherit it
 
     r = data.results
-    groups = [lambda: {**_residuals_figure(data, plots), **_modes_figures(data, plots)}]
+    groups = [lambda: {**_residuals_figure(data, plots), **_budget_figure(data, plots),
+                       **_modes_figures(data, plots)}]  # fmt: skip
     if data.taps is not None:
         groups.append(lambda: _tap_figures(data, plots))
     if "sample" in r:
-        groups.append(lambda: _sample_figures(r["sample"], plots))
+        groups.append(lambda: _sample_figures(r["sample"], plots, r.get("B")))
     if "diagnose" in r:
 
         def diagnosis():
@@ -77,6 +78,18 @@ def _residuals_figure(data, plots):
         title="residuals at each estimate",
     )
     return {"residuals": fig}
+
+
+def _budget_figure(data, plots):
+    """Where B's uncertainty of each constant comes from (frequencies, inputs, prior)."""
+    budget = data.results.get("B", {}).get("budget")
+    if not budget:
+        return {}
+    sources = budget["sources"]
+    share = np.array([[budget["share"][key][s] for key in ENGINEERING_KEYS] for s in sources])
+    view = SimpleNamespace(sources=sources, share=share, method="B")
+    title = "share of each constant's variance by source (B, linearised at its estimate)"
+    return {"variance_budget": plots.variance_budget_bars(view, title=title)}
 
 
 def _modes_figures(data, plots):
@@ -142,13 +155,26 @@ def _tap_figures(data, plots):
     return {"stabilisation": chart, "frf": frf}
 
 
-def _sample_figures(result, plots):
-    """Corner plot of the posterior draws (see :func:`bayesplate.report.steps.sample_step`)."""
+def _sample_figures(result, plots, b_result=None):
+    """Corner plot of the posterior draws, with B's linearised ellipses where B converged.
+
+    See :func:`bayesplate.report.steps.sample_step`; the ellipses enclose what the draws'
+    contours do (1 and 2 sigma), so a linearised covariance that holds lies on them.
+    """
     labels = [f"{n} ({u})" for n, u in zip(ENGINEERING_NAMES, ENGINEERING_UNITS, strict=True)]
-    truths = None if result["map"] is None else to_case_units(result["map"])
-    fig = plots.posterior_corner(
-        result["draws"], labels, truths=truths, title="posterior (emcee); red: the B estimate (MAP)"
-    )
+    covariance = None if b_result is None else b_result.get("covariance")
+    if covariance is None or not b_result["converged"]:
+        truths = None if result["map"] is None else to_case_units(result["map"])
+        title = "posterior (emcee); red: the B estimate (MAP)"
+        return {"posterior_corner": plots.posterior_corner(result["draws"], labels,
+                                                           truths=truths, title=title)}  # fmt: skip
+    scale = to_case_units(np.ones(6))
+    estimate = (to_case_units(b_result["constants"]),
+                np.asarray(covariance) * np.outer(scale, scale))  # fmt: skip
+    fig = plots.corner_estimates(
+        result["draws"], labels, estimates={"B, linearised": estimate},
+        title="posterior (emcee draws) and B's linearised Gaussian (1 and 2 sigma ellipses)",
+    )  # fmt: skip
     return {"posterior_corner": fig}
 
 

@@ -177,6 +177,14 @@ def _estimates_section(data, figures):
             "residuals",
             "Per-mode residuals at each estimate: (measured - computed) / sigma",
         )
+        + _image(
+            figures,
+            "variance_budget",
+            "Where each constant's uncertainty comes from, at the B estimate: the share of "
+            "its variance from the measured frequencies, the measured inputs (thickness, "
+            "density, size, where the case gives their deviations) and the prior; a "
+            "constant mostly from its prior is one the test hardly determines",
+        )
     )
 
 
@@ -270,8 +278,9 @@ def _posterior_section(data, figures):
         + _image(
             figures,
             "posterior_corner",
-            "Posterior draws of the engineering constants; dashed: 3 %, 50 % and 97 % "
-            "quantiles; red: the B estimate",
+            "Posterior draws of the engineering constants (histograms and 1 and 2 sigma "
+            "contours) with B's linearised Gaussian (its ellipses enclose the same "
+            "probabilities: where they lie on the contours, the linearised intervals hold)",
         )
     )
 

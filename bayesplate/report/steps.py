@@ -64,6 +64,7 @@ def estimate_step(case, model, method, pairing, fast=None):
     With a fast model (a :class:`bayesplate.reduced.CertifiedModel`) the estimator iterates
     on it and the full model checks the answer (the ``check`` entry).
     """
+    from ..io.export import budget_to_dict
     from ..run import run_estimate
 
     options = estimate_options(method, pairing, model)
@@ -82,6 +83,8 @@ def estimate_step(case, model, method, pairing, fast=None):
         "modes": np.asarray(r.modes),
         "constants": r.constants,
         "sd": r.sd,
+        "covariance": r.covariance,
+        "budget": None if done.budget is None else budget_to_dict(done.budget),
         "b": r.b,
         "frequency_Hz": r.frequency_Hz,
         "measured_Hz": r.measured_Hz,
@@ -102,14 +105,15 @@ def estimate_options(method, pairing, model):
     """The run layer's options of the report's estimate of `method`.
 
     The command line's defaults; on the full model unless the step is given the report's
-    shared fast model (which the report builds where ``"auto"`` takes the fast path); no
-    variance budget (the report shows none).
+    shared fast model (which the report builds where ``"auto"`` takes the fast path); the
+    variance budget of B's (the report's figure of where each constant's uncertainty comes
+    from).
     """
     from ..run import EstimateOptions
 
     mesh = (model.mesh.nx, model.mesh.ny)
     return EstimateOptions(method=method, mesh=mesh, pairing=pairing, forward="full",
-                           budget=False)  # fmt: skip
+                           budget=method == "B")  # fmt: skip
 
 
 def _scale_data(summary):
