@@ -311,6 +311,7 @@ def _residues(frf: FRFData, poles, band_Hz) -> np.ndarray:
     lower, upper = _band(frf.frequency_Hz, band_Hz)
     damping = np.array([pole.damping for pole in poles])
     omega = 2 * np.pi * np.array([pole.frequency_Hz for pole in poles])
+    # the poles of the data as given: an exponential window's decay added back
     lam = -damping * omega - frf.added_decay_per_s + 1j * omega * np.sqrt(1 - damping**2)
     with _quiet():
         from sdypy import EMA
@@ -359,18 +360,8 @@ def modal_data_from_poles(frf: FRFData, poles, band_Hz=None) -> ModalData:
     notes = frf.notes
     if frf.points_mm is None or frf.n_points < 2:
         return ModalData(frequency, damping=damping, source=frf.source, notes=notes, **evidence)
-    lower, upper = _band(frf.frequency_Hz, band_Hz)
-    omega = 2 * np.pi * frequency
-    # the poles of the data as given: an exponential window's decay added back
-    lam = -damping * omega - frf.added_decay_per_s + 1j * omega * np.sqrt(1 - damping**2)
-    with _quiet():
-        from sdypy import EMA
-
-        model = EMA.Model(frf=frf.frf, freq=frf.frequency_Hz, lower=lower, upper=upper,
-                          pol_order_high=1, frf_form=frf.form)  # fmt: skip
-        chosen = _ChosenPoles([lam], [[0, i] for i in range(lam.size)])
-        _, constants = model.get_constants(whose_poles=chosen)
-    shapes = np.array([_realised(np.asarray(constants)[:, i]) for i in range(lam.size)])
+    constants = _residues(frf, poles, band_Hz)
+    shapes = np.array([_realised(constants[:, i]) for i in range(len(poles))])
     return ModalData(frequency, frf.points_mm, shapes, damping, source=frf.source, notes=notes,
                      **evidence)  # fmt: skip
 
