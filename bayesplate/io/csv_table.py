@@ -58,6 +58,21 @@ def csv_lines(path: str) -> list[tuple[int, list[str]]]:
     ``#`` starts a comment; a byte-order mark is skipped. Cells are as the csv module splits
     them (not stripped). An unreadable or non-UTF-8 file raises a :class:`CaseError`.
     """
+    lines = []
+    for number, content in csv_contents(path):
+        try:
+            lines.append((number, next(csv.reader([content]))))
+        except csv.Error as err:  # a field over the csv module's limit (128 kB)
+            raise CaseError(f"line {number}", rule=f"not a CSV line ({err})") from None
+    return lines
+
+
+def csv_contents(path: str) -> list[tuple[int, str]]:
+    """``(line number, text)`` of every line not blank or a comment, the comment cut off.
+
+    ``#`` starts a comment; a byte-order mark is skipped. An unreadable or non-UTF-8 file
+    raises a :class:`CaseError`.
+    """
     try:
         with open(path, encoding="utf-8-sig", newline="") as stream:
             text = stream.read()
@@ -65,12 +80,12 @@ def csv_lines(path: str) -> list[tuple[int, list[str]]]:
         raise CaseError(None, rule=f"cannot read the file ({err.strerror or err})") from None
     except UnicodeDecodeError:
         raise CaseError(None, rule="not a UTF-8 text file") from None
-    lines = []
+    contents = []
     for number, line in enumerate(text.splitlines(), start=1):
         content = line.split("#", 1)[0]
         if content.strip():
-            lines.append((number, next(csv.reader([content]))))
-    return lines
+            contents.append((number, content))
+    return contents
 
 
 def _read_csv(path: str) -> ModalData:

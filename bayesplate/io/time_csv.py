@@ -38,6 +38,7 @@ import re
 
 import numpy as np
 
+from .csv_table import csv_contents
 from .errors import CaseError
 
 __all__ = [
@@ -153,18 +154,7 @@ def _split(content: str, separator: str, number: int = 1) -> list[str]:
 
 def _lines(path) -> tuple[str, list]:
     """The separator and ``(line number, cells)`` of every line that is not blank or a comment."""
-    try:
-        with open(path, encoding="utf-8-sig", newline="") as stream:
-            text = stream.read()
-    except OSError as err:
-        raise CaseError(None, rule=f"cannot read the file ({err.strerror or err})") from None
-    except UnicodeDecodeError:
-        raise CaseError(None, rule="not a UTF-8 text file") from None
-    contents = []
-    for number, line in enumerate(text.splitlines(), start=1):
-        content = line.split("#", 1)[0]
-        if content.strip():
-            contents.append((number, content))
+    contents = csv_contents(path)
     separator = _separator(contents[0][1]) if contents else ","
     return separator, [(n, _split(content, separator, n)) for n, content in contents]
 
