@@ -1,5 +1,6 @@
 import hashlib
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -15,6 +16,17 @@ sys.path.insert(0, str(Path(__file__).parent))
 def rng():
     """One seeded generator per test: the same seed gives the same numbers."""
     return np.random.default_rng(20070461)
+
+
+@pytest.fixture
+def sheet(tmp_path):
+    """plate1 without its measured frequencies: a plate sheet (the tap-test imports')."""
+    from bayesplate.io import bundled_case_path
+
+    text = bundled_case_path("plate1").read_text()
+    path = tmp_path / "plate1_sheet.toml"
+    path.write_text(re.sub(r"frequency_Hz = \[[^\]]*\]\n", "", text))
+    return path
 
 
 # ----------------------------------------------------------------------------- fuzz counting

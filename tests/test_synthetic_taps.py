@@ -5,7 +5,6 @@ the frequencies are those of the model solved here, and the artefacts are checke
 arrays (a second pulse, a flat top) or in the H1 and coherence of `bayesplate.io.taps`.
 """
 
-import re
 
 import numpy as np
 import pytest
@@ -46,15 +45,6 @@ def modes(plate1):
     """Ten modes of plate1, tapped at one corner, measured at the opposite one."""
     model, b = plate1
     return plate_modes_at(model, b, TAP_MM, SENSOR_MM, 10)
-
-
-@pytest.fixture
-def sheet(tmp_path):
-    """plate1 without its measured frequencies: a plate sheet."""
-    text = bundled_case_path("plate1").read_text()
-    path = tmp_path / "plate1_sheet.toml"
-    path.write_text(re.sub(r"frequency_Hz = \[[^\]]*\]\n", "", text))
-    return path
 
 
 def taps_of(frequency, amplitude, rng, n_taps=5, duration_s=0.5, **artefacts):

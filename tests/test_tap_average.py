@@ -5,7 +5,6 @@ plate's computed frequencies and shapes (w at the points), convolved with a hamm
 half-sine force pulse, seeded noise added to the responses.
 """
 
-import re
 
 import numpy as np
 import pytest
@@ -35,15 +34,6 @@ def plate1():
     result = model.solve(stiffness_from_engineering(case.reference), 10)
     w = np.asarray(model.interpolation(POINTS_MM * 1e-3, "w") @ result.vectors)
     return np.asarray(result.frequency_Hz), w / np.abs(w).max(axis=0)
-
-
-@pytest.fixture
-def sheet(tmp_path):
-    """plate1 without its measured frequencies: a plate sheet."""
-    text = bundled_case_path("plate1").read_text()
-    path = tmp_path / "plate1_sheet.toml"
-    path.write_text(re.sub(r"frequency_Hz = \[[^\]]*\]\n", "", text))
-    return path
 
 
 def impulse_responses(frequency, w, ref=0):

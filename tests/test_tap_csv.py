@@ -25,15 +25,6 @@ MODES_HZ = np.array([611.23, 2002.7, 2171.2])  # plate1's first three
 BAND = ("300", "2300")
 
 
-@pytest.fixture
-def sheet(tmp_path):
-    """plate1 without its measured frequencies: a plate sheet."""
-    text = bundled_case_path("plate1").read_text()
-    path = tmp_path / "plate1_sheet.toml"
-    path.write_text(re.sub(r"frequency_Hz = \[[^\]]*\]\n", "", text))
-    return path
-
-
 def synthetic_tap(n=12000, rate_Hz=RATE_HZ):
     """A hammer tap (half-sine force, 0.2 ms) on three damped modes: float32 (force, response)."""
     t = np.arange(n) / rate_Hz

@@ -1,6 +1,5 @@
 """Tap tests in (issue 16): impulse recordings and FRFs -> LSCF poles (sdypy-EMA) -> case files."""
 
-import re
 from pathlib import Path
 
 import numpy as np
@@ -40,15 +39,6 @@ def plate1():
     points_mm = np.column_stack([x.ravel(), y.ravel()])
     w = np.asarray(model.interpolation(points_mm * 1e-3, "w") @ result.vectors)
     return np.asarray(result.frequency_Hz), points_mm, w / np.abs(w).max(axis=0)
-
-
-@pytest.fixture
-def sheet(tmp_path):
-    """plate1 without its measured frequencies: a plate sheet."""
-    text = bundled_case_path("plate1").read_text()
-    path = tmp_path / "plate1_sheet.toml"
-    path.write_text(re.sub(r"frequency_Hz = \[[^\]]*\]\n", "", text))
-    return path
 
 
 def damping_of(frequency):
