@@ -98,3 +98,19 @@ def add_base_arguments(parser, base_rev, out):
     parser.add_argument("--base-dir", type=pathlib.Path, help="an existing checkout of the base")
     parser.add_argument("--no-base", action="store_true", help="time this tree only")
     parser.add_argument("--out", default=str(out), help="report folder")
+
+
+def write_report(out_dir, name, lines):
+    """Write ``lines`` joined by newlines to ``out_dir/name``, whole (a temporary, renamed).
+
+    Returns
+    -------
+    pathlib.Path
+        The report written.
+    """
+    path = pathlib.Path(out_dir) / name
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_text("\n".join(lines))
+    tmp.replace(path)
+    return path

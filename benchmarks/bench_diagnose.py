@@ -157,10 +157,7 @@ def write_report(rows, base_rows, info, out_dir, base_label, started):
         lines += ["", f"Base ({base_label}) / now, wall time on the same recordings in this run: "
                   + ", ".join(f"{x:.1f}x" for x in ratios)
                   + f" (median {statistics.median(ratios):.1f}x)."]  # fmt: skip
-    path = pathlib.Path(out_dir) / REPORT
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines) + "\n")
-    return path
+    return _machine.write_report(out_dir, REPORT, [*lines, ""])
 
 
 def write_scaling(scaling, info, out_dir, started):
@@ -197,10 +194,7 @@ def write_scaling(scaling, info, out_dir, started):
         slope = np.polyfit(n, t, 1)[0]
         lines += ["", f"Wall time against unknowns at 14 frequencies: slope {slope:.2f} on "
                   "log-log axes (a least-squares fit over the meshes above)."]  # fmt: skip
-    path = pathlib.Path(out_dir) / SCALING_REPORT
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines) + "\n")
-    return path
+    return _machine.write_report(out_dir, SCALING_REPORT, [*lines, ""])
 
 
 def write_pairs(rows, info, out_dir, base_label, started):
@@ -233,10 +227,7 @@ def write_pairs(rows, info, out_dir, base_label, started):
     if now and then:
         lines += ["", f"Base ({base_label}) / this code, median wall times in this run: "
                   f"{statistics.median(then) / statistics.median(now):.1f}x."]  # fmt: skip
-    path = pathlib.Path(out_dir) / PAIRS_REPORT
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines) + "\n")
-    return path
+    return _machine.write_report(out_dir, PAIRS_REPORT, [*lines, ""])
 
 
 def main(out_dir, runs, workers, base=None, base_runs=(), quick=False, scaling=False,

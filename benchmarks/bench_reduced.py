@@ -308,11 +308,7 @@ def write_report(m, info, out_dir, quick=False, date=None):
         f"{EVAL_REPEATS} batches of {EVAL_BATCH} calls at {N_EVAL_POINTS} points of the box.",
         "",
     ]
-    path = pathlib.Path(out_dir) / REPORT
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".md.tmp")
-    tmp.write_text("\n".join(lines))
-    tmp.replace(path)
+    path = _machine.write_report(out_dir, REPORT, lines)
     return path
 
 

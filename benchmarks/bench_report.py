@@ -114,10 +114,7 @@ def write_report(bench, info, out_dir, base_rev=None):
     lines += _steps_table(now_runs, "this tree")
     if base_runs:
         lines += _steps_table(base_runs[0], base_rev)
-    path = pathlib.Path(out_dir) / REPORT
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines))
-    return path
+    return _machine.write_report(out_dir, REPORT, lines)
 
 
 def main(argv=None):

@@ -143,10 +143,7 @@ def write_report(bench, info, out_dir, base_rev=None, date=None):
         "least that importing any numerics costs.",
         "",
     ]
-    path = pathlib.Path(out_dir) / REPORT
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines))
-    return path
+    return _machine.write_report(out_dir, REPORT, lines)
 
 
 def main(argv=None):
