@@ -10,32 +10,10 @@ import numpy as np
 
 from ..quantities import CASE_SCALE, ENGINEERING_NAMES, ENGINEERING_UNITS
 from .data import ESTIMATORS, _estimate_for_modes, sampling_available
+from .md_blocks import _constant, _image, _num, _short, _table
+from .md_taps import tap_section
 
 __all__ = ["render_markdown"]
-
-
-def _table(head, rows):
-    lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
-    lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
-    return lines
-
-
-def _num(value, fmt):
-    return "n/a" if value is None or not np.isfinite(value) else format(value, fmt)
-
-
-def _constant(values, i, sd=None):
-    """Constant i in case units, ``"113.5 ± 2.6"``."""
-    v = values[i] / CASE_SCALE[i]
-    text = _num(v, "#.4g") if i != 2 else _num(v, ".3f")
-    if sd is not None:
-        s = sd[i] / CASE_SCALE[i]
-        text += " ± " + (_num(s, "#.2g") if i != 2 else _num(s, ".3f"))
-    return text
-
-
-def _image(figures, name, caption):
-    return [f"![{caption}]({figures[name]})", "", f"*{caption}*", ""] if name in figures else []
 
 
 def _header(data):
@@ -436,52 +414,6 @@ def _plies(n):
     return "1 ply" if n == 1 else f"{n} plies"
 
 
-def _short(value):
-    return f"{value:.4g}" if isinstance(value, float) else str(value)
-
-
-def _taps_section(data, figures):
-    """The tap test: its recordings, the peaks with their evidence and roles, two figures."""
-    if data.taps is None:
-        return []
-    from .figures import tap_roles
-
-    taps, measured = data.taps, data.case.measured
-    roles, _, unobserved = tap_roles(data)
-    lower, upper = taps.analysis.band_Hz
-    lines = ["## Tap test", "", (
-        f"{len(taps.sources)} recording{'s' if len(taps.sources) != 1 else ''} averaged; "
-        f"LSCF poles fitted over {lower:.4g}-{upper:.4g} Hz at model orders up to "
-        f"{int(taps.analysis.orders[-1])}; {len(taps.kept)} poles kept. Each peak's prior "
-        "probability of being spurious comes from its pole's evidence (coherence, the phase "
-        "of its modal constant, damping, stability); the loss factor is twice the damping "
-        "ratio."), ""]  # fmt: skip
-    head = ["peak", "f (Hz)", "loss factor (%)", "coherence", "phase off (deg)", "p spurious",
-            "role"]  # fmt: skip
-    by_f = {round(p.frequency_Hz, 6): p for p in taps.kept}
-    rows = []
-    for i, f in enumerate(measured.frequency_Hz):
-        pole = min(taps.kept, key=lambda p, f=f: abs(p.frequency_Hz - f))
-        pole = by_f.get(round(f, 6), pole)
-        evidence = (pole.coherence, pole.phase_deviation_deg, pole.p_spurious)
-        rows.append([i + 1, f"{f:.2f}", f"{200 * pole.damping:.2f}",
-                     *(f"{v:.3g}" for v in evidence), roles[i]])  # fmt: skip
-    lines += _table(head, rows) + [""]
-    if unobserved:
-        listed = ", ".join(str(j + 1) for j in unobserved)
-        lines += [f"Computed modes no peak explains (unobserved: a node at the tap or the "
-                  f"sensor, or too weak): {listed}.", ""]  # fmt: skip
-    lines += _image(figures, "frf", "the measured FRF (mean magnitude), the peaks paired and "
-                    "those called spurious (top), the computed modes at the estimate "
-                    "(dotted; dashed red: no peak explains them)")  # fmt: skip
-    return lines + _image(
-        figures,
-        "stabilisation",
-        "stabilisation chart: poles of each LSCF "
-        "model order, the kept ones marked at the top; below, the coherence",
-    )
-
-
 def render_markdown(data, figures):
     """The Markdown text of a report.
 
@@ -498,7 +430,7 @@ def render_markdown(data, figures):
     from .html import report_summary, summary_lines
 
     lines = _header(data) + summary_lines(report_summary(data))
-    lines += _case_section(data) + _taps_section(data, figures)
+    lines += _case_section(data) + tap_section(data, figures)
     lines += _measured_section(data, figures)
     lines += _estimates_section(data, figures) + _modes_section(data, figures)
     lines += _posterior_section(data, figures) + _diagnose_section(data, figures)
