@@ -63,3 +63,22 @@ def test_the_mode_the_sensor_cannot_see_is_the_one_left_unobserved(tmp_path):
     assert a.unobserved.tolist() == [2]
     assert a.modes.tolist() == [0, 1, *range(3, case.measured.size + 1)]
     assert a.p_unobserved[2] > 0.5 > 0.05 > np.max(np.delete(a.p_unobserved, 2)[:9])
+
+
+def test_the_mode_shapes_figure_marks_the_tap_and_the_sensor(tmp_path):
+    """Every panel carries both points at their millimetres, and the legend names them."""
+    from bayesplate.plots import mode_shapes
+
+    case = load_case(_plate1_toml(tmp_path))
+    model = PlateModel.from_case(case, mesh=(8, 4))
+    result = model.solve(stiffness_from_engineering(case.prior.mean), n_modes=4)
+    marks = {"tap": case.measured.tap_points[0], "sensor": case.measured.tap_points[1]}
+    fig = mode_shapes(model, result, n=4, points=(21, 11), marks=marks)
+    panels = [ax for ax in fig.axes if ax.get_visible() and ax.get_title().startswith("mode")]
+    assert len(panels) == 4
+    for ax in panels:
+        lines = {line.get_label(): np.column_stack(line.get_data()) for line in ax.get_lines()}
+        np.testing.assert_allclose(lines["tap"], [TAP_MM])
+        np.testing.assert_allclose(lines["sensor"], [SENSOR_MM])
+    legend = panels[0].get_legend()
+    assert [t.get_text() for t in legend.get_texts()] == ["tap", "sensor"]

@@ -35,6 +35,21 @@ def run(args):
     )
     path, data = make_report(case.path, args.output, options, label=str(case_file), taps=taps)
     print(f"{path}: {len(data.computed)} steps computed, {len(data.reused)} reused from the cache")
+    return _print_pdf(path) if args.pdf else 0
+
+
+def _print_pdf(report_md):
+    """``--pdf``: report.html printed beside it; exit status 2, the report kept, on failure."""
+    import sys
+
+    from ..report.pdf import PdfError, print_pdf
+
+    try:
+        pdf = print_pdf(report_md.with_name("report.html"))
+    except PdfError as err:
+        print(f"bayesplate report: error: --pdf: {err}", file=sys.stderr)
+        return 2
+    print(f"{pdf}: the report page printed")
     return 0
 
 
@@ -89,4 +104,10 @@ def register(sub):
     p.add_argument("--seed", type=seed_int, default=0, help="seed of diagnose and the sampler")
     p.add_argument("--no-diagnose", action="store_true", help="leave out the diagnosis")
     p.add_argument("--no-sample", action="store_true", help="leave out posterior sampling")
+    p.add_argument(
+        "--pdf",
+        action="store_true",
+        help="also DIR/report.pdf: report.html printed by a headless Chromium (apt-get "
+        "install chromium, or name one in BAYESPLATE_CHROMIUM)",
+    )
     p.set_defaults(func=run)

@@ -10,7 +10,7 @@ from ._style import _MM, _axes
 __all__ = ["mac_matrix_plot", "mode_shapes"]
 
 
-def mode_shapes(model, result, n=6, fig=None, points=(121, 61)):
+def mode_shapes(model, result, n=6, fig=None, points=(121, 61), marks=None):
     """Filled contours of the transverse displacement ``w`` of the first ``n`` modes.
 
     Each shape is scaled to ``max |w| = 1`` with its largest deflection positive; the nodal
@@ -26,6 +26,9 @@ def mode_shapes(model, result, n=6, fig=None, points=(121, 61)):
     fig : matplotlib.figure.Figure, optional
     points : tuple of int
         Evaluation grid along the longer and the shorter side.
+    marks : dict, optional
+        Label -> point ``(x, y)`` in m (for example ``{"tap": ..., "sensor": ...}``), marked
+        on every panel, so that a mode with a node at the tap or the sensor is seen to be one.
 
     Returns
     -------
@@ -57,6 +60,7 @@ def mode_shapes(model, result, n=6, fig=None, points=(121, 61)):
         W = w[:, k].reshape(X.shape)
         filled = ax.contourf(X * _MM, Y * _MM, W, levels=levels, cmap="RdBu_r")
         ax.contour(X * _MM, Y * _MM, W, levels=[0.0], colors="black", linewidths=1.2)
+        _mark_points(ax, marks)
         ax.set_aspect("equal")
         ax.set_title(f"mode {k + 1}: {result.frequency_Hz[k]:.1f} Hz")
         if k % ncols == 0:
@@ -65,7 +69,19 @@ def mode_shapes(model, result, n=6, fig=None, points=(121, 61)):
             ax.set_xlabel("x [mm]")
     bar = fig.colorbar(filled, ax=axes.ravel().tolist(), shrink=0.9, ticks=levels[::5])
     bar.set_label("w / max|w| (-); nodal lines in black")
+    if marks:
+        axes.ravel()[0].legend(loc="upper right", fontsize=7, framealpha=0.8)
     return fig
+
+
+_MARK_STYLES = ({"marker": "x", "color": "black"}, {"marker": "o", "color": "gold"})
+
+
+def _mark_points(ax, marks):
+    """Each point of ``marks`` (label -> (x, y) in m) as a marker with its label."""
+    for (label, (x, y)), style in zip((marks or {}).items(), _MARK_STYLES * 4, strict=False):
+        ax.plot(x * _MM, y * _MM, linestyle="none", markersize=7, markeredgecolor="black",
+                label=label, **style)  # fmt: skip
 
 
 def mac_matrix_plot(mac, pairs=None, ax=None, title=None, measured_Hz=None):

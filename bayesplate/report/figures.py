@@ -105,7 +105,11 @@ def _modes_figures(data, plots):
     shapes = ModalResult(
         modes["b"], modes["eigenvalues"][:k], modes["vectors"], np.zeros((k, 6)), np.zeros(0)
     )
-    figs["mode_shapes"] = plots.mode_shapes(data.plate_model(), shapes, n=k, points=_SHAPE_GRID)
+    tap = data.case.measured.tap_points
+    marks = None if tap is None else {"tap": tap[0], "sensor": tap[1]}
+    figs["mode_shapes"] = plots.mode_shapes(
+        data.plate_model(), shapes, n=k, points=_SHAPE_GRID, marks=marks
+    )
     pairing, m = data.pairing(), data.case.measured.size
     if pairing.mac is not None:
         pairs = np.full(m, -1)
@@ -180,7 +184,7 @@ def _sample_figures(result, plots, b_result=None):
 
 def _diagnosis_view(result):
     """What :func:`bayesplate.plots.diagnosis_figures` reads, from a cached diagnosis."""
-    from ..discrepancy.locate import LocationMap
+    from ..discrepancy.physics.location import LocationMap
 
     d = result["diagnosis"]
     maps = {}

@@ -232,9 +232,20 @@ def _modes_section(data, figures):
             figures,
             "mode_shapes",
             f"The first {k} elastic mode shapes at the {at} "
-            "estimate (w, scaled to max |w| = 1); nodal lines in black",
+            "estimate (w, scaled to max |w| = 1); nodal lines in black"
+            + _tap_marks(data),
         ),
     ]
+
+
+def _tap_marks(data):
+    """The caption's words for the tap and sensor points, when the case gives them."""
+    if data.case.measured.tap_points is None:
+        return ""
+    return (
+        "; the tap (x) and the sensor (o): a mode with a nodal line through either is "
+        "barely excited or seen, so its peak may be missing"
+    )
 
 
 def _posterior_section(data, figures):
