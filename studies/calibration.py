@@ -63,7 +63,7 @@ from bayesplate.discrepancy import (
     ThicknessTaper,
 )
 from bayesplate.discrepancy.diagnose import DEFAULTS, diagnose, mesh_error
-from bayesplate.discrepancy.locate import absorbable_projector
+from bayesplate.discrepancy.physics.location import absorbable_projector
 from bayesplate.io import atomic_write_text
 from bayesplate.posterior import prior_in_stiffness
 

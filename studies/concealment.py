@@ -36,7 +36,7 @@ from bayesplate.discrepancy import (
     ThicknessTaper,
 )
 from bayesplate.discrepancy.diagnose import diagnose
-from bayesplate.discrepancy.pair import Pair
+from bayesplate.discrepancy.physics.combined import Pair
 from bayesplate.io import atomic_write_text
 
 _HERE = Path(__file__).resolve().parent

@@ -22,7 +22,7 @@ import matplotlib
 import numpy as np
 
 from bayesplate.discrepancy.diagnose import diagnose
-from bayesplate.discrepancy.fit import JointProblem, fit
+from bayesplate.discrepancy.search.joint_fit import JointProblem, fit
 from bayesplate.io import atomic_write_text, bundled_case_path, load_case
 from bayesplate.laminate import stiffness_from_engineering
 from bayesplate.model import PlateModel

@@ -27,7 +27,7 @@ from matplotlib.figure import Figure
 from scipy.optimize import linear_sum_assignment
 
 from bayesplate import plots
-from bayesplate.discrepancy.locate import mode_kinds
+from bayesplate.discrepancy.physics.location import mode_kinds
 from bayesplate.io import bundled_case_path, load_case
 from bayesplate.laminate import stiffness_from_engineering
 from bayesplate.model import PlateModel
@@ -94,7 +94,7 @@ def case_model(case, layup=None, **kwargs):
 
 def _runs(case, models):
     """Frequencies of every model at the reference constants, and the kinds of the first
-    model's modes (:func:`bayesplate.discrepancy.locate.mode_kinds`)."""
+    model's modes (:func:`bayesplate.discrepancy.physics.location.mode_kinds`)."""
     b = stiffness_from_engineering(case.reference)
     results = {label: model.solve(b, N_MODES) for label, model in models.items()}
     first = next(iter(models))

@@ -135,7 +135,7 @@ def write_report(out_dir, stored, base_rows, quick, workers):
         "The calibration study's recordings (its plates, meshes, seeds and 0.2 % noise) "
         "diagnosed again with `mesh_error_part=\"unabsorbed\"`: the deviations widened only by "
         "the part of the mesh's estimated error that the six constants cannot absorb "
-        "(`bayesplate.discrepancy.mesh_error`), beside the calibration study's rows of the "
+        "(`bayesplate.discrepancy.search.mesh_error`), beside the calibration study's rows of the "
         "same replicates (the default, `\"whole\"`: the whole estimate added). Only "
         "replicates both rules ran are counted. `widening`: the median over the replicates "
         "of each one's median factor on the deviations under the other rule (under the "

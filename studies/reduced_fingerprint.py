@@ -12,7 +12,7 @@ import hashlib
 
 import numpy as np
 
-from bayesplate.discrepancy.elastic_foundation import ElasticFoundation
+from bayesplate.discrepancy.physics.elastic_foundation import ElasticFoundation
 from bayesplate.io import bundled_case_path, load_case
 from bayesplate.model import PlateModel
 from bayesplate.reduced import ReducedModel, fast_model, prior_stiffness, stiffness_box

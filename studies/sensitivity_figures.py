@@ -17,7 +17,7 @@ import matplotlib
 import numpy as np
 
 from bayesplate import plots
-from bayesplate.discrepancy.locate import mode_kinds
+from bayesplate.discrepancy.physics.location import mode_kinds
 from bayesplate.io import bundled_case_path, load_case
 from bayesplate.laminate import stiffness_from_engineering
 from bayesplate.model import PlateModel
@@ -187,7 +187,7 @@ def write_report(results, out_dir, quick=False):
         "and prints no numbers, so its statements about the figures are checked instead. "
         "Because `K` is linear in the six coefficients and `M` does not depend on them, every "
         "row sums to 1 (Euler's theorem); the `sum` column is that check. `kind` is "
-        "`bayesplate.discrepancy.locate.mode_kinds`: `in-plane` when most of the kinetic "
+        "`bayesplate.discrepancy.physics.location.mode_kinds`: `in-plane` when most of the kinetic "
         "energy is in u, v (the paper's 14 modes include such modes, which do not depend on "
         "C44 and C55), otherwise named by the dominant coefficient.",
         "",

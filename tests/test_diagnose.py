@@ -13,10 +13,10 @@ import pytest
 from bayesplate import PlateModel, bundled_case_path, load_case, stiffness_from_engineering
 from bayesplate.cli import main
 from bayesplate.discrepancy import LocalStiffnessLoss, Parameter, PointMass
-from bayesplate.discrepancy.base import mirror_positions
 from bayesplate.discrepancy.diagnose import diagnose
-from bayesplate.discrepancy.local_stiffness_loss import element_energies
-from bayesplate.discrepancy.locate import effect_map
+from bayesplate.discrepancy.physics.base import mirror_positions
+from bayesplate.discrepancy.physics.local_stiffness_loss import element_energies
+from bayesplate.discrepancy.physics.location import effect_map
 from bayesplate.io import diagnosis_to_dict, write_json
 
 MESH = (12, 6)
@@ -100,7 +100,7 @@ def test_nominal_fit_is_global_where_a_local_fit_is_trapped():
     # from the case's) from which one local fit with modes paired by order stops at
     # chi-square ~140 (the issue's pitfall); the global fit must not
     from bayesplate.discrepancy.diagnose import coarse_model, fit_nominal
-    from bayesplate.discrepancy.fit import JointProblem, fit
+    from bayesplate.discrepancy.search.joint_fit import JointProblem, fit
     from bayesplate.posterior import prior_in_stiffness
 
     case = load_case(bundled_case_path("frederiksen_t300"))
@@ -121,7 +121,7 @@ def test_a_second_optimum_that_fits_as_well_makes_its_constants_unidentified():
     from types import SimpleNamespace
 
     from bayesplate import laminate
-    from bayesplate.discrepancy.verdict import basins_note, unidentified
+    from bayesplate.discrepancy.search.verdict import basins_note, unidentified
 
     e = np.array([113e9, 8.5e9, 0.32, 4.45e9, 4.4e9, 2.9e9])
     sd = 0.01 * e  # well identified by the Laplace curvature of its own basin
@@ -215,7 +215,7 @@ def test_global_stage_reaches_the_basin_of_the_published_constants():
     # draws) reaches objective chi2 + chi2_prior ~14; 4 starts on the half mesh (before
     # issue 12) stopped at ~18.4. The many reduced-model starts must reach the former.
     from bayesplate.discrepancy.diagnose import coarse_model, fit_nominal, nominal_reduced
-    from bayesplate.discrepancy.fit import JointProblem, fit
+    from bayesplate.discrepancy.search.joint_fit import JointProblem, fit
     from bayesplate.posterior import observed_eigenvalues, prior_in_stiffness
 
     case = load_case(bundled_case_path("frederiksen_t300"))

@@ -7,7 +7,7 @@ from bayesplate import PlateModel, bundled_case_path, load_case, stiffness_from_
 from bayesplate.assignment import P_SPURIOUS, P_UNOBSERVED, assign
 from bayesplate.discrepancy import PointMass
 from bayesplate.discrepancy.diagnose import diagnose
-from bayesplate.discrepancy.reassign import assignment_log_prior, full_modes, pairing_of
+from bayesplate.discrepancy.search.reassign import assignment_log_prior, full_modes, pairing_of
 from bayesplate.pairing import Pairing
 from bayesplate.quantities import eigenvalue_from_hz
 

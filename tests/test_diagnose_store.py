@@ -18,8 +18,8 @@ from test_diagnose import _plate1_case
 from bayesplate import PlateModel, stiffness_from_engineering
 from bayesplate.discrepancy import ElasticFoundation, PointMass, ThicknessTaper
 from bayesplate.discrepancy.diagnose import diagnose
-from bayesplate.discrepancy.pair import Pair
-from bayesplate.discrepancy.store import MemoryStore, digest
+from bayesplate.discrepancy.physics.combined import Pair
+from bayesplate.discrepancy.search.store import MemoryStore, digest
 from bayesplate.io import diagnosis_to_dict, jsonable
 from bayesplate.io.stage_store import DirectoryStore
 

@@ -1,10 +1,10 @@
-"""Local fits from many starts (:func:`bayesplate.discrepancy.local.local_fits`)."""
+"""Local fits from many starts (:func:`bayesplate.discrepancy.search.local_fits.local_fits`)."""
 
 import logging
 
 import numpy as np
 
-from bayesplate.discrepancy.local import local_fits
+from bayesplate.discrepancy.search.local_fits import local_fits
 
 
 class _TwoRoots:

@@ -5,7 +5,7 @@ import pytest
 
 from bayesplate import PlateModel, bundled_case_path, load_case, stiffness_from_engineering
 from bayesplate.discrepancy.diagnose import diagnose
-from bayesplate.discrepancy.mesh_error import unabsorbed
+from bayesplate.discrepancy.search.mesh_error import unabsorbed
 
 
 def _synthetic(m=12, seed=0):
@@ -74,7 +74,7 @@ def test_the_unabsorbed_part_widens_the_deviations_less_and_is_said():
 def test_the_command_line_offers_every_part_the_default_first():
     from bayesplate.cli.options import MESH_ERROR_CHOICES
     from bayesplate.discrepancy.diagnose import DEFAULTS
-    from bayesplate.discrepancy.mesh_error import MESH_ERROR_PARTS
+    from bayesplate.discrepancy.search.mesh_error import MESH_ERROR_PARTS
 
     assert MESH_ERROR_CHOICES == MESH_ERROR_PARTS
     assert MESH_ERROR_CHOICES[0] == DEFAULTS["mesh_error_part"]
@@ -111,8 +111,8 @@ def test_a_concealed_point_support_reaches_its_best_basin_and_is_named():
     # the foundation was named alone, a wrong name. Reference: the full model fitted locally
     # from the truth's mirror image (another path: no scan, no reduced model, no rounds)
     from bayesplate.discrepancy import ElasticFoundation
-    from bayesplate.discrepancy.fit import JointProblem, fit
-    from bayesplate.discrepancy.point_support import PointSupport
+    from bayesplate.discrepancy.physics.point_support import PointSupport
+    from bayesplate.discrepancy.search.joint_fit import JointProblem, fit
     from bayesplate.posterior import observed_eigenvalues, prior_in_stiffness
     from tests._studies import load_study
 

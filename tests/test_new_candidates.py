@@ -13,8 +13,13 @@ import scipy.linalg
 
 from bayesplate import laminate
 from bayesplate.discrepancy import Cutout, PointSupport
-from bayesplate.discrepancy.cutout import RESIDUAL, cutout_map, disc_fractions, discs_fractions
-from bayesplate.discrepancy.point_support import point_support_map, reference_stiffness
+from bayesplate.discrepancy.physics.cutout import (
+    RESIDUAL,
+    cutout_map,
+    disc_fractions,
+    discs_fractions,
+)
+from bayesplate.discrepancy.physics.point_support import point_support_map, reference_stiffness
 from bayesplate.model import PlateModel
 
 E_REF = np.array([113e9, 8.5e9, 0.323, 4.45e9, 4.43e9, 2.97e9])
@@ -288,7 +293,7 @@ def _concealed(physics, theta, seed):
 
 
 def _near_truth_or_mirror(model, got_xy, truth_xy, tol_mm):
-    from bayesplate.discrepancy.base import mirror_positions
+    from bayesplate.discrepancy.physics.base import mirror_positions
 
     places = [tuple(truth_xy), *mirror_positions(model, *truth_xy)]
     return min(np.hypot(*(np.asarray(got_xy) - np.asarray(p))) for p in places) < tol_mm

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from bayesplate.discrepancy.rank import CandidateResult, _phase
+from bayesplate.discrepancy.search.rank import CandidateResult, _phase
 
 
 class _Physics:

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from bayesplate import laminate
-from bayesplate.discrepancy.elastic_foundation import ElasticFoundation
+from bayesplate.discrepancy.physics.elastic_foundation import ElasticFoundation
 from bayesplate.forward import ForwardModel, Modes
 from bayesplate.io import bundled_case_path, load_case
 from bayesplate.model import ModalResult, PlateModel

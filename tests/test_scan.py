@@ -8,11 +8,11 @@ import scipy.linalg as sla
 
 from bayesplate import laminate
 from bayesplate.discrepancy import LocalStiffnessLoss, PointMass
-from bayesplate.discrepancy.base import mirror_positions
-from bayesplate.discrepancy.local_stiffness_loss import stiffness_loss_scan
-from bayesplate.discrepancy.locate import absorbable_projector
-from bayesplate.discrepancy.point_mass import point_mass_scan
-from bayesplate.discrepancy.scan import RitzBasis, Scan
+from bayesplate.discrepancy.physics.base import mirror_positions
+from bayesplate.discrepancy.physics.local_stiffness_loss import stiffness_loss_scan
+from bayesplate.discrepancy.physics.location import absorbable_projector
+from bayesplate.discrepancy.physics.point_mass import point_mass_scan
+from bayesplate.discrepancy.physics.ritz_scan import RitzBasis, Scan
 from bayesplate.model import PlateModel
 
 E_REF = np.array([113e9, 8.5e9, 0.323, 4.45e9, 4.43e9, 2.97e9])

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import pytest
 
-from bayesplate.discrepancy import two_effects as stage
+from bayesplate.discrepancy.search import two_effects as stage
 
 M = 14  # frequencies: a chi-square of 5 is accepted, 80 rejected at alpha = 0.01
 

@@ -16,13 +16,13 @@ from test_diagnose import MESH, NOISE, _plate1_case, _recordings
 from bayesplate import PlateModel, stiffness_from_engineering
 from bayesplate.cli.diagnose import diagnosis_text
 from bayesplate.discrepancy import ElasticFoundation, PointMass, ThicknessTaper
-from bayesplate.discrepancy.base import mirror_positions
 from bayesplate.discrepancy.diagnose import diagnose
-from bayesplate.discrepancy.pair import Pair, pairs_with
-from bayesplate.discrepancy.pencil import candidate_pencil
-from bayesplate.discrepancy.probabilities import NOMINAL, model_probabilities
-from bayesplate.discrepancy.separate import separate
-from bayesplate.discrepancy.verdict import runner_up, tie_text, ties, verdict
+from bayesplate.discrepancy.physics.base import mirror_positions
+from bayesplate.discrepancy.physics.combined import Pair, pairs_with
+from bayesplate.discrepancy.physics.reduced_model import candidate_pencil
+from bayesplate.discrepancy.search.probabilities import NOMINAL, model_probabilities
+from bayesplate.discrepancy.search.separation import separate
+from bayesplate.discrepancy.search.verdict import runner_up, tie_text, ties, verdict
 from bayesplate.io import diagnosis_to_dict
 
 N_MODES = 12
@@ -305,7 +305,7 @@ def test_a_pairs_mirror_images_are_told_on_a_small_mesh_as_on_its_own(b):
                       (10.0, 150.0, 70.0, -0.12)]  # fmt: skip
     # a combination that is no image is told apart on the small mesh too: the same
     # eigenvalues there only for the images
-    from bayesplate.discrepancy.pair import _check_model
+    from bayesplate.discrepancy.physics.combined import _check_model
 
     small = _check_model(fine)
     assert (small.mesh.nx, small.mesh.ny) == (12, 10)
@@ -351,7 +351,7 @@ def test_two_concealed_effects_are_named_as_a_pair(model, b):
 def test_mirror_images_count_as_posterior_modes():
     # two equal Gaussian modes at +-mu (unit deviations): their integral against the Laplace
     # approximation at the highest point (its height and curvature), computed numerically
-    from bayesplate.discrepancy.probabilities import images_log_weight
+    from bayesplate.discrepancy.search.probabilities import images_log_weight
 
     assert images_log_weight(np.array([3.0]), np.eye(1), []) == 0.0
     far = [np.array([300.0]), np.array([-300.0])]
@@ -373,7 +373,7 @@ def test_a_named_candidates_rivals_left_on_the_coarse_model_are_refined():
     # unrefined ones within RIVAL_REACH of it are refined too; none when nothing may be named
     from types import SimpleNamespace
 
-    from bayesplate.discrepancy.rank import RIVAL_REACH, _rivals
+    from bayesplate.discrepancy.search.rank import RIVAL_REACH, _rivals
 
     def result(gain, refined, failed=""):
         return SimpleNamespace(log_evidence_gain=gain, fit=SimpleNamespace(refined=refined),
@@ -393,8 +393,8 @@ def test_every_named_fit_not_settled_gets_its_note():
     # fit among them (and the nominal one) whose full-model check did not settle, none else
     from types import SimpleNamespace
 
-    from bayesplate.discrepancy.polish import FitCheck
-    from bayesplate.discrepancy.verdict import unsettled_notes
+    from bayesplate.discrepancy.search.settling import FitCheck
+    from bayesplate.discrepancy.search.verdict import unsettled_notes
 
     def fitted(name, settled, objective=10.0):
         check = FitCheck(objective, objective, 1e-6, 0.0 if settled else 2.5, 6, 6, settled)

@@ -156,7 +156,7 @@ PAIRING_CHOICES = ("auto", "mac", "likelihood", "index", "order")
 #: and :data:`~bayesplate.estimators.DEFAULT_MAX_ITER`, spelled here for the same reason
 #: (``tests/test_startup.py`` holds them equal).
 METHOD_CHOICES = ("B", "MVE", "MVE-mod")
-#: :data:`bayesplate.discrepancy.mesh_error.MESH_ERROR_PARTS`, the first the default.
+#: :data:`bayesplate.discrepancy.search.mesh_error.MESH_ERROR_PARTS`, the first the default.
 MESH_ERROR_CHOICES = ("whole", "unabsorbed")
 CONVENTION_CHOICES = ("paper", "full-prior", "printed")
 #: :data:`bayesplate.io.band.DEFAULT_BAND_MODES`, ``BAND_LOW_FACTOR`` and ``BAND_HIGH_FACTOR``,

@@ -8,14 +8,14 @@ candidate (:mod:`.point_mass`, :mod:`.local_stiffness_loss`, :mod:`.cutout`,
 a new candidate, located or not, is one module.
 """
 
-from .base import Parameter, Physics
-from .cutout import Cutout
-from .elastic_foundation import ElasticFoundation
-from .local_stiffness_loss import LocalStiffnessLoss
-from .ply_misalignment import PlyMisalignment
-from .point_mass import PointMass
-from .point_support import PointSupport
-from .thickness_taper import ThicknessTaper
+from .physics.base import Parameter, Physics
+from .physics.cutout import Cutout
+from .physics.elastic_foundation import ElasticFoundation
+from .physics.local_stiffness_loss import LocalStiffnessLoss
+from .physics.ply_misalignment import PlyMisalignment
+from .physics.point_mass import PointMass
+from .physics.point_support import PointSupport
+from .physics.thickness_taper import ThicknessTaper
 
 __all__ = [
     "CANDIDATES",

@@ -47,18 +47,18 @@ from ..parallel import fork_map
 from ..posterior import observed_eigenvalues, prior_in_stiffness
 from ..quantities import hz_from_eigenvalue
 from . import candidates as all_candidates
-from .fit import JointFit, JointProblem
-from .locate import absorbable_projector, best_region, mode_kinds
-from .mesh_error import MESH_ERROR_PARTS, coarse_model, mesh_error, unabsorbed
-from .nominal import N_STARTS, check_fast, fit_nominal, nominal_reduced, nominal_stage
-from .probabilities import model_probabilities
-from .rank import CandidateResult, improved_nominal, rank, searched_anew
-from .reassign import made_again
-from .scan import RitzBasis
-from .separate import Separation, separate
-from .store import Stages, digest, fit_digest, plate_digest
-from .two_effects import two_effects
-from .verdict import (
+from .physics.location import absorbable_projector, best_region, mode_kinds
+from .physics.ritz_scan import RitzBasis
+from .search.joint_fit import JointFit, JointProblem
+from .search.mesh_error import MESH_ERROR_PARTS, coarse_model, mesh_error, unabsorbed
+from .search.nominal import N_STARTS, check_fast, fit_nominal, nominal_reduced, nominal_stage
+from .search.probabilities import model_probabilities
+from .search.rank import CandidateResult, improved_nominal, rank, searched_anew
+from .search.reassign import made_again
+from .search.separation import Separation, separate
+from .search.store import Stages, digest, fit_digest, plate_digest
+from .search.two_effects import two_effects
+from .search.verdict import (
     basins_note,
     predictive_p_values,
     refit_test,

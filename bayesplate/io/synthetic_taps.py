@@ -101,7 +101,7 @@ def plate_modes_at(model: PlateModel, b, tap_mm, sensor_mm, n_modes: int, *,
             boundary=model.boundary, shear_order=model.element.shear_order,
         )  # fmt: skip
     if taper is not None:
-        from ..discrepancy.thickness_taper import ThicknessTaper
+        from ..discrepancy.physics.thickness_taper import ThicknessTaper
 
         direction, ratio = taper
         model = ThicknessTaper(direction).apply(model, (float(ratio),))

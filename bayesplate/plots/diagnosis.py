@@ -16,7 +16,7 @@ def location_map(location, model, ax=None, title=None, mirrors=(), nothing_found
 
     Parameters
     ----------
-    location : bayesplate.discrepancy.locate.LocationMap
+    location : bayesplate.discrepancy.physics.location.LocationMap
     model : PlateModel
         For the plate outline.
     mirrors : sequence of (x_mm, y_mm)
@@ -113,7 +113,7 @@ def residual_comparison(measured_Hz, before_sigma, after_sigma=None, kinds=None,
 
 def diagnosis_figures(model, diagnosis):
     """The figures of a diagnosis: ``{name: Figure}`` (maps and residuals)."""
-    from ..discrepancy.base import mirror_positions
+    from ..discrepancy.physics.base import mirror_positions
 
     d = diagnosis
     after = d.chosen.fit.residual_sigma if d.chosen is not None else None

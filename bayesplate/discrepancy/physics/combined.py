@@ -27,7 +27,7 @@ from dataclasses import replace
 import numpy as np
 
 from .base import Physics, distinct_images, plate_symmetries
-from .pencil import _has_ritz, project
+from .reduced_model import _has_ritz, project
 
 __all__ = ["Pair", "pairs_with"]
 

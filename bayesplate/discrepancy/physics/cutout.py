@@ -6,9 +6,9 @@ import numpy as np
 
 from .base import Parameter, Physics, mirror_position
 from .local_stiffness_loss import element_energies
-from .locate import effect_map
-from .pencil import RegionProjection, project
-from .scan import Scan, misfit
+from .location import effect_map
+from .reduced_model import RegionProjection, project
+from .ritz_scan import Scan, misfit
 
 __all__ = ["Cutout", "cutout_map", "cutout_scan", "disc_fractions", "discs_fractions"]
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import Parameter, Physics
-from .pencil import interpolated_ritz
+from .reduced_model import interpolated_ritz
 
 __all__ = ["ElasticFoundation"]
 

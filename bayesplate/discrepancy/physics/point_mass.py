@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 from .base import Parameter, Physics, mirror_position
-from .locate import effect_map
-from .pencil import project
-from .scan import Scan, misfit
+from .location import effect_map
+from .reduced_model import project
+from .ritz_scan import Scan, misfit
 
 __all__ = ["PointMass", "point_mass_map", "point_mass_scan"]
 

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 
 from .base import Parameter, Physics, mirror_position
-from .locate import effect_map
-from .pencil import RIGID_SHARE, project
+from .location import effect_map
 from .point_mass import _rank_one
-from .scan import Scan
+from .reduced_model import RIGID_SHARE, project
+from .ritz_scan import Scan
 
 __all__ = ["PointSupport", "point_support_map", "point_support_scan", "reference_stiffness"]
 

@@ -24,8 +24,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from .fit import JointProblem, settle
-from .local import distinct
+from .joint_fit import JointProblem, settle
+from .local_fits import distinct
 from .nominal import first_round, nominal_reduced
 
 __all__ = ["ANEW_SEED", "ANEW_STARTS", "constants_anew"]

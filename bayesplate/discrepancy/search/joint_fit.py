@@ -32,12 +32,12 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.stats import norm
 
-from .. import laminate
-from ..quantities import engineering_covariance, hz_from_eigenvalue
-from .finish import finish
-from .local import distinct as _distinct
-from .local import local_fits as _local_fits
-from .polish import MAX_ROUNDS, polish_and_finish
+from ... import laminate
+from ...quantities import engineering_covariance, hz_from_eigenvalue
+from .local_fits import distinct as _distinct
+from .local_fits import local_fits as _local_fits
+from .settling import MAX_ROUNDS, polish_and_finish
+from .tight_finish import finish
 
 __all__ = ["JointFit", "JointProblem", "fit", "rough_fit", "settle"]
 

@@ -12,11 +12,11 @@ import logging
 import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
 
-from ..parallel import fork_map
+from ...parallel import fork_map
 
 __all__ = ["DISTINCT", "distinct", "local_fits", "problem_name"]
 
-log = logging.getLogger("bayesplate.discrepancy.fit")  # the fits' records, as before
+log = logging.getLogger("bayesplate.discrepancy.search.joint_fit")  # the fits' records, as before
 
 DISTINCT = 0.3  # whitened distance under which two optima are the same
 

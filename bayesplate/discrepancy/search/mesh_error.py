@@ -19,8 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..quantities import hz_from_eigenvalue
-from .locate import absorbable_projector
+from ...quantities import hz_from_eigenvalue
+from ..physics.location import absorbable_projector
 
 __all__ = ["MESH_ERROR_PARTS", "coarse_model", "mesh_error", "unabsorbed"]
 

@@ -16,10 +16,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..reduced import ReducedModel
-from .fit import JointProblem, fit
-from .local import local_fits
-from .pencil import candidate_pencil
+from ...reduced import ReducedModel
+from ..physics.reduced_model import candidate_pencil
+from .joint_fit import JointProblem, fit
+from .local_fits import local_fits
 
 __all__ = [
     "N_STARTS",

@@ -19,14 +19,14 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..parallel import fork_map
-from .anew import constants_anew
-from .fit import JointFit, JointProblem, fit, rough_fit, settle
-from .local import DISTINCT
+from ...parallel import fork_map
+from ..physics.reduced_model import candidate_pencil
+from .constants_again import constants_anew
+from .joint_fit import JointFit, JointProblem, fit, rough_fit, settle
+from .local_fits import DISTINCT
 from .nominal import nominal_polisher
-from .pencil import candidate_pencil
-from .polish import polish_and_finish
 from .probabilities import images_log_weight
+from .settling import polish_and_finish
 from .store import fit_digest
 
 __all__ = ["CandidateResult", "improved_nominal", "rank", "searched_anew"]

@@ -40,9 +40,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..assignment import P_SPURIOUS, P_UNOBSERVED, assignment_terms, most_probable
-from ..pairing import Pairing
-from ..quantities import eigenvalue_from_hz
+from ...assignment import P_SPURIOUS, P_UNOBSERVED, assignment_terms, most_probable
+from ...pairing import Pairing
+from ...quantities import eigenvalue_from_hz
 
 __all__ = [
     "EXTRA_MODES",

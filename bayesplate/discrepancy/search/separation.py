@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..quantities import hz_from_eigenvalue
+from ...quantities import hz_from_eigenvalue
 
 __all__ = ["EXTRA_MODES", "Separation", "separate"]
 

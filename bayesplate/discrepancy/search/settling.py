@@ -45,12 +45,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
 
-from .local import DISTINCT, problem_name
+from .local_fits import DISTINCT, problem_name
 
 __all__ = ["DECREMENT_TOL", "FINISH_MARGIN", "FitCheck", "MAX_ROUNDS", "STEP_TOL", "Settled",
            "canonical", "polish_and_finish"]  # fmt: skip
 
-log = logging.getLogger("bayesplate.discrepancy.fit")  # the fits' records, as before
+log = logging.getLogger("bayesplate.discrepancy.search.joint_fit")  # the fits' records, as before
 
 #: See the module's docstring. On the measured Frederiksen plate the nominal polish is
 #: within 0.002 of the finished objective and the second basin 2.55 above the best; a

@@ -29,7 +29,7 @@ import types
 
 import numpy as np
 
-from .. import __version__
+from ... import __version__
 
 __all__ = ["MemoryStore", "Stages", "digest", "fit_digest", "plate_digest"]
 

@@ -13,7 +13,7 @@ loss (+565 nats, the mass second at +530); every pair with the stiffness loss wa
 
 from __future__ import annotations
 
-from .pair import pairs_with
+from ..physics.combined import pairs_with
 from .rank import rank
 from .verdict import refit_test
 

@@ -11,8 +11,8 @@ import numpy as np
 from scipy.stats import chi2 as chi2_dist
 from scipy.stats import norm
 
-from .. import laminate
-from ..quantities import ENGINEERING_NAMES, engineering_covariance
+from ... import laminate
+from ...quantities import ENGINEERING_NAMES, engineering_covariance
 
 __all__ = [
     "basins_note",
