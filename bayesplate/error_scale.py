@@ -47,7 +47,6 @@ __all__ = [
     "linearised_scale",
     "log_marginal",
     "loo_pointwise",
-    "scale_estimate",
     "scale_from_draws",
     "summarise_scale",
 ]
@@ -394,37 +393,3 @@ def linearised_at(problem, b, covariance_b=None):
     return linearised_scale(S, r, problem.V_Y, W, problem.error_scale)
 
 
-def scale_estimate(case, model, result):
-    """An estimate (B, MVE, MVE-mod) with the case's error scale: ``s`` and the widened ``P``.
-
-    The estimate stays where the estimator put it; its covariance becomes
-    :attr:`LinearisedScale.covariance_b` (module docstring), carried to the engineering
-    constants to first order.
-
-    Parameters
-    ----------
-    case : bayesplate.io.Case
-        With ``measured.error_scale`` set.
-    model : bayesplate.forward.ForwardModel
-        The full model (one solve at the estimate).
-    result : bayesplate.estimators.EstimateResult
-
-    Returns
-    -------
-    scaled : EstimateResult
-        `result` with ``covariance_b``, ``covariance`` and ``sd`` replaced.
-    linearised : LinearisedScale
-    """
-    from dataclasses import replace
-
-    from .posterior import GaussianProblem
-    from .quantities import engineering_covariance
-
-    conventions = result.settings.get("conventions")
-    observation = getattr(conventions, "observation", "variance")
-    problem = GaussianProblem.from_case(case, model, result.pairing, observation)
-    lin = linearised_at(problem, result.b, result.covariance_b)
-    cov = engineering_covariance(result.constants, lin.covariance_b)
-    scaled = replace(result, covariance_b=lin.covariance_b, covariance=cov,
-                     sd=np.sqrt(np.diag(cov)))  # fmt: skip
-    return scaled, lin

@@ -58,7 +58,6 @@ from .pairing import track
 from .quantities import engineering_covariance
 
 __all__ = [
-    "converged_budget",
     "INPUT_NAMES",
     "INPUT_UNITS",
     "InputJacobian",
@@ -70,7 +69,6 @@ __all__ = [
     "input_jacobian",
     "input_covariance",
     "variance_budget",
-    "estimate_budget",
 ]
 
 log = logging.getLogger(__name__)
@@ -364,71 +362,3 @@ def variance_budget(P, S, V_Y, V_b, J_p, sd_p, b, method="B", names=INPUT_NAMES)
     return VarianceBudget(method, sources, variance, covariance, cov_e, closure, status)
 
 
-def estimate_budget(case, result, model=None, jacobian=None) -> VarianceBudget:
-    """The variance budget of an estimate of a case (B, MVE or MVE-mod).
-
-    Parameters
-    ----------
-    case : bayesplate.io.Case
-        Its plate's ``*_sd`` are the input deviations.
-    result : bayesplate.estimators.EstimateResult
-        The estimate; its pairing, conventions and (final stage's) prior rebuild its problem.
-    model : PlateModel, optional
-        Full model for the sensitivities at the estimate and the input Jacobian's mesh;
-        default the case's.
-    jacobian : InputJacobian, optional
-        Already computed at ``result.b`` for these modes (skips 6 solves). Not computed when
-        every input deviation is 0.
-
-    Returns
-    -------
-    VarianceBudget
-    """
-    from .posterior import GaussianProblem
-
-    model = model or PlateModel.from_case(case)
-    conventions = result.settings["conventions"]
-    problem = GaussianProblem.from_case(
-        case,
-        model,
-        result.pairing,
-        conventions.observation,
-        conventions.prior,
-        result.settings.get("prior_mean"),
-        result.settings.get("prior_sd"),
-    )
-    modes = np.asarray(result.modes) - 1
-    prediction = problem.predict(result.b, modes)
-    names, A = input_sources(case.plate)
-    if not np.any(A):  # every input taken as exact: no share, no solves
-        J = np.zeros((modes.size, len(INPUT_NAMES)))
-    elif jacobian is None:
-        mesh = (model.mesh.nx, model.mesh.ny)
-        J = input_jacobian(case, result.b, modes, mesh=mesh).J
-    else:
-        J = jacobian.J
-    if case.plate.mass is None:  # (h, rho, a, b) independent: as before, bit for bit
-        J_sources, sd = J, np.diag(A)
-    else:  # one deviation of each reading (h, m, a, b) through rho = m / (a b h)
-        J_sources, sd = J @ A, np.ones(len(names))
-    return variance_budget(
-        result.covariance_b,
-        prediction.S,
-        problem.V_Y,
-        problem.V_b,
-        J_sources,
-        sd,
-        result.b,
-        result.method,
-        names,
-    )
-
-
-def converged_budget(case, result, model=None):
-    """:func:`estimate_budget` of a converged estimate; None when there is no covariance.
-
-    What ``bayesplate estimate`` and ``bayesplate batch`` both report (one rule for both).
-    """
-    if not result.converged or not np.all(np.isfinite(result.covariance_b)):
-        return None
-    return estimate_budget(case, result, model)

@@ -31,6 +31,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from .assignment import MAC_SCALE, assign_with_shapes, most_probable, predictive_sd_Hz
+from .forward import ForwardModel
 from .peak_prior import assignment_priors
 from .quantities import stiffness_covariance
 
@@ -368,7 +369,7 @@ def shape_mac(measurement, model, vectors):
 
 def pair_measured(
     case,
-    model,
+    model: ForwardModel,
     b,
     how="auto",
     threshold=DEFAULT_MAC_THRESHOLD,

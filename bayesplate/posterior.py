@@ -51,6 +51,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import laminate
+from .forward import ForwardModel
 from .pairing import Pairing
 from .quantities import eigenvalue_from_hz, eigenvalue_sd, stiffness_covariance
 
@@ -203,7 +204,7 @@ class GaussianProblem:
     def from_case(
         cls,
         case,
-        model,
+        model: ForwardModel,
         pairing=None,
         observation="variance",
         prior="variance",

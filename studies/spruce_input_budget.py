@@ -4,7 +4,7 @@ The bundled case `badiane_spruce_5R` takes its thickness, density and size as ex
 says otherwise: ten thickness readings 4.7 to 5.1 mm (sd 0.11 mm, 2.3 %), five lengths
 (sd 0.84 mm) and five widths (sd 0.55 mm); the density is the mass (269.2 g, read to 0.1 g)
 over a b h. B and MVE are run on the case as it is; their variance budget
-(:func:`bayesplate.inputs.estimate_budget`) then adds each input's linearised share.
+(:func:`bayesplate.run.budget.estimate_budget`) then adds each input's linearised share.
 
 Two readings of the density's uncertainty:
 - *independent*: what the case keys express (``density_sd_kg_m3``, inputs independent), with
@@ -38,11 +38,12 @@ import time
 import numpy as np
 
 from bayesplate.estimators import estimate
-from bayesplate.inputs import estimate_budget, input_jacobian
+from bayesplate.inputs import input_jacobian
 from bayesplate.io import atomic_write_text, bundled_case_path, load_case
 from bayesplate.laminate import engineering_from_stiffness
 from bayesplate.model import PlateModel
 from bayesplate.quantities import ENGINEERING_KEYS, to_case_units
+from bayesplate.run.budget import estimate_budget
 
 _HERE = pathlib.Path(__file__).resolve().parent
 if str(_HERE) not in sys.path:

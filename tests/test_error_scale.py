@@ -291,9 +291,9 @@ def _synthetic_Hz(case, model, rng, rel):
 
 
 def test_the_estimate_with_the_key_widens_its_deviations():
-    from bayesplate.error_scale import scale_estimate
     from bayesplate.estimators import estimate
     from bayesplate.model import PlateModel
+    from bayesplate.run.budget import scale_estimate
 
     case = _plate1_with({"median": 1.0, "upper95": 5.0})
     model = PlateModel.from_case(case)
@@ -417,10 +417,10 @@ def test_the_screen_bound_is_above_the_marginal_likelihood(rng):
 
 def test_the_report_widens_the_estimates_with_the_scale(tmp_path):
     """`bayesplate report` on a case with the key: B's sd are those of `scale_estimate`."""
-    from bayesplate.error_scale import scale_estimate
     from bayesplate.estimators import estimate
     from bayesplate.model import PlateModel
     from bayesplate.report import ReportOptions, make_report
+    from bayesplate.run.budget import scale_estimate
 
     text = bundled_case_path("plate1").read_text()
     text = text.replace("sigma_rel = 0.01\n",

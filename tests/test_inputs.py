@@ -9,7 +9,6 @@ from bayesplate import laminate
 from bayesplate.estimators import estimate
 from bayesplate.inputs import (
     INPUT_NAMES,
-    estimate_budget,
     input_jacobian,
     input_sd,
     variance_budget,
@@ -17,6 +16,7 @@ from bayesplate.inputs import (
 from bayesplate.io import Case, CaseError, Measurement, Plate, Prior, parse_case
 from bayesplate.model import PlateModel
 from bayesplate.quantities import hz_from_eigenvalue
+from bayesplate.run.budget import estimate_budget
 
 MESH = (12, 8)
 #: The thin plate's mesh: the TSDT element locks in shear on coarse meshes of thin plates

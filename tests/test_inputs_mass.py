@@ -16,7 +16,6 @@ from bayesplate import laminate
 from bayesplate.estimators import estimate
 from bayesplate.inputs import (
     describe_inputs,
-    estimate_budget,
     input_covariance,
     input_jacobian,
     input_sources,
@@ -25,6 +24,7 @@ from bayesplate.io import CaseError, Plate, parse_case
 from bayesplate.model import PlateModel
 from bayesplate.posterior import GaussianProblem
 from bayesplate.quantities import hz_from_eigenvalue
+from bayesplate.run.budget import estimate_budget
 
 A_MM, B_MM, H_MM, M_G = 300.0, 200.0, 4.9, 128.1  # 435.7 kg/m^3
 

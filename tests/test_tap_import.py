@@ -13,10 +13,10 @@ from bayesplate.io.band import prior_band_Hz
 from bayesplate.io.case_writer import _to_digits as to_digits
 from bayesplate.io.case_writer import sheet_case
 from bayesplate.io.frf import read_frf_csv, read_uff_frf
-from bayesplate.io.impulse import read_impulse
 from bayesplate.io.modal_file import is_tap_test, read_spectra
 from bayesplate.io.poles import extract_poles, modal_data_from_poles
 from bayesplate.io.poles_file import read_poles
+from bayesplate.io.taps import read_impulse
 from bayesplate.laminate import stiffness_from_engineering
 from bayesplate.model import PlateModel
 

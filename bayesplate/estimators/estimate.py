@@ -9,6 +9,7 @@ import numpy as np
 
 from .. import laminate
 from ..checked_order import assignment_at, checks_order, refuted_order
+from ..forward import ForwardModel
 from ..model import PlateModel
 from ..pairing import Pairing, pair_measured, resolve_pairing
 from ..posterior import prior_in_stiffness
@@ -41,7 +42,7 @@ class OrderRefuted(Exception):
 def estimate(
     case,
     method="MVE",
-    model=None,
+    model: ForwardModel | None = None,
     tol=1e-3,
     max_iter=DEFAULT_MAX_ITER,
     convention="paper",

@@ -111,7 +111,7 @@ def estimate_to_dict(result, case, model, budget=None, scale=None):
     model : bayesplate.forward.ForwardModel
         The model it was computed with (its mesh).
     budget : bayesplate.inputs.VarianceBudget, optional
-        Its variance budget (:func:`bayesplate.inputs.converged_budget`), under
+        Its variance budget (:func:`bayesplate.run.budget.converged_budget`), under
         ``"variance_budget"``.
     scale : bayesplate.error_scale.LinearisedScale, optional
         The inferred error scale (the case's ``measured.error_scale``), under

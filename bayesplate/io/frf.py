@@ -7,14 +7,14 @@ naming the file, the dataset or line and column, and the rule.
 
 from __future__ import annotations
 
-import math
 import os
 from dataclasses import dataclass
 
 import numpy as np
 
-from .csv_table import csv_lines
+from .csv_rows import numeric_table, read_csv_rows
 from .errors import CaseError
+from .points import read_points
 
 __all__ = ["FRFData", "read_uff_frf", "read_frf_csv"]
 
@@ -167,7 +167,7 @@ def read_frf_csv(path, points=None) -> FRFData:
     response point ``<point>`` has two columns ``H<point>_re`` and ``H<point>_im`` (real and
     imaginary part, any consistent unit, receptance assumed), the points in the order of
     the header. ``#`` starts a comment; blank lines are skipped. Coordinates come from a
-    points file (:func:`bayesplate.io.taps.read_points`, ``point,x_mm,y_mm``), matched by
+    points file (:func:`bayesplate.io.points.read_points`, ``point,x_mm,y_mm``), matched by
     name: its row ``point = 3`` gives the coordinates of ``H3_re, H3_im``; it must name
     exactly the table's points (any row order). Without it only frequencies are imported.
 
@@ -220,8 +220,6 @@ def read_frf_csv(path, points=None) -> FRFData:
 
 def _coordinates(points_path, names: list[str], path: str) -> np.ndarray:
     """(x, y) in mm of the named FRF points, from the points file (matched by name)."""
-    from .taps import read_points
-
     given, xy = read_points(points_path)
     points_path = os.fspath(points_path)
     for name in names:
@@ -235,39 +233,3 @@ def _coordinates(points_path, names: list[str], path: str) -> np.ndarray:
     return xy[[given.index(name) for name in names]]
 
 
-def read_csv_rows(path: str, min_rows: int = 8, lines=None) -> tuple[int, list[str], list]:
-    """Header line number, header cells and ``(line number, cells)`` rows of a CSV file.
-
-    The lines of :func:`bayesplate.io.csv_table.csv_lines`, or `lines` (``(line number,
-    cells)`` already split, e.g. at another separator), cells stripped.
-    """
-    lines = csv_lines(path) if lines is None else lines
-    lines = [(number, [cell.strip() for cell in cells]) for number, cells in lines]
-    if not lines:
-        raise CaseError(None, rule="the file is empty: give a header line and data rows")
-    (header_line, header), rows = lines[0], lines[1:]
-    for i, name in enumerate(header):
-        if name in header[:i]:
-            raise CaseError(f"line {header_line}, column {name}", name, "column given twice")
-    if len(rows) < min_rows:
-        rule = f"at least {min_rows} data rows must follow the header"
-        raise CaseError(f"line {header_line}", rule=rule)
-    return header_line, header, rows
-
-
-def numeric_table(header: list[str], rows) -> dict[str, np.ndarray]:
-    """Columns of finite numbers by name; a bad row or cell raises a CaseError naming it."""
-    values = np.empty((len(rows), len(header)))
-    for i, (number, cells) in enumerate(rows):
-        if len(cells) != len(header):
-            rule = f"must have {len(header)} comma-separated values ({', '.join(header)})"
-            raise CaseError(f"line {number}", ",".join(cells), rule)
-        for j, (name, cell) in enumerate(zip(header, cells, strict=True)):
-            try:
-                value = float(cell)
-            except ValueError:
-                raise CaseError(f"line {number}, column {name}", cell, "must be a number") from None
-            if not math.isfinite(value):
-                raise CaseError(f"line {number}, column {name}", cell, "must be a finite number")
-            values[i, j] = value
-    return {name: values[:, j] for j, name in enumerate(header)}

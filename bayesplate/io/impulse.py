@@ -1,9 +1,10 @@
 """An impulse recording (ASTM E1876-style tap) as a spectrum: WAV or CSV time series in, FRF out.
 
 A tap test records the decaying response of the plate to a light impact (microphone or
-accelerometer), optionally with the force of an instrumented hammer. :func:`read_impulse`
-reads it and :func:`impulse_spectrum` turns it into an :class:`~bayesplate.io.frf.FRFData`
-of one response point:
+accelerometer), optionally with the force of an instrumented hammer. This module reads one
+recording's channels (:func:`read_recording`) and chooses its window (:func:`time_window`);
+:func:`bayesplate.io.taps.read_impulse` and :func:`bayesplate.io.taps.impulse_spectrum` turn
+it into an :class:`~bayesplate.io.frf.FRFData` of one response point:
 
 - with a force channel, ``H1 = conj(F) Y / conj(F) F`` (one record: ``Y / F``);
 - without, the response spectrum ``Y`` alone (an ideal tap has a flat force spectrum, so
@@ -32,64 +33,20 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import CaseError
-from .frf import FRFData
 
 __all__ = [
     "Recording",
     "is_recording",
     "read_recording",
-    "read_impulse",
-    "impulse_spectrum",
     "time_window",
     "WINDOWS",
 ]
 
 WINDOWS = ("auto", "none", "exponential")
-"""Windows :func:`impulse_spectrum` knows."""
+"""Windows :func:`time_window` knows."""
 
 _TAIL = 0.05  # fraction of the record that must have decayed for no window
 _DECAYED = 0.01  # ... below this fraction of the peak; also the exponential window's end value
-
-
-def read_impulse(path, window: str = "auto", force_channel="auto", channel=None,
-                 points=None, rate_Hz=None, force_column=None,
-                 response_column=None) -> FRFData:  # fmt: skip
-    """Read an impulse recording (``.wav`` or a CSV time series) and return its spectrum.
-
-    WAV (scipy.io.wavfile, any sample format): one channel, the response; two, the response
-    then the force (channels 0 and 1); more, see :mod:`bayesplate.io.taps` (``force_channel``,
-    ``channel``, ``points``). CSV: a header line, then one row per sample: a time column
-    (optional: else give `rate_Hz`), a response and optionally a force, found by their
-    names as a DAQ writes them (``time_s``, ``Time (s)``, ``signal``, ``acceleration``,
-    ``force``, ...; :mod:`bayesplate.io.time_csv`); ``#`` starts a comment.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        The recording.
-    window : {"auto", "none", "exponential"}
-        See the module docstring.
-    force_channel, channel, points, rate_Hz, force_column, response_column
-        See :func:`bayesplate.io.taps.read_taps`.
-
-    Returns
-    -------
-    FRFData
-        One FRF per response channel, with coordinates when `points` is given.
-
-    Raises
-    ------
-    CaseError
-        Naming the file, the line and column (CSV) or the part of the WAV file, and the rule.
-    """
-    from .taps import read_taps
-
-    path = os.fspath(path)
-    try:
-        return read_taps([path], window, force_channel, channel, points, rate_Hz,
-                         force_column, response_column)  # fmt: skip
-    except CaseError as err:
-        raise err if err.path else err.with_path(path) from None
 
 
 @dataclass(frozen=True, eq=False)
@@ -256,35 +213,3 @@ def time_window(y, rate_Hz: float, window: str = "auto"):
     return np.ones(n), 0.0, note
 
 
-def impulse_spectrum(signal, rate_Hz: float, force=None, window: str = "auto") -> FRFData:
-    """Spectrum (or H1 FRF with a force) of one impulse response.
-
-    Parameters
-    ----------
-    signal : array_like, shape (n,)
-        Response samples (any unit), from just before the tap.
-    rate_Hz : float
-        Sampling rate, Hz.
-    force : array_like, shape (n,), optional
-        Force samples of an instrumented hammer.
-    window : {"auto", "none", "exponential"}
-        See the module docstring.
-
-    Returns
-    -------
-    FRFData
-        Frequency lines ``k rate / n`` up to the Nyquist frequency, one response point.
-
-    Raises
-    ------
-    CaseError
-        For a signal too short, not finite or all zero, or an unknown window.
-    """
-    from .taps import average_taps
-
-    y = np.asarray(signal, dtype=float).reshape(1, -1)
-    if force is not None:
-        force = np.asarray(force, dtype=float)
-        if force.shape != y.shape[1:]:
-            raise CaseError("force", force.size, f"must be as long as the signal ({y.size})")
-    return average_taps([Recording(float(rate_Hz), y, force, (0,), "")], window)

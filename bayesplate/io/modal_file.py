@@ -117,7 +117,7 @@ def read_spectra(path, window: str = "auto"):
 
     suffix = pathlib.Path(path).suffix.lower()
     if suffix in _TAP_SUFFIXES or is_recording(path):
-        from .impulse import read_impulse
+        from .taps import read_impulse
 
         return read_impulse(path, window=window)
     if suffix == ".csv":

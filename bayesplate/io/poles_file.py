@@ -23,9 +23,9 @@ import os
 
 import numpy as np
 
+from .csv_rows import read_csv_rows
 from .errors import CaseError
 from .export import atomic_write_text, save_figure
-from .frf import read_csv_rows
 from .poles import Pole, PoleAnalysis
 
 __all__ = ["write_poles", "read_poles", "write_chart", "stabilisation_chart"]

@@ -25,9 +25,11 @@ same sampling rate and length) of the same set-up and averages them into one
 Channels of a WAV file are numbered from 0. ``force_channel`` names the force (``None``: no
 force; default ``"auto"``: channel 1 of a 2-channel file, as a hammer and a microphone are
 recorded, else none); the other channels are responses, in channel order. Their points are
-given by a points file (:func:`read_points`), one row per response channel; ``channel`` picks
-a single response channel instead. Several response channels without points are refused:
-the shapes need to know where they were measured.
+given by a points file (:func:`bayesplate.io.points.read_points`), one row per response
+channel; ``channel`` picks a single response channel instead. Several response channels
+without points are refused: the shapes need to know where they were measured.
+
+One recording alone: :func:`read_impulse` (a file) and :func:`impulse_spectrum` (samples).
 """
 
 from __future__ import annotations
@@ -39,13 +41,16 @@ import os
 import numpy as np
 
 from .errors import CaseError
-from .frf import FRFData, numeric_table, read_csv_rows
+from .frf import FRFData
 from .impulse import Recording, read_recording, time_window
+from .points import read_points
 
 __all__ = [
     "read_points",
     "average_taps",
     "read_taps",
+    "read_impulse",
+    "impulse_spectrum",
     "coherence_at_poles",
     "COHERENCE_WARNING",
 ]
@@ -53,60 +58,7 @@ __all__ = [
 COHERENCE_WARNING = 0.9
 """A chosen pole whose coherence is below this is warned about."""
 
-_POINT_COLUMNS = ("point", "x_mm", "y_mm")
 _TRIGGER = 0.05  # without a force, a tap starts where a response first reaches 5 % of its peak
-
-
-def read_points(path) -> tuple[tuple[str, ...], np.ndarray]:
-    """Read a points file: CSV ``point,x_mm,y_mm``, one row per response point.
-
-    ``point`` is a name (unique; for an FRF CSV it is the ``<point>`` of its ``H<point>_re``
-    columns), ``x_mm, y_mm`` the point's coordinates in the plate frame, mm. ``#`` starts a
-    comment.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-
-    Returns
-    -------
-    names : tuple of str, length p
-    points_mm : numpy.ndarray, shape (p, 2)
-
-    Raises
-    ------
-    CaseError
-        Naming the file, line and column, for a missing or unknown column, a number that is
-        not finite, or a name given twice.
-    """
-    path = os.fspath(path)
-    try:
-        header_line, header, rows = read_csv_rows(path, min_rows=1)
-        for name in header:
-            if name not in _POINT_COLUMNS:
-                rule = f"unknown column; allowed: {', '.join(_POINT_COLUMNS)}"
-                raise CaseError(f"line {header_line}, column {name}", name, rule)
-        for name in _POINT_COLUMNS:
-            if name not in header:
-                rule = f"required column is missing from the header ({', '.join(header)})"
-                raise CaseError(f"line {header_line}, column {name}", rule=rule)
-        names = []
-        for number, cells in rows:
-            if len(cells) != len(header):
-                rule = f"must have {len(header)} comma-separated values ({', '.join(header)})"
-                raise CaseError(f"line {number}", ",".join(cells), rule)
-            name = cells[header.index("point")]
-            if not name:
-                raise CaseError(f"line {number}, column point", rule="must name the point")
-            if name in names:
-                raise CaseError(f"line {number}, column point", name, "point named twice")
-            names.append(name)
-        columns = [name for name in header if name != "point"]
-        table = numeric_table(columns, [(n, [c for c, h in zip(cells, header, strict=True)
-                                             if h != "point"]) for n, cells in rows])  # fmt: skip
-    except CaseError as err:
-        raise err.with_path(path) from None
-    return tuple(names), np.column_stack([table["x_mm"], table["y_mm"]])
 
 
 def average_taps(recordings, window: str = "auto", points_mm=None) -> FRFData:
@@ -299,3 +251,74 @@ def coherence_at_poles(frf: FRFData, poles) -> list[tuple[float, float]]:
         point = int(np.argmax(np.abs(frf.frf[:, line])))
         found.append((pole.frequency_Hz, float(frf.coherence[point, line])))
     return found
+
+
+def read_impulse(path, window: str = "auto", force_channel="auto", channel=None,
+                 points=None, rate_Hz=None, force_column=None,
+                 response_column=None) -> FRFData:  # fmt: skip
+    """Read an impulse recording (``.wav`` or a CSV time series) and return its spectrum.
+
+    WAV (scipy.io.wavfile, any sample format): one channel, the response; two, the response
+    then the force (channels 0 and 1); more, see :mod:`bayesplate.io.taps` (``force_channel``,
+    ``channel``, ``points``). CSV: a header line, then one row per sample: a time column
+    (optional: else give `rate_Hz`), a response and optionally a force, found by their
+    names as a DAQ writes them (``time_s``, ``Time (s)``, ``signal``, ``acceleration``,
+    ``force``, ...; :mod:`bayesplate.io.time_csv`); ``#`` starts a comment.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The recording.
+    window : {"auto", "none", "exponential"}
+        See the module docstring.
+    force_channel, channel, points, rate_Hz, force_column, response_column
+        See :func:`bayesplate.io.taps.read_taps`.
+
+    Returns
+    -------
+    FRFData
+        One FRF per response channel, with coordinates when `points` is given.
+
+    Raises
+    ------
+    CaseError
+        Naming the file, the line and column (CSV) or the part of the WAV file, and the rule.
+    """
+    path = os.fspath(path)
+    try:
+        return read_taps([path], window, force_channel, channel, points, rate_Hz,
+                         force_column, response_column)  # fmt: skip
+    except CaseError as err:
+        raise err if err.path else err.with_path(path) from None
+
+
+def impulse_spectrum(signal, rate_Hz: float, force=None, window: str = "auto") -> FRFData:
+    """Spectrum (or H1 FRF with a force) of one impulse response.
+
+    Parameters
+    ----------
+    signal : array_like, shape (n,)
+        Response samples (any unit), from just before the tap.
+    rate_Hz : float
+        Sampling rate, Hz.
+    force : array_like, shape (n,), optional
+        Force samples of an instrumented hammer.
+    window : {"auto", "none", "exponential"}
+        See the module docstring.
+
+    Returns
+    -------
+    FRFData
+        Frequency lines ``k rate / n`` up to the Nyquist frequency, one response point.
+
+    Raises
+    ------
+    CaseError
+        For a signal too short, not finite or all zero, or an unknown window.
+    """
+    y = np.asarray(signal, dtype=float).reshape(1, -1)
+    if force is not None:
+        force = np.asarray(force, dtype=float)
+        if force.shape != y.shape[1:]:
+            raise CaseError("force", force.size, f"must be as long as the signal ({y.size})")
+    return average_taps([Recording(float(rate_Hz), y, force, (0,), "")], window)

@@ -187,7 +187,7 @@ def read_time_csv(path, rate_Hz=None, force_column=None, response_column=None):
         Naming the line and column (or the option), the value and the rule; the caller
         adds the file.
     """
-    from .frf import read_csv_rows
+    from .csv_rows import read_csv_rows
 
     if rate_Hz is not None and not (np.isfinite(rate_Hz) and rate_Hz > 0):
         raise CaseError("--rate-Hz", rate_Hz, "must be a positive number (Hz)")

@@ -11,6 +11,9 @@ export's JSON documents, it writes nothing (the callers print, store and cache).
   of a run;
 - :mod:`~bayesplate.run.estimate`: :func:`run_estimate` (estimate, variance budget, error
   scale, JSON document);
+- :mod:`~bayesplate.run.budget`: what a run adds to an estimate, its variance budget
+  (:func:`~bayesplate.run.budget.estimate_budget`) and its error scale
+  (:func:`~bayesplate.run.budget.scale_estimate`);
 - :mod:`~bayesplate.run.sample`: :func:`run_sample` (prepare, the chain, the error scale's
   draws, MVE beside B, JSON document).
 """

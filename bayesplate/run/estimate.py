@@ -59,8 +59,8 @@ def run_estimate(case, options, *, model=None, fast=None):
     EstimateRun
     """
     from ..estimators import estimate, estimate_on_fast
-    from ..inputs import converged_budget
     from ..model import PlateModel
+    from .budget import converged_budget
 
     if model is None:
         model = PlateModel.from_case(case, mesh=options.mesh)
@@ -73,7 +73,7 @@ def run_estimate(case, options, *, model=None, fast=None):
     budget = converged_budget(case, result, model) if options.budget else None
     scale = None
     if case.measured.error_scale is not None:  # the sd widened by the inferred scale
-        from ..error_scale import scale_estimate
+        from .budget import scale_estimate
 
         result, scale = scale_estimate(case, model, result)
     return EstimateRun(case, model, result, budget, scale)

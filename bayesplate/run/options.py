@@ -38,7 +38,7 @@ class EstimateOptions:
         The model iterated on (ignored when the run is given a shared fast model).
     budget : bool
         Also the variance budget of a converged estimate
-        (:func:`bayesplate.inputs.converged_budget`; the report shows none).
+        (:func:`bayesplate.run.budget.converged_budget`; the report shows none).
     """
 
     method: str = "MVE"
