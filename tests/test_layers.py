@@ -108,3 +108,64 @@ def test_modules_are_small_or_say_why(path):
         return
     doc = ast.get_docstring(ast.parse(text)) or ""
     assert REASON in doc, f"{lines} lines and no '{REASON} ...' in the docstring"
+
+
+def _dotted(path, package=PACKAGE):
+    """``bayesplate/io/taps.py`` -> ``"bayesplate.io.taps"``; a package's ``__init__`` its name."""
+    parts = ("bayesplate",) + path.relative_to(package).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _imported_modules(path, known, package=PACKAGE):
+    """Modules of `known` that `path` imports anywhere in it (a name of a package's
+    ``from . import name`` counts as its submodule when there is one)."""
+    package_parts = ("bayesplate",) + path.relative_to(package).parent.parts
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            wanted = [[a.name] for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                base = ".".join(package_parts[: len(package_parts) - node.level + 1]
+                                + ((node.module,) if node.module else ()))  # fmt: skip
+            wanted = [[f"{base}.{a.name}", base] for a in node.names]
+        else:
+            continue
+        found |= {next((n for n in names if n in known), None) for names in wanted}
+    return found - {None, _dotted(path, package)}
+
+
+def _circles(package=PACKAGE):
+    """Sets of modules that import one another in a circle (strongly connected, size > 1)."""
+    known = {_dotted(p, package): p for p in package.rglob("*.py")}
+    graph = {m: _imported_modules(p, known, package) for m, p in known.items()}
+
+    def reaches(start):
+        seen, todo = set(), [start]
+        while todo:
+            for nxt in graph[todo.pop()] - seen:
+                seen.add(nxt)
+                todo.append(nxt)
+        return seen
+
+    reach = {m: reaches(m) for m in graph}
+    circles = {frozenset({m} | {n for n in reach[m] if m in reach[n]}) for m in graph}
+    return sorted(sorted(c) for c in circles if len(c) > 1)
+
+
+def test_no_import_circle():
+    """No module imports, through any chain and any lazy import, a module that imports it."""
+    assert _circles() == []
+
+
+def test_the_circle_check_sees_a_lazy_circle(tmp_path):
+    package = tmp_path / "bayesplate"
+    (package / "io").mkdir(parents=True)
+    (package / "__init__.py").write_text("")
+    (package / "io" / "__init__.py").write_text("from .a import f\n")
+    (package / "io" / "a.py").write_text("def f():\n    from .b import g\n")
+    (package / "io" / "b.py").write_text("from ..io import f\n")
+    (package / "model.py").write_text("from . import laminate\n")
+    (package / "laminate.py").write_text("")
+    assert _circles(package) == [["bayesplate.io", "bayesplate.io.a", "bayesplate.io.b"]]
