@@ -88,13 +88,15 @@ Modules
     :mod:`~bayesplate.sampling.stacked` (their stacked problem),
     :mod:`~bayesplate.sampling.joint` (:func:`sample_plates`, the shared constants) and
     :mod:`~bayesplate.sampling.plate_checks` (which plate disagrees),
-    :mod:`~bayesplate.sampling.hierarchical` (each plate around the material's mean).
+    :mod:`~bayesplate.sampling.hierarchical` (the population and each plate in it, on
+    :mod:`~bayesplate.sampling.plate_laplace`, :mod:`~bayesplate.sampling.population` and
+    :mod:`~bayesplate.sampling.population_draws`).
 """
 
 from .chain import sample_problem
 from .checks import covariance_agreement, curvature_covariance, linearisation_band
 from .density import EigenvalueForward, WhitenedLogPosterior
-from .hierarchical import HierarchicalResult, sample_hierarchical
+from .hierarchical import HierarchicalResult, sample_hierarchical, sample_population
 from .joint import (
     JointResult,
     JointSetup,
@@ -106,6 +108,7 @@ from .joint import (
 from .moves import LaplaceMove, ScreenedDEMove, default_moves
 from .pipeline import sample
 from .plate_checks import PlateCheck, plate_checks, predictive_check
+from .plate_laplace import PlateFit, PlateLaplace, fit_plate
 from .result import CASE_UNITS, HDI_PROB, SamplingResult
 from .setup import SamplingSetup, posterior_box, prepare, resolve_inputs
 from .stacked import JointForward, joint_estimate, joint_problem
@@ -120,6 +123,8 @@ __all__ = [
     "JointSetup",
     "LaplaceMove",
     "PlateCheck",
+    "PlateFit",
+    "PlateLaplace",
     "PlatesMismatch",
     "SamplingResult",
     "SamplingSetup",
@@ -129,6 +134,7 @@ __all__ = [
     "covariance_agreement",
     "curvature_covariance",
     "default_moves",
+    "fit_plate",
     "joint_estimate",
     "joint_problem",
     "linearisation_band",
@@ -141,5 +147,6 @@ __all__ = [
     "sample",
     "sample_hierarchical",
     "sample_plates",
+    "sample_population",
     "sample_problem",
 ]

@@ -1,38 +1,40 @@
-"""One material, many plates, each a little different: the hierarchical posterior.
+"""One material, many plates, each a little different: the population and each plate in it.
 
-Each plate's engineering constants ``c_p`` (``E1, E2, nu12, G12, G13, G23``, all positive)
-are drawn around the material's mean ``mu`` with a spread ``tau`` per constant, log-normal
-and non-centred:
+Each plate's constants ``c_p`` (``E1, E2, nu12, G12, G13, G23``) are log-normal around the
+material's mean ``mu`` with a spread ``tau`` per constant, ``ln c_p ~ N(ln mu, diag tau^2)``
+(or, with probability :data:`~bayesplate.sampling.population.OUTLIER_PRIOR`, an outlier:
+:mod:`bayesplate.sampling.population`). Each plate's likelihood is its Laplace approximation
+in ``z = ln c`` on its certified fast model (:mod:`bayesplate.sampling.plate_laplace`), so
+that ``c_p`` integrates out in closed form: the sampler moves in the twelve population
+parameters ``theta = (ln mu, ln tau)`` only, whatever the number of plates, and each plate's
+constants are drawn afterwards from their Gaussian conditional given each kept ``theta``
+(shrunk towards the population). The earlier sampler of ``theta`` and every plate's
+``6 P`` offsets together (non-centred) did not converge (R-hat 1.80 after 5000 steps on
+three plates); this one does in seconds (``reports/benchmark_hierarchical.md``).
 
-    ln c_p = ln mu + tau * eta_p,   eta_p ~ N(0, I),   p = 1..P.
+Priors: ``mu`` has the first case's prior (Gaussian in the stiffness coefficients ``b``,
+:meth:`GaussianProblem.log_prior`, carried to ``ln mu`` with its Jacobian
+``|d b / d e| prod mu = E2 / D^3 prod mu``, ``D = 1 - nu12^2 E2 / E1``), so that
+``tau -> 0`` is the shared-constants form of :mod:`bayesplate.sampling.joint`; each ``tau_k``
+is half-normal with scale :data:`TAU_SCALE` (0.1: a plate-to-plate spread of about 10 % is
+plausible, 25 % unlikely), carried to ``ln tau``.
 
-Priors: ``mu`` has the first case's prior, the one the shared-constants form puts on ``b``
-(:meth:`GaussianProblem.log_prior` of ``b(mu)``, carried to ``ln mu`` with its Jacobian), so
-that ``tau -> 0`` is the shared form; each ``tau_k`` is half-normal with scale
-:data:`TAU_SCALE` (0.1: a plate-to-plate spread of about 10 % is plausible, 25 % very
-unlikely, P(tau > 0.2) = 4.6 %), weakly informative. Each plate's likelihood is on its own
-certified fast model at ``b(c_p)``, as in the shared form.
+The chain: the one-plate sampler's moves (:mod:`bayesplate.sampling.moves`: 80 % an
+independence Student-t proposal tuned on the ensemble, 20 % differential evolution) in
+coordinates whitened by the Laplace approximation of ``theta`` at its MAP, with its tuning
+rounds (:func:`~bayesplate.sampling.chain._tune`); the stretch move alone had
+autocorrelation times of 110 steps, differential evolution 50-70, on ten synthetic plates (the
+density costs a few milliseconds for 48 walkers and 10 plates), stopped when it is longer than
+``target_tau_factor`` autocorrelation times, and every population parameter has ``min_ess``
+bulk effective samples and R-hat below ``max_rhat`` (walkers as chains; burn-in
+:data:`~bayesplate.sampling.stopping.BURN_TAU` autocorrelation times).
 
-The sampler moves in ``theta = (ln mu, ln tau, eta_1, ..., eta_P)`` (``6 + 6 + 6 P``: 30 for
-three plates), whitened by the Laplace approximation at the MAP (L-BFGS, then a
-finite-difference Hessian), with the one-plate sampler's moves (independence proposal
-tuned on the ensemble, differential evolution), tuning, stopping rule (ESS and R-hat of the
-material's mean constants, autocorrelation of every coordinate) and run loop
-(:mod:`bayesplate.sampling.chain`). The independence proposals are truncated to points
-whose every plate lies in its fast model's box; DE proposals outside use the full-model
-fallback.
-
-Convergence: the non-centred form suits the weakly identified constants (``tau`` and
-``eta`` of G13 and G23 are the prior's); the well-identified ones (E1, E2, G12) make
-``eta_p`` and ``tau`` strongly dependent (a narrow ridge ``tau eta_p = const``), which the
-tuned proposal only partly follows. Sampling those centred instead (``centred``: ``ln c_p``
-itself, the same posterior) was worse on these plates (1000 steps: R-hat 3.3 against 1.95
-non-centred): the MAP that whitens the coordinates then sits in the funnel's neck (``tau``
-of E1 near 0.001), so it is an option, not the default. On the three plates of
-``studies/many_plates.py`` (30 dimensions, 62 walkers) 5000 steps took 18 minutes (load
-about 6, 2026-11-25) and ended with the largest autocorrelation time at 490 steps, ESS 91
-and R-hat 1.80: the hierarchical chain does not converge in reasonable time on these
-plates, and the shared-constants form (:mod:`bayesplate.sampling.joint`) stays the default.
+Refinement: the Laplace is accurate where the plate's conditional posterior is, not
+necessarily at its own mode (a constant the plate barely identifies, shrunk to the
+population, moves the others through their correlation). Before sampling, each plate whose
+conditional mean at the population's MAP lies more than :data:`REFINE_DISTANCE` of its own
+deviations (in ``H``'s metric) from its linearisation point is linearised again there (one
+solve on its fast model), and the MAP found again, until none moves (at most four rounds).
 """
 
 from __future__ import annotations
@@ -43,273 +45,416 @@ from dataclasses import dataclass, field
 import emcee
 import numpy as np
 from scipy import optimize
-from threadpoolctl import threadpool_limits
 
 from .. import laminate
-from .chain import TUNE_ROUNDS, TUNE_STEPS, _progress_bar, _run_chain, _tune
+from .chain import TUNE_ROUNDS, TUNE_STEPS, _tune
 from .moves import LaplaceMove
+from .population import (
+    OUTLIER_PRIOR,
+    OUTLIER_SCALE,
+    conditional,
+    mixture_log_likelihood,
+)
 from .seeding import generator, resolve_rng
-from .stopping import StoppingRule, burn_in, diagnostics
+from .stopping import burn_in, load_arviz
 
-__all__ = ["TAU_SCALE", "HierarchicalDensity", "HierarchicalResult", "sample_hierarchical"]
+__all__ = [
+    "REFINE_DISTANCE",
+    "TAU_SCALE",
+    "HierarchicalResult",
+    "PopulationDensity",
+    "sample_hierarchical",
+    "sample_population",
+]
 
 #: Scale of the half-normal prior of each ``tau`` (the spread of ``ln c`` between plates).
 TAU_SCALE = 0.1
+#: A plate is linearised again when its shrunk mean is this many of its own deviations away.
+REFINE_DISTANCE = 1.0
+#: Most kept draws of the population for each plate's conditional draws and the ArviZ data.
+MAX_DRAWS = 8000
 
 
-class HierarchicalDensity:
-    """``ln f(theta | Y_1..Y_P)`` in whitened coordinates ``u``: ``theta = centre + L u``.
+def log_jacobian(mu):
+    """``ln |det d b / d e|`` at engineering constants `mu` (..., 6): ``ln(E2 / D^3)``."""
+    E1, E2, nu12 = mu[..., 0], mu[..., 1], mu[..., 2]
+    return np.log(E2) - 3.0 * np.log(1.0 - nu12**2 * E2 / E1)
+
+
+class PopulationDensity:
+    """``ln f(theta | Y_1..Y_P)``, ``theta = (ln mu, ln tau)``, vectorised over rows.
 
     Parameters
     ----------
-    setups : sequence of SamplingSetup
-        The plates (their problems and fast models).
-    tau_scale : float
-        Half-normal scale of each ``tau``.
-    centred : array_like of bool, shape (6,), optional
-        Constants sampled centred (``theta`` holds ``ln c_p`` itself, with the density's
-        ``1 / tau``); default none (non-centred throughout).
-
-    Attributes
-    ----------
-    P : int
-        Plates.
-    dim : int
-        ``12 + 6 P``.
-    centre, chol : numpy.ndarray, shapes (dim,), (dim, dim)
-        The whitening (identity until :meth:`whiten`).
-    n_forward : int
-        Plate-model evaluations.
+    laplaces : sequence of PlateLaplace
+        Each plate's likelihood in ``z = ln c``.
+    mu_b, V_b : numpy.ndarray, shapes (6,), (6, 6)
+        The material's prior on ``b`` (Pa, Pa^2), the first case's.
+    tau_scale, outlier_prior, outlier_scale : float
+        :data:`TAU_SCALE`, and the mixture's (``outlier_prior = 0``: no outliers).
     """
 
-    def __init__(self, setups, tau_scale=TAU_SCALE, centred=None):
-        self.centred = np.zeros(6, dtype=bool) if centred is None else np.asarray(centred, bool)
-        self.setups = tuple(setups)
-        self.P = len(self.setups)
-        self.dim = 12 + 6 * self.P
+    dim = 12
+
+    def __init__(self, laplaces, mu_b, V_b, tau_scale=TAU_SCALE, outlier_prior=OUTLIER_PRIOR,
+                 outlier_scale=OUTLIER_SCALE):  # fmt: skip
+        self.H = np.array([fit.H for fit in laplaces])
+        self.h = np.array([fit.h for fit in laplaces])
+        self.P = len(self.H)
+        self.mu_b = np.asarray(mu_b, dtype=float)
+        self.Vb_inv = np.linalg.inv(np.asarray(V_b, dtype=float))
         self.tau_scale = float(tau_scale)
-        self.problems = [s.problem.with_forward(s.sampling_forward()) for s in self.setups]
-        self.prior = self.setups[0].problem
-        self.boxes = [None if s.fast is None else s.fast.box for s in self.setups]
-        self.centre, self.chol = np.zeros(self.dim), np.eye(self.dim)
-        self.n_forward = 0
+        self.outlier_prior, self.outlier_scale = float(outlier_prior), float(outlier_scale)
+        self.centre, self.chol = np.zeros(12), np.eye(12)
 
-    def split(self, theta):
-        """``(ln mu (6,), ln tau (6,), eta (P, 6))`` of ``theta`` (dim,)."""
-        theta = np.asarray(theta, dtype=float)
-        log_mu, log_tau = theta[:6], theta[6:12]
-        raw = theta[12:].reshape(self.P, 6)
-        eta = np.where(self.centred, (raw - log_mu) / np.exp(log_tau), raw)
-        return log_mu, log_tau, eta
+    def log_prior(self, theta):
+        """``ln f(ln mu) + ln f(ln tau)``, (n,); -inf where ``mu`` is not a physical lamina."""
+        theta = np.atleast_2d(theta)
+        mu = np.exp(theta[:, :6])
+        b = laminate.stiffness_from_engineering(mu)
+        d = b - self.mu_b
+        lp = -0.5 * np.einsum("ni,ij,nj->n", d, self.Vb_inv, d)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            lp = lp + log_jacobian(mu) + theta[:, :6].sum(axis=1)
+        tau = np.exp(theta[:, 6:])
+        lp = lp + np.sum(-0.5 * (tau / self.tau_scale) ** 2 + theta[:, 6:], axis=1)
+        return np.where(laminate.is_physical(b) & np.isfinite(lp), lp, -np.inf)
 
-    def pack(self, log_mu, log_tau, eta):
-        """``theta`` (dim,) of ``ln mu`` (6,), ``ln tau`` (6,) and ``eta`` (P, 6)."""
-        eta = np.asarray(eta, dtype=float).reshape(self.P, 6)
-        raw = np.where(self.centred, log_mu + np.exp(log_tau) * eta, eta)
-        return np.concatenate([log_mu, log_tau, raw.ravel()])
-
-    def plate_constants(self, theta):
-        """Each plate's constants ``c_p`` (SI), shape (P, 6)."""
-        theta = np.asarray(theta, dtype=float)
-        log_mu, log_tau = theta[:6], theta[6:12]
-        raw = theta[12:].reshape(self.P, 6)
-        return np.exp(np.where(self.centred, raw, log_mu + np.exp(log_tau) * raw))
-
-    def theta(self, u):
-        """``theta`` of whitened ``u``, shape (..., dim)."""
-        return self.centre + np.asarray(u, dtype=float) @ self.chol.T
-
-    def to_b(self, u):
-        """Stiffness of the material's mean ``b(mu)`` (Pa) of whitened points (..., 6)."""
-        return laminate.stiffness_from_engineering(np.exp(self.theta(u)[..., :6]))
+    def plates(self, theta):
+        """Each plate's marginal and its components' responsibilities, (n, P), (n, P, 8)."""
+        theta = np.atleast_2d(theta)
+        return mixture_log_likelihood(theta[:, :6], np.exp(theta[:, 6:]), self.H, self.h,
+                                      self.outlier_prior, self.outlier_scale)  # fmt: skip
 
     def log_density_theta(self, theta):
-        """``ln f(theta | Y)`` up to a constant; -inf where a lamina is not physical."""
-        log_mu, log_tau, eta = self.split(theta)
-        mu = np.exp(log_mu)
-        b_mu = laminate.stiffness_from_engineering(mu)
-        lp = self.prior.log_prior(b_mu)
-        if not np.isfinite(lp):
-            return -np.inf
-        lp += np.linalg.slogdet(laminate.stiffness_jacobian(mu))[1] + np.sum(log_mu)
-        tau = np.exp(log_tau)
-        lp += np.sum(-0.5 * (tau / self.tau_scale) ** 2 + log_tau)  # half-normal, in ln tau
-        lp += -0.5 * np.sum(eta**2) - self.P * np.sum(log_tau[self.centred])  # centred: 1/tau
-        for problem, c in zip(self.problems, self.plate_constants(theta), strict=True):
-            b = laminate.stiffness_from_engineering(c)
-            if not laminate.is_physical(b):
-                return -np.inf
-            self.n_forward += 1
-            lp += problem.log_likelihood(b)
-        return float(lp)
+        """``ln f(theta | Y)`` up to a constant, (n,)."""
+        lp = self.log_prior(theta)
+        ok = np.isfinite(lp)
+        if np.any(ok):
+            lp[ok] += self.plates(np.atleast_2d(theta)[ok])[0].sum(axis=1)
+        return lp
+
+    def theta(self, u):
+        """``theta`` of whitened ``u`` (..., 12)."""
+        return self.centre + np.asarray(u, dtype=float) @ self.chol.T
 
     def __call__(self, u):
-        """``ln f`` at whitened ``u`` (dim,) (the whitening's Jacobian is a constant)."""
-        return self.log_density_theta(self.theta(u))
+        """``ln f`` at whitened rows ``u`` (n, 12) (emcee, vectorised)."""
+        return self.log_density_theta(self.theta(np.atleast_2d(u)))
 
-    def inside(self, u):
-        """Whether every plate of each row of `u` (n, dim) is in its fast model's box, (n,)."""
-        out = np.ones(len(u), dtype=bool)
-        for k, row in enumerate(np.atleast_2d(u)):
-            c = self.plate_constants(self.theta(row))
-            b = laminate.stiffness_from_engineering(c)
-            out[k] = all(
-                box is None or box.contains(bp) for box, bp in zip(self.boxes, b, strict=True)
-            )
-        return out
-
-    def start(self, singles):
-        """A first ``theta``: the plates' own estimates' log-mean, spread and offsets."""
-        logs = np.log([s.constants for s in singles])
-        log_mu = logs.mean(axis=0)
-        tau = np.maximum(logs.std(axis=0), 0.2 * self.tau_scale)
-        return self.pack(log_mu, np.log(tau), (logs - log_mu) / tau)
-
-    def whiten(self, theta0, step=1e-3):
-        """Centre at the MAP from `theta0` and whiten by the inverse Hessian there."""
-        f = lambda t: -self.log_density_theta(t)  # noqa: E731
-        best = optimize.minimize(f, theta0, method="L-BFGS-B", options={"maxiter": 2000})
+    def whiten(self, theta0, step=1e-4):
+        """Centre at the MAP from `theta0`; whiten by the inverse Hessian there."""
+        f = lambda t: -float(self.log_density_theta(t)[0])  # noqa: E731
+        best = optimize.minimize(f, theta0, method="L-BFGS-B", options={"maxiter": 5000})
         theta = best.x if np.isfinite(best.fun) and best.fun <= f(theta0) else theta0
         H = _hessian(f, theta, step)
         w, V = np.linalg.eigh(0.5 * (H + H.T))
-        w = np.maximum(w, 1e-2)  # flat directions: unit scale (ln tau, eta of the prior)
-        cov = (V / w) @ V.T
-        self.centre, self.chol = theta, np.linalg.cholesky(cov)
+        w = np.maximum(w, 1.0)  # flat directions (unidentified spreads): the prior's scale
+        self.centre, self.chol = theta, np.linalg.cholesky((V / w) @ V.T)
         return theta
 
 
 def _hessian(f, x, h):
-    """Central finite-difference Hessian of `f` at `x` (step `h` in every coordinate)."""
+    """Central finite-difference Hessian of scalar `f` at `x` (step `h` in every coordinate)."""
     n = x.size
-    H = np.zeros((n, n))
-    f0 = f(x)
     E = np.eye(n) * h
+    f0 = f(x)
     fp = np.array([f(x + E[i]) for i in range(n)])
     fm = np.array([f(x - E[i]) for i in range(n)])
+    H = np.diag((fp - 2 * f0 + fm) / h**2)
     for i in range(n):
-        H[i, i] = (fp[i] - 2 * f0 + fm[i]) / h**2
         for j in range(i + 1, n):
-            H[i, j] = H[j, i] = (
-                f(x + E[i] + E[j]) - fp[i] - fp[j] + 2 * f0 - fm[i] - fm[j] + f(x - E[i] - E[j])
-            ) / (2 * h**2)
+            H[i, j] = H[j, i] = (f(x + E[i] + E[j]) - fp[i] - fp[j] + 2 * f0 - fm[i] - fm[j]
+                                 + f(x - E[i] - E[j])) / (2 * h**2)  # fmt: skip
     return H
 
 
 @dataclass(frozen=True, eq=False)
 class HierarchicalResult:
-    """The hierarchical posterior: the material's mean, the spread, each plate's constants.
+    """The population of plates of one material, and each plate in it.
 
     Attributes
     ----------
+    names : tuple of str
+        The plates.
     mean, sd : numpy.ndarray, shape (6,)
         Posterior mean and deviation of the material's mean constants ``mu``, SI.
     hdi : numpy.ndarray, shape (2, 6)
         Its 3 % and 97 % quantiles (equal-tailed 94 %), SI.
-    tau_mean, tau_hdi : numpy.ndarray, shapes (6,), (2, 6)
-        The spread ``tau`` per constant (of ``ln c``: 0.05 is about 5 %): mean and 3 %,
-        97 % quantiles.
+    tau_mean, tau_sd : numpy.ndarray, shape (6,)
+        The spread ``tau`` per constant (of ``ln c``: 0.05 is about 5 %).
+    tau_hdi : numpy.ndarray, shape (2, 6)
+        Its 3 % and 97 % quantiles.
     plate_mean, plate_sd : numpy.ndarray, shape (P, 6)
-        Each plate's constants, SI.
-    samples : numpy.ndarray, shape (draws, 12 + 6 P)
-        Kept draws of ``theta`` (``ln mu``, ``ln tau``, ``eta``).
-    ess_min, rhat_max : float
-        Of the material's mean constants.
-    tau_max : float
-        Largest autocorrelation time over every coordinate, steps.
+        Each plate's shrunk constants, SI.
+    plate_hdi : numpy.ndarray, shape (2, P, 6)
+        Their 3 % and 97 % quantiles, SI.
+    own, own_sd : numpy.ndarray, shape (P, 6)
+        Each plate's own answer (its B estimate under the case's prior), SI; NaN without one.
+    outlier : numpy.ndarray, shape (P,)
+        Posterior probability that the plate is not of the population.
+    outlier_constant : numpy.ndarray of int, shape (P,)
+        The likeliest widened component of an outlier: 0-5 a constant, 6 all six.
+    samples : numpy.ndarray, shape (draws, 12)
+        Kept draws of ``theta = (ln mu, ln tau)`` (thinned to at most :data:`MAX_DRAWS`).
+    plate_samples : numpy.ndarray, shape (draws, P, 6)
+        Each plate's constants drawn given each kept ``theta``, SI.
+    ess, rhat : numpy.ndarray, shape (12,)
+        Bulk ESS and R-hat of ``ln mu`` then ``ln tau`` (walkers as chains).
+    ess_min, rhat_max, tau_max : float
+        Smallest ESS, largest R-hat, largest autocorrelation time (steps).
     n_steps, n_burn, n_walkers : int
+    acceptance : float
+    refined : tuple of int
+        0-based plates linearised again at their shrunk mean.
     converged : bool
     status : str
         ``"converged"`` or ``"max_steps"``.
+    message : str
+    idata : arviz.InferenceData
+        ``posterior``: ``mu`` (case units), ``tau``, ``plate`` constants (case units), with
+        walkers as chains; ``sample_stats``: ``outlier`` responsibilities per plate.
     wall_time : float
+        Seconds of the sampling (both rounds).
     """
 
+    names: tuple
     mean: np.ndarray
     sd: np.ndarray
     hdi: np.ndarray
     tau_mean: np.ndarray
+    tau_sd: np.ndarray
     tau_hdi: np.ndarray
     plate_mean: np.ndarray
     plate_sd: np.ndarray
+    plate_hdi: np.ndarray
+    own: np.ndarray
+    own_sd: np.ndarray
+    outlier: np.ndarray
+    outlier_constant: np.ndarray
     samples: np.ndarray = field(repr=False)
+    plate_samples: np.ndarray = field(repr=False)
+    ess: np.ndarray
+    rhat: np.ndarray
     ess_min: float
     rhat_max: float
     tau_max: float
     n_steps: int
     n_burn: int
     n_walkers: int
+    acceptance: float
+    refined: tuple
     converged: bool
     status: str
+    message: str
+    idata: object = field(repr=False)
     wall_time: float
 
+    @property
+    def flagged(self):
+        """0-based plates more likely outliers than not."""
+        return tuple(int(i) for i in np.flatnonzero(self.outlier > 0.5))
 
-def sample_hierarchical(setups, singles, rng=None, n_walkers=None, max_steps=5000,
-                        target_tau_factor=50.0, min_ess=2000.0, max_rhat=1.01, check_every=20,
-                        tau_scale=TAU_SCALE, centred=None, progress=False):  # fmt: skip
-    """Sample the hierarchical posterior of plates of one material (module docstring).
+
+def _diagnostics(chain):
+    """Bulk ESS and R-hat of each coordinate of `chain` (steps, walkers, 12), (12,) each."""
+    az = load_arviz()
+    x = chain.swapaxes(0, 1)
+    ess = np.array([float(az.ess(x[..., j])) for j in range(x.shape[-1])])
+    rhat = np.array([float(az.rhat(x[..., j])) for j in range(x.shape[-1])])
+    return ess, rhat
+
+
+def _run(density, rng, n_walkers, max_steps, check_every, target_tau_factor, min_ess,
+         max_rhat):  # fmt: skip
+    """The chain to its stopping rule: (sampler, burn, tau_max, ess, rhat, converged)."""
+    import warnings
+
+    laplace = LaplaceMove(1.1, df=5)
+    moves = [(laplace, 0.8), (emcee.moves.DEMove(), 0.2)]
+    sampler = emcee.EnsembleSampler(n_walkers, 12, density, moves=moves, vectorize=True)
+    sampler.random_state = np.random.RandomState(int(rng.integers(2**32))).get_state()
+    state = emcee.State(0.5 * rng.standard_normal((n_walkers, 12)))
+    state, n_tune = _tune(sampler, state, laplace, TUNE_ROUNDS, TUNE_STEPS, max_steps, None)
+    burn, tau_max, ess, rhat, done = n_tune, np.inf, np.zeros(12), np.full(12, np.inf), False
+    while sampler.iteration < max_steps and not done:
+        state = sampler.run_mcmc(state, min(check_every, max_steps - sampler.iteration))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            tau = sampler.get_autocorr_time(discard=n_tune, tol=0)
+        tau_max = float(np.max(np.where(np.isfinite(tau), tau, np.inf)))
+        burn = burn_in(n_tune, tau_max, sampler.iteration)
+        if not np.isfinite(tau_max) or sampler.iteration - burn <= target_tau_factor * tau_max:
+            continue
+        ess, rhat = _diagnostics(density.theta(sampler.get_chain(discard=burn)))
+        done = bool(np.min(ess) >= min_ess and np.max(rhat) < max_rhat)
+    if not done:  # the last check's numbers, on the chain as it ended
+        ess, rhat = _diagnostics(density.theta(sampler.get_chain(discard=burn)))
+    return sampler, burn, tau_max, ess, rhat, done
+
+
+def _start(laplaces, mu_b):
+    """A first ``theta``: the plates' own points' mean, a spread of half the prior scale."""
+    z = np.array([fit.z0 for fit in laplaces])
+    log_mu = np.mean(z, axis=0)
+    if not laminate.is_physical(laminate.stiffness_from_engineering(np.exp(log_mu))):
+        log_mu = np.log(laminate.engineering_from_stiffness(mu_b))
+    return np.concatenate([log_mu, np.full(6, np.log(0.5 * TAU_SCALE))])
+
+
+def _settle(fits, mu_b, V_b, options, rounds=4):
+    """Fits linearised again where the population would put them, and the plates moved.
+
+    At the population's MAP each plate's conditional mean (as one of the population: for an
+    outlier too, whose likelihood the Gauss-Newton model then extrapolates to its own mode)
+    is where its likelihood matters; a plate whose mean lies over :data:`REFINE_DISTANCE`
+    of its own deviations (``H``'s metric) from its linearisation point is linearised again
+    there (one solve), up to `rounds` times.
+    """
+    moved = set()
+    for _ in range(rounds):
+        density = PopulationDensity([f.laplace for f in fits], mu_b, V_b, **options)
+        theta = density.whiten(_start([f.laplace for f in fits], mu_b))
+        mean = conditional(theta[:6], np.exp(theta[6:]), density.H, density.h)[0]  # (P, 6)
+        far = [
+            p
+            for p, f in enumerate(fits)
+            if f.problem is not None
+            and (d := mean[p] - f.laplace.z0) @ f.laplace.H @ d > REFINE_DISTANCE**2
+        ]
+        if not far:
+            break
+        from .plate_laplace import relinearise
+
+        fits = [relinearise(f, mean[p]) if p in far else f for p, f in enumerate(fits)]
+        moved.update(far)
+    return fits, tuple(sorted(moved))
+
+
+def sample_population(fits, mu_b, V_b, rng=None, n_walkers=48, max_steps=20000,
+                      target_tau_factor=50.0, min_ess=1000.0, max_rhat=1.01, check_every=500,
+                      tau_scale=TAU_SCALE, outlier_prior=OUTLIER_PRIOR, refine=True):  # fmt: skip
+    """Sample the population of plates of one material; draw each plate in it (module doc).
 
     Parameters
     ----------
-    setups : sequence of SamplingSetup
-        The plates (e.g. :attr:`JointSetup.setups`).
-    singles : sequence of EstimateResult
-        Each plate's own estimate (the start).
+    fits : sequence of PlateFit
+        Each plate's Laplace (:func:`~bayesplate.sampling.plate_laplace.fit_plate`); a fit
+        without a ``problem`` is not refined.
+    mu_b, V_b : numpy.ndarray, shapes (6,), (6, 6)
+        The material's prior on ``b`` (Pa, Pa^2).
     rng : int, numpy.random.Generator or None
-        Seeds the initial walkers and emcee.
-    n_walkers : int, optional
-        Default twice the dimension plus two.
-    max_steps, target_tau_factor, min_ess, max_rhat, check_every
-        As for :func:`~bayesplate.sampling.chain.sample_problem`.
-    tau_scale : float
-        Half-normal scale of each ``tau``.
-    centred : array_like of bool, shape (6,), optional
-        Constants sampled centred; default none (non-centred throughout, as the issue asks).
-    progress : bool
-        Progress bar.
+        Seeds the walkers, emcee and the plates' draws.
+    n_walkers, max_steps, target_tau_factor, min_ess, max_rhat, check_every
+        The chain and its stopping rule (module docstring).
+    tau_scale, outlier_prior : float
+        Half-normal scale of each ``tau``; prior probability of an outlier plate (0: none).
+    refine : bool
+        Linearise far plates again at their shrunk mean and sample again (once).
 
     Returns
     -------
     HierarchicalResult
     """
     started = time.perf_counter()
-    rng = generator(resolve_rng(rng, None, "sample_hierarchical"))[1]
-    density = HierarchicalDensity(setups, tau_scale, centred)
-    limits = threadpool_limits(limits=1, user_api="blas")
-    try:
-        density.whiten(density.start(singles))
-        d = density.dim
-        n_walkers = n_walkers or 2 * d + 2
-        laplace = LaplaceMove(1.1, density.inside, df=10)
-        moves = [(laplace, 0.9), (emcee.moves.DEMove(), 0.1)]
-        sampler = emcee.EnsembleSampler(n_walkers, d, density, moves=moves)
-        sampler.random_state = np.random.RandomState(int(rng.integers(2**32))).get_state()
-        u0 = 0.3 * rng.standard_normal((n_walkers, d))
-        state = emcee.State(u0)
-        bar = _progress_bar(progress, max_steps, 0)
-        state, n_tune = _tune(sampler, state, laplace, TUNE_ROUNDS, TUNE_STEPS, max_steps, bar)
-        stop = StoppingRule(density, n_tune, target_tau_factor, min_ess, max_rhat)
-        state, history, converged = _run_chain(sampler, state, max_steps, check_every, stop,
-                                               bar, n_tune)  # fmt: skip
-        if bar is not None:
-            bar.close()
-    finally:
-        limits.restore_original_limits()
-    tau = history[-1, 1:] if len(history) else np.full(d, np.inf)
-    tau_max = float(np.max(tau))
-    burn = burn_in(n_tune, tau_max, sampler.iteration)
-    u = sampler.get_chain(discard=burn)  # (steps, walkers, d)
-    theta = density.theta(u)
-    mu = np.exp(theta[..., :6])
-    ess, rhat = diagnostics(mu.swapaxes(0, 1))
-    flat = theta.reshape(-1, d)
-    mu_flat, tau_flat = np.exp(flat[:, :6]), np.exp(flat[:, 6:12])
-    plates = np.array([density.plate_constants(t) for t in flat])
+    rng = generator(resolve_rng(rng, None, "sample_population"))[1]
+    fits = list(fits)
+    if len(fits) < 2:
+        raise ValueError(f"a population needs two plates or more, not {len(fits)}")
+    chain = dict(
+        n_walkers=n_walkers,
+        max_steps=max_steps,
+        check_every=check_every,
+        target_tau_factor=target_tau_factor,
+        min_ess=min_ess,
+        max_rhat=max_rhat,
+    )
+    options = dict(tau_scale=tau_scale, outlier_prior=outlier_prior)  # fmt: skip
+    refined = ()
+    if refine:
+        fits, refined = _settle(fits, mu_b, V_b, options)
+    done = _sample_once([f.laplace for f in fits], mu_b, V_b, rng, chain, options)
+    return _result(fits, done, refined, time.perf_counter() - started, rng)
+
+
+def _sample_once(laplaces, mu_b, V_b, rng, chain, options):
+    """One chain: (density, plates' shrunk mean, sampler, burn, tau_max, ess, rhat, done)."""
+    density = PopulationDensity(laplaces, mu_b, V_b, **options)
+    density.whiten(_start(laplaces, mu_b))
+    sampler, burn, tau_max, ess, rhat, ok = _run(density, rng, **chain)
+    return density, None, sampler, burn, tau_max, ess, rhat, ok
+
+
+def _kept(density, sampler, burn):
+    """Kept ``theta`` (D, 12), step-major, thinned to at most :data:`MAX_DRAWS`."""
+    u = sampler.get_chain(discard=burn)
+    thin = max(1, int(np.ceil(u.shape[0] * u.shape[1] / MAX_DRAWS)))
+    return density.theta(u[::thin]).reshape(-1, 12)
+
+
+def _result(fits, done, refined, wall, rng):
+    from .population_draws import inference_data, plate_draws
+
+    density, _, sampler, burn, tau_max, ess, rhat, ok = done
+    theta = _kept(density, sampler, burn)
+    plates, resp = plate_draws(density, theta, rng)
+    names = tuple(f.name for f in fits)
+    mu, tau = np.exp(theta[:, :6]), np.exp(theta[:, 6:])
     q = [3, 97]
+    own = np.array([_own(f)[0] for f in fits])
+    own_sd = np.array([_own(f)[1] for f in fits])
+    widened = resp[..., 1:].mean(axis=0)  # (P, 7)
+    status = "converged" if ok else "max_steps"
+    message = (f"{sampler.iteration} steps, tau <= {tau_max:.1f}, ESS >= {np.min(ess):.0f}, "
+               f"R-hat <= {np.max(rhat):.3f}")  # fmt: skip
     return HierarchicalResult(
-        mean=mu_flat.mean(axis=0), sd=mu_flat.std(axis=0, ddof=1),
-        hdi=np.percentile(mu_flat, q, axis=0), tau_mean=tau_flat.mean(axis=0),
-        tau_hdi=np.percentile(tau_flat, q, axis=0), plate_mean=plates.mean(axis=0),
-        plate_sd=plates.std(axis=0, ddof=1), samples=flat, ess_min=ess, rhat_max=rhat,
-        tau_max=tau_max, n_steps=sampler.iteration, n_burn=burn, n_walkers=n_walkers,
-        converged=bool(converged), status="converged" if converged else "max_steps",
-        wall_time=time.perf_counter() - started,
+        names=names, mean=mu.mean(0), sd=mu.std(0, ddof=1), hdi=np.percentile(mu, q, axis=0),
+        tau_mean=tau.mean(0), tau_sd=tau.std(0, ddof=1), tau_hdi=np.percentile(tau, q, axis=0),
+        plate_mean=plates.mean(0), plate_sd=plates.std(0, ddof=1),
+        plate_hdi=np.percentile(plates, q, axis=0), own=own, own_sd=own_sd,
+        outlier=1.0 - resp[..., 0].mean(axis=0), outlier_constant=np.argmax(widened, axis=1),
+        samples=theta, plate_samples=plates, ess=ess, rhat=rhat, ess_min=float(np.min(ess)),
+        rhat_max=float(np.max(rhat)), tau_max=tau_max, n_steps=sampler.iteration, n_burn=burn,
+        n_walkers=sampler.nwalkers, acceptance=float(np.mean(sampler.acceptance_fraction)),
+        refined=refined, converged=ok, status=status, message=message,
+        idata=inference_data(theta, plates, resp, sampler.nwalkers, names), wall_time=wall,
     )  # fmt: skip
+
+
+def _own(fit):
+    """A plate's own answer and its deviations (SI), NaN without an estimate."""
+    est = fit.estimate
+    if est is None:
+        return np.full(6, np.nan), np.full(6, np.nan)
+    sd = getattr(est, "sd", None)
+    return np.asarray(est.constants, float), np.full(6, np.nan) if sd is None else np.asarray(sd)
+
+
+def sample_hierarchical(setups, singles=None, rng=None, *, names=None, **options):
+    """:func:`sample_population` of plates already set up (e.g. :attr:`JointSetup.setups`).
+
+    Parameters
+    ----------
+    setups : sequence of SamplingSetup
+        The plates, each with its problem, fast model and MAP (the first one's prior is the
+        material's).
+    singles : sequence of EstimateResult, optional
+        Each plate's own answer (default its setup's estimate).
+    rng : int, numpy.random.Generator or None
+    names : sequence of str, optional
+    **options
+        Of :func:`sample_population`.
+
+    Returns
+    -------
+    HierarchicalResult
+    """
+    from .plate_laplace import PlateFit, linearise
+
+    singles = [s.estimate for s in setups] if singles is None else list(singles)
+    names = [f"plate {p + 1}" for p in range(len(setups))] if names is None else list(names)
+    problems = [s.problem_on_fast_model() for s in setups]
+    fits = [PlateFit(n, linearise(q, s.estimate.b), e, q)
+            for n, s, e, q in zip(names, setups, singles, problems, strict=True)]  # fmt: skip
+    p = setups[0].problem
+    return sample_population(fits, p.mu_b, p.V_b, rng=rng, **options)
