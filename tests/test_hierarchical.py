@@ -1,0 +1,212 @@
+"""The hierarchical model by Laplace (issue 42): its Gaussian algebra, its plates, its chain."""
+
+import numpy as np
+import pytest
+from scipy.stats import multivariate_normal
+
+from _studies import load_study
+from bayesplate import laminate
+from bayesplate.sampling.hierarchical import PopulationDensity, log_jacobian
+from bayesplate.sampling.population import (
+    component_spreads,
+    conditional,
+    marginal_log_likelihood,
+    mixture_log_likelihood,
+)
+
+
+def _plate(rng, rank=6, scale=100.0, info=10.0):
+    """A random plate precision of the given rank and an information vector."""
+    A = rng.normal(size=(6, rank)) * np.sqrt(scale)
+    return A @ A.T, rng.normal(size=6) * info
+
+
+def _direct(log_mu, tau, H, h):
+    """``N(H^-1 h; m, H^-1 + T)`` plus the constant relating it to ``int L N`` (full rank)."""
+    zhat = np.linalg.solve(H, h)
+    const = 0.5 * zhat @ H @ zhat - 0.5 * np.linalg.slogdet(H)[1] + 3 * np.log(2 * np.pi)
+    cov = np.linalg.inv(H) + np.diag(tau**2)
+    return multivariate_normal(log_mu, cov).logpdf(zhat) + const
+
+
+def test_marginal_is_the_direct_gaussian_when_the_precision_is_full_rank(rng):
+    for _ in range(5):
+        H, h = _plate(rng)
+        log_mu, tau = rng.normal(size=6), np.abs(rng.normal(size=6)) * 0.1
+        # two routes to one number: differences of ~1e3-sized logs, round-off ~1e-12
+        np.testing.assert_allclose(
+            marginal_log_likelihood(log_mu, tau, H, h), _direct(log_mu, tau, H, h), atol=1e-8
+        )
+
+
+def test_marginal_is_the_monte_carlo_integral_when_the_precision_is_singular(rng):
+    """Rank 3 (three constants unidentified): ``E_z[exp(q(z))]`` over ``z ~ N(m, T)``."""
+    H, h = _plate(rng, rank=3, scale=1.0, info=1.0)  # weights of moderate spread
+    log_mu = rng.normal(size=6) * 0.3
+    tau = np.array([0.3, 0.2, 0.5, 0.4, 0.1, 0.6])
+    z = log_mu + tau * rng.standard_normal((400_000, 6))
+    q = -0.5 * np.einsum("ni,ij,nj->n", z, H, z) + z @ h
+    top = q.max()
+    mc = top + np.log(np.mean(np.exp(q - top)))
+    w = np.exp(q - top)
+    rel_se = np.std(w) / np.mean(w) / np.sqrt(len(w))  # the estimate's relative standard error
+    exact = marginal_log_likelihood(log_mu, tau, H, h)
+    assert rel_se < 0.01
+    assert abs(exact - mc) < 4 * rel_se  # four standard errors of the Monte Carlo mean
+
+
+def test_marginal_tends_to_the_plate_likelihood_as_the_spread_vanishes(rng):
+    H, h = _plate(rng, rank=2)
+    log_mu = rng.normal(size=6)
+    q = -0.5 * log_mu @ H @ log_mu + h @ log_mu
+    value = marginal_log_likelihood(log_mu, np.full(6, 1e-9), H, h)
+    np.testing.assert_allclose(value, q, rtol=1e-9)
+
+
+def test_conditional_is_the_gaussian_product(rng):
+    H, h = _plate(rng)
+    log_mu, tau = rng.normal(size=6), np.abs(rng.normal(size=6)) * 0.1 + 0.01
+    mean, cov = conditional(log_mu, tau, H, h)
+    Tinv = np.diag(tau**-2.0)
+    ref_cov = np.linalg.inv(H + Tinv)  # the textbook product, fine at these spreads
+    np.testing.assert_allclose(cov, ref_cov, rtol=1e-8, atol=1e-14)
+    np.testing.assert_allclose(mean, ref_cov @ (h + Tinv @ log_mu), rtol=1e-8)
+
+
+def test_mixture_is_the_weighted_sum_of_its_components(rng):
+    H, h = _plate(rng, rank=4)
+    mu, tau = rng.normal(size=(3, 6)), np.abs(rng.normal(size=(3, 6))) * 0.05
+    total, resp = mixture_log_likelihood(mu, tau, H[None], h[None], prior=0.05, scale=0.5)
+    spreads = component_spreads(tau, 0.5)
+    weights = np.array([0.95] + [0.05 / 7] * 7)
+    for n in range(3):
+        each = np.array([marginal_log_likelihood(mu[n], spreads[n, c], H, h) for c in range(8)])
+        ref = np.log(np.sum(weights * np.exp(each - each.max()))) + each.max()
+        np.testing.assert_allclose(total[n, 0], ref, rtol=1e-12)
+        np.testing.assert_allclose(resp[n, 0].sum(), 1.0, rtol=1e-12)
+
+
+def test_log_jacobian_is_that_of_the_stiffness_map(rng):
+    for _ in range(5):
+        e = np.array([150e9, 10e9, 0.25, 3e9, 3e9, 2e9]) * np.exp(0.2 * rng.normal(size=6))
+        ref = np.linalg.slogdet(laminate.stiffness_jacobian(e))[1]
+        np.testing.assert_allclose(log_jacobian(e), ref, rtol=1e-12)
+
+
+def test_population_prior_is_the_case_prior_carried_to_log_mu():
+    """``ln f(ln mu)`` = the Gaussian prior on b at b(mu) + ln|db/de| + sum ln mu (+ const)."""
+    from bayesplate.posterior import prior_in_stiffness
+
+    mean = np.array([140e9, 9e9, 0.30, 3.5e9, 3.5e9, 2.5e9])
+    mu_b, V_b = prior_in_stiffness(mean, mean * 0.2)
+    d = PopulationDensity([], mu_b, V_b)
+    values = []
+    for s in (0.9, 1.0, 1.1):
+        mu = mean * s
+        b = laminate.stiffness_from_engineering(mu)
+        ref = multivariate_normal(mu_b, V_b).logpdf(b)
+        ref += np.linalg.slogdet(laminate.stiffness_jacobian(mu))[1] + np.log(mu).sum()
+        theta = np.concatenate([np.log(mu), np.log(np.full(6, 0.1))])
+        values.append(d.log_prior(theta)[0] - ref)
+    np.testing.assert_allclose(values, values[0], atol=1e-9)  # equal up to one constant
+
+
+@pytest.fixture(scope="module")
+def study():
+    return load_study("population_coverage")
+
+
+def test_linearised_likelihood_has_the_exact_gradient_at_its_point(study, rng):
+    """``h - H z0`` is the gradient of ln L in ``z`` at ``z0`` (central differences)."""
+    from bayesplate.posterior import GaussianProblem
+    from bayesplate.sampling.plate_laplace import linearise
+
+    c = np.array([150e9, 10e9, 0.25, 3e9, 3e9, 2e9])
+    case, model = study.synthetic_plate("P", study.GEOMETRIES[0], c, rng)
+    problem = GaussianProblem.from_case(case, model)
+    z0 = np.log(c * 1.02)
+    lap = linearise(problem, laminate.stiffness_from_engineering(np.exp(z0)))
+
+    def loglik(z):
+        return problem.log_likelihood(laminate.stiffness_from_engineering(np.exp(z)))
+
+    step = 1e-5  # central differences: truncation ~step^2, round-off ~1e-16 lnL / step
+    fd = [(loglik(z0 + step * e) - loglik(z0 - step * e)) / (2 * step) for e in np.eye(6)]
+    np.testing.assert_allclose(lap.h - lap.H @ z0, fd, rtol=1e-4, atol=1e-3)
+
+
+def test_plate_mode_is_b_where_b_converges(study, rng):
+    from bayesplate.estimators import run
+    from bayesplate.posterior import GaussianProblem
+    from bayesplate.sampling.plate_laplace import plate_mode
+
+    c = np.array([150e9, 10e9, 0.25, 3e9, 3e9, 2e9])
+    case, model = study.synthetic_plate("P", study.GEOMETRIES[1], c, rng)
+    problem = GaussianProblem.from_case(case, model)
+    b = run(problem, "B", tol=1e-9)
+    mode = plate_mode(problem)
+    assert b.converged and mode.converged
+    # both minimise S_B: equal to the iterations' tolerance (1e-9 relative change)
+    np.testing.assert_allclose(mode.constants, b.constants, rtol=1e-5)
+    np.testing.assert_allclose(mode.sd, b.sd, rtol=1e-3)  # Laplace in z vs in b, first order
+
+
+TRUE_MU = np.array([150e9, 10e9, 0.25, 3e9, 3e9, 2e9])
+
+
+def _population(study, seed, tau, offsets=None):
+    from bayesplate.posterior import prior_in_stiffness
+
+    rng = np.random.default_rng(seed)
+    fits, truths = study.population(rng, TRUE_MU, np.asarray(tau), offsets=offsets)
+    return fits, truths, prior_in_stiffness(study.PRIOR_MEAN, study.PRIOR_SD)
+
+
+@pytest.mark.slow
+def test_synthetic_population_converges_and_covers_the_truth(study):
+    from bayesplate.sampling import sample_population
+
+    tau = np.array([0.04, 0.05, 0.04, 0.03, 0.06, 0.06])
+    fits, _, (mu_b, V_b) = _population(study, 11, tau)
+    r = sample_population(fits, mu_b, V_b, rng=5, min_ess=400)
+    assert r.converged and r.rhat_max < 1.01 and r.ess_min >= 400, r.message
+    assert np.all((r.hdi[0] <= TRUE_MU) & (TRUE_MU <= r.hdi[1]))
+    assert np.all((r.tau_hdi[0] <= tau) & (tau <= r.tau_hdi[1]))
+    assert not r.flagged
+
+
+@pytest.mark.slow
+def test_without_spread_the_population_mean_is_the_shared_answer(study):
+    """Identical plates: the population's mean is the shared-constants B answer within its sd."""
+    from bayesplate.estimators import run
+    from bayesplate.sampling import sample_population
+    from bayesplate.sampling.stacked import joint_problem
+
+    fits, _, (mu_b, V_b) = _population(study, 12, np.zeros(6))
+    shared = run(joint_problem([f.problem for f in fits]), "B", tol=1e-9)
+    r = sample_population(fits, mu_b, V_b, rng=6, min_ess=400)
+    assert r.converged
+    assert np.all(np.abs(r.mean - shared.constants) < shared.sd), (r.mean / shared.constants)
+
+
+@pytest.mark.slow
+def test_a_plate_fifteen_percent_low_on_e1_is_flagged(study):
+    from bayesplate.sampling import sample_population
+
+    offsets = np.ones((10, 6))
+    offsets[3, 0] = 0.85
+    tau = np.full(6, 0.02)
+    fits, _, (mu_b, V_b) = _population(study, 13, tau, offsets)
+    r = sample_population(fits, mu_b, V_b, rng=7, min_ess=400)
+    assert r.flagged == (3,), np.round(r.outlier, 3)
+    assert r.outlier[3] > 0.95 and r.outlier_constant[3] == 0  # E1
+    # the outlier does not widen the material's E1 spread: its truth is still covered
+    assert r.tau_hdi[0, 0] <= 0.02 <= r.tau_hdi[1, 0]
+
+
+@pytest.mark.slow
+def test_study_quick_tier(study):
+    """One replicate of the quick tier (10 plates) converges and covers most parameters."""
+    s = study.main(quick=True)
+    assert s["n"] == 1 and s["rhat_max"] < 1.01 and s["ess_min"] >= 400
+    assert s["all_mu"] >= 4 / 6 and s["all_tau"] >= 4 / 6  # one replicate: most covered
