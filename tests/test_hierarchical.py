@@ -2,9 +2,9 @@
 
 import numpy as np
 import pytest
+from _studies import load_study
 from scipy.stats import multivariate_normal
 
-from _studies import load_study
 from bayesplate import laminate
 from bayesplate.sampling.hierarchical import PopulationDensity, log_jacobian
 from bayesplate.sampling.population import (
@@ -186,7 +186,7 @@ def test_without_spread_the_population_mean_is_the_shared_answer(study):
     shared = run(joint_problem([f.problem for f in fits]), "B", tol=1e-9)
     r = sample_population(fits, mu_b, V_b, rng=6, min_ess=400)
     assert r.converged
-    assert np.all(np.abs(r.mean - shared.constants) < shared.sd), (r.mean / shared.constants)
+    assert np.all(np.abs(r.mean - shared.constants) < shared.sd), r.mean / shared.constants
 
 
 @pytest.mark.slow

@@ -199,9 +199,10 @@ def register(sub):
                    help="case file (TOML) or the name of a bundled case; several: plates of "
                    "one material, sampled jointly")  # fmt: skip
     p.add_argument("--hierarchical", action="store_true",
-                   help="several plates: also each plate's constants drawn around the "
-                   "material's mean with a spread to infer (log-normal, non-centred; slow: "
-                   "the shared constants stay the main answer)")  # fmt: skip
+                   help="several plates: the population instead of shared constants: the "
+                   "material's mean and plate-to-plate spread per constant, each plate "
+                   "shrunk towards it, each plate's outlier probability (--workers builds "
+                   "the plates' fast models in parallel; -o DIR: population.png)")  # fmt: skip
     p.add_argument("-o", "--output", metavar="DIR",
                    help="write the figures into DIR (several plates: plates.png, one row per "
                    "plate beside the shared estimate; one case: as --plots)")  # fmt: skip

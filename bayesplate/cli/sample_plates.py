@@ -4,9 +4,12 @@ The joint posterior (:func:`bayesplate.sampling.sample_plates`), printed as the 
 constants and one line per plate (its own B estimate's fit and the leave-one-out check
 against the others); ``--json FILE`` writes the same as JSON, ``-o DIR`` the figure (one
 row per plate beside the shared estimate), ``--out FILE.nc`` the shared constants' ArviZ
-data. ``--hierarchical`` adds the hierarchical posterior
-(:func:`bayesplate.sampling.sample_hierarchical`: the material's mean, the spread ``tau``
-per constant, each plate's constants) after the shared one. Cases that cannot be one
+data. ``--hierarchical`` samples the population instead
+(:func:`bayesplate.sampling.sample_population`: each plate's fast model built on the batch
+engine's pool, :func:`bayesplate.batch.map_tasks`, ``--workers`` of them; the material's mean
+and spread per constant, every plate's constants shrunk towards them beside its own answer,
+each plate's outlier probability; ``--out`` the population's ArviZ data, ``-o DIR``
+``population.png``). Cases that cannot be one
 material's plates (another prior, a file given twice, an error scale) are refused in one
 line naming the file, key, value and rule (status 2).
 """
@@ -21,11 +24,13 @@ import sys
 from .options import mesh_of, resolve_case
 
 __all__ = [
+    "fit_plates",
     "hierarchical_text",
     "hierarchical_to_dict",
     "joint_text",
     "joint_to_dict",
     "run_plates",
+    "run_population",
 ]
 
 #: Options of ``sample`` that one case takes and several do not (yet).
@@ -127,9 +132,11 @@ def run_plates(args):
     from ..sampling import PlatesMismatch, sample_plates
 
     for attr, option in _ONE_CASE_ONLY:
-        if getattr(args, attr, None):
+        if getattr(args, attr, None) and not (args.hierarchical and attr == "workers"):
             return _refuse(f"{option} is for one case file (several plates: not yet)")
     cases = _load(args.case)
+    if args.hierarchical:
+        return run_population(args, cases)
     quiet = args.json == "-"
     if not quiet:
         logging.getLogger("bayesplate.sampling").setLevel(logging.INFO)
@@ -151,61 +158,159 @@ def run_plates(args):
         rows, shared = plate_rows(result)
         fig = plates_figure(rows, shared, title=f"{len(cases)} plates of one material")
         save_figure(fig, pathlib.Path(args.output) / "plates.png")
-    hier = None
-    if args.hierarchical:
-        from ..sampling import sample_hierarchical
-
-        hier = sample_hierarchical(result.setup.setups, result.setup.singles, rng=args.seed,
-                                   max_steps=args.max_steps, min_ess=args.min_ess,
-                                   progress=not quiet)  # fmt: skip
     if args.json:
-        doc = joint_to_dict(result, cases)
-        if hier is not None:
-            doc["hierarchical"] = hierarchical_to_dict(hier, result.names)
-        write_json(doc, args.json)
+        write_json(joint_to_dict(result, cases), args.json)
     if not quiet:
         print(joint_text(result))
-        if hier is not None:
-            print(hierarchical_text(hier, result.names))
-    converged = result.sampling.converged and (hier is None or hier.converged)
-    return 0 if converged else 1
+    return 0 if result.sampling.converged else 1
 
 
-def hierarchical_text(hier, names):
-    """The hierarchical posterior: the material's mean, the spread, each plate's constants."""
+def _fit_task(item):
+    """One plate's fit for the pool: its model, setup and Laplace (a PlateFit)."""
+    import warnings
+
+    from ..model import PlateModel
+    from ..sampling import fit_plate
+
+    case, mesh, rng, prior, options = item
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the workers' warnings are the setup's log lines
+        model = PlateModel.from_case(case, mesh=mesh)
+        return fit_plate(case, model=model, rng=rng, prior_mean=prior.mean, prior_sd=prior.sd,
+                         **options)  # fmt: skip
+
+
+def fit_plates(cases, rng, mesh=None, workers=1, progress=False, **options):
+    """Every plate's PlateFit, built on the batch engine's pool (``workers`` processes).
+
+    Parameters
+    ----------
+    cases : sequence of bayesplate.io.Case
+    rng : numpy.random.Generator
+        Spawned into one stream per plate (the same numbers with one worker or several).
+    mesh : (int, int), optional
+    workers : int
+        Dask worker processes (:func:`bayesplate.batch.map_tasks`); 1: in this process.
+    progress : bool
+    **options
+        Of :func:`~bayesplate.sampling.setup.prepare`.
+
+    Returns
+    -------
+    list of PlateFit
+    """
+    from ..batch.pool import map_tasks
+
+    prior = cases[0].prior
+    items = [(c, mesh, r, prior, options) for c, r in zip(cases, rng.spawn(len(cases)),
+                                                          strict=True)]  # fmt: skip
+    return map_tasks(_fit_task, items, workers=workers, progress=None if progress else False)
+
+
+def run_population(args, cases):
+    """``--hierarchical``: the population of the plates, its table, JSON, netCDF and figure."""
+    import time
+
+    from ..io import CaseError, save_figure, write_json, write_netcdf
+    from ..parallel import available_cores
+    from ..sampling import PlatesMismatch, check_plates, sample_population
+    from ..sampling.seeding import resolve_rng, streams
+
+    quiet = args.json == "-"
+    try:
+        check_plates(cases)
+    except PlatesMismatch as err:
+        raise CaseError(err.key, err.value, err.rule, path=cases[err.index].path) from None
+    _, build, walk = streams(resolve_rng(args.seed, None, "sample"))
+    workers = args.workers or min(len(cases), available_cores())
+    started = time.perf_counter()
+    fits = fit_plates(cases, build, mesh_of(args), workers, not quiet,
+                      forward="full" if args.full else "reduced", pairing=args.pairing,
+                      inputs=args.inputs or "auto")  # fmt: skip
+    t_build = time.perf_counter() - started
+    p = fits[0].problem
+    hier = sample_population(fits, p.mu_b, p.V_b, rng=walk, n_walkers=args.walkers,
+                             max_steps=args.max_steps, min_ess=args.min_ess)  # fmt: skip
+    timings = {"build": t_build, "sampling": hier.wall_time, "workers": workers}
+    if args.out:
+        write_netcdf(hier.idata, args.out)
+    if args.output:
+        from ..plots.population import population_figure
+
+        fig = population_figure(hier, title=f"{len(cases)} plates of one material")
+        save_figure(fig, pathlib.Path(args.output) / "population.png")
+    if args.json:
+        write_json(hierarchical_to_dict(hier, cases, timings), args.json)
+    if not quiet:
+        print(hierarchical_text(hier, timings))
+    return 0 if hier.converged else 1
+
+
+def hierarchical_text(hier, timings=None):
+    """The population (mean, spread, 94 % intervals), each plate shrunk beside its own answer."""
     from ..quantities import ENGINEERING_KEYS, to_case_units
 
+    timing = "" if timings is None else (f"; fast models {timings['build']:.1f} s "
+                                         f"({timings['workers']} workers), sampling "
+                                         f"{timings['sampling']:.1f} s")  # fmt: skip
     lines = [
-        f"hierarchical (ln c_p = ln mu + tau eta_p): {hier.n_walkers} walkers x "
-        f"{hier.n_steps} steps ({hier.n_burn} burn-in), tau <= {hier.tau_max:.0f} steps, "
-        f"ESS >= {hier.ess_min:.0f}, R-hat <= {hier.rhat_max:.3f}: {hier.status}"
-        + ("" if hier.converged else " (NOT converged: use the shared constants above)"),
-        f"{'constant':>9} {'mean mu':>10} {'sd':>9} {'tau':>7} {'tau 97%':>8} "
-        + " ".join(f"{n[:10]:>10}" for n in names),
+        f"{len(hier.names)} plates of one material, each its own constants around the "
+        "material's mean (ln c_p ~ N(ln mu, tau^2); each plate's likelihood by Laplace)",
+        f"emcee on (ln mu, ln tau): {hier.n_walkers} walkers x {hier.n_steps} steps "
+        f"({hier.n_burn} burn-in), ESS >= {hier.ess_min:.0f}, R-hat <= {hier.rhat_max:.3f}: "
+        f"{hier.status}{timing}"
+        + ("" if hier.converged else " (NOT converged: raise --max-steps)"),
+        f"{'constant':>9} {'mean':>9} {'94 % interval':>21} {'spread':>7} "
+        f"{'94 % interval':>15} {'ESS':>6} {'R-hat':>6}",
     ]
-    mean, sd = to_case_units(hier.mean), to_case_units(hier.sd)
-    plates = to_case_units(hier.plate_mean)
+    mean, lo, hi = (to_case_units(v) for v in (hier.mean, hier.hdi[0], hier.hdi[1]))
     for i, key in enumerate(ENGINEERING_KEYS):
-        lines.append(f"{key:>9} {mean[i]:#10.4g} {sd[i]:#9.3g} {hier.tau_mean[i]:7.3f} "
-                     f"{hier.tau_hdi[1, i]:8.3f} "
-                     + " ".join(f"{plates[p, i]:#10.4g}" for p in range(len(names))))  # fmt: skip
+        t_lo, t_hi = 100 * hier.tau_hdi[:, i]
+        lines.append(
+            f"{key:>9} {mean[i]:#9.4g} [{lo[i]:#9.4g}, {hi[i]:#9.4g}] "
+            f"{100 * hier.tau_mean[i]:6.1f}% [{t_lo:5.1f}, {t_hi:5.1f}]% "
+            f"{min(hier.ess[i], hier.ess[6 + i]):6.0f} {max(hier.rhat[i], hier.rhat[6 + i]):6.3f}"
+        )
+    lines.append("plates: shrunk (own answer) per constant; P(outlier)")
+    lines.append(f"{'plate':>12} " + " ".join(f"{k:>19}" for k in ENGINEERING_KEYS)
+                 + " P(outlier)")  # fmt: skip
+    shrunk, own = to_case_units(hier.plate_mean), to_case_units(hier.own)
+    for p, name in enumerate(hier.names):
+        cells = " ".join(f"{shrunk[p, i]:#8.4g} ({own[p, i]:#8.4g})" for i in range(6))
+        flag = " OUTLIER" if hier.outlier[p] > 0.5 else ""
+        which = ENGINEERING_KEYS[c] if (c := hier.outlier_constant[p]) < 6 else "all"
+        note = f" ({which})" if flag else ""
+        lines.append(f"{name[:12]:>12} {cells} {hier.outlier[p]:10.3f}{flag}{note}")
     return "\n".join(lines)
 
 
-def hierarchical_to_dict(hier, names):
-    """The hierarchical posterior as JSON (case units; ``tau`` of ``ln c``, dimensionless)."""
+def hierarchical_to_dict(hier, cases, timings=None):
+    """The population as JSON (case units; spreads ``tau`` of ``ln c``, dimensionless)."""
     from ..quantities import ENGINEERING_KEYS, to_case_units
 
     mean, sd = to_case_units(hier.mean), to_case_units(hier.sd)
-    plates = to_case_units(hier.plate_mean)
+    lo, hi = to_case_units(hier.hdi[0]), to_case_units(hier.hdi[1])
+    shrunk, own = to_case_units(hier.plate_mean), to_case_units(hier.own)
+    p_lo, p_hi = to_case_units(hier.plate_hdi[0]), to_case_units(hier.plate_hdi[1])
+    keys = ENGINEERING_KEYS
     return {
         "status": hier.status,
-        "mean": {k: {"mean": float(mean[i]), "sd": float(sd[i])}
-                 for i, k in enumerate(ENGINEERING_KEYS)},
-        "tau": {k: {"mean": float(hier.tau_mean[i]), "hdi_3%": float(hier.tau_hdi[0, i]),
-                    "hdi_97%": float(hier.tau_hdi[1, i])} for i, k in enumerate(ENGINEERING_KEYS)},
-        "plates": {n: {k: float(plates[p, i]) for i, k in enumerate(ENGINEERING_KEYS)}
-                   for p, n in enumerate(names)},
+        "mean": {k: {"mean": float(mean[i]), "sd": float(sd[i]), "hdi_3%": float(lo[i]),
+                     "hdi_97%": float(hi[i]), "ess_bulk": float(hier.ess[i]),
+                     "r_hat": float(hier.rhat[i])} for i, k in enumerate(keys)},
+        "spread": {k: {"mean": float(hier.tau_mean[i]), "sd": float(hier.tau_sd[i]),
+                       "hdi_3%": float(hier.tau_hdi[0, i]), "hdi_97%": float(hier.tau_hdi[1, i]),
+                       "ess_bulk": float(hier.ess[6 + i]), "r_hat": float(hier.rhat[6 + i])}
+                   for i, k in enumerate(keys)},
+        "plates": [{"name": n, "file": c.path, "outlier_probability": float(hier.outlier[p]),
+                    "refined": p in hier.refined,
+                    "shrunk": {k: {"mean": float(shrunk[p, i]), "hdi_3%": float(p_lo[p, i]),
+                                   "hdi_97%": float(p_hi[p, i])} for i, k in enumerate(keys)},
+                    "own": {k: float(own[p, i]) for i, k in enumerate(keys)}}
+                   for p, (n, c) in enumerate(zip(hier.names, cases, strict=True))],
+        "flagged": [hier.names[p] for p in hier.flagged],
         "chain": {"n_walkers": hier.n_walkers, "n_steps": hier.n_steps, "n_burn": hier.n_burn,
-                  "tau_max": hier.tau_max, "ess_min": hier.ess_min, "rhat_max": hier.rhat_max},
+                  "tau_max": hier.tau_max, "ess_min": hier.ess_min, "rhat_max": hier.rhat_max,
+                  "acceptance": hier.acceptance, "message": hier.message},
+        "timings": {} if timings is None else {k: float(v) for k, v in timings.items()},
     }  # fmt: skip
