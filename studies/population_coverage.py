@@ -150,13 +150,15 @@ def main(out_dir=None, quick=False, replicates=None, seed0=4200):
 
     n = replicates or (QUICK_REPLICATES if quick else REPLICATES)
     load = " ".join(f"{x:.2f}" for x in os.getloadavg())
+    version = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
+                             capture_output=True, text=True).stdout.strip()  # fmt: skip
     started = time.perf_counter()
     rows = []
     for k in range(n):  # the report is rewritten after each replicate (the run so far)
         rows.append(replicate(seed0 + k, QUICK_PLATES if quick else N_PLATES, **CHAIN))
         summary = _summary(rows, time.perf_counter() - started)
         if not quick and out_dir is not None:
-            _write(Path(out_dir), summary, ENGINEERING_NAMES, load, n)
+            _write(Path(out_dir), summary, ENGINEERING_NAMES, (load, version), n)
     return summary
 
 
@@ -171,11 +173,11 @@ def _summary(rows, elapsed):
     return {"n": len(rows), **summary}
 
 
-def _write(out, s, names, load, planned):
+def _write(out, s, names, started, planned):
+    """The report of the replicates so far; `started` is the (load, code version) at start."""
     from _study_host import cpu
 
-    version = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
-                             capture_output=True, text=True).stdout.strip()  # fmt: skip
+    load, version = started
     when = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     lines = [
         "# Population coverage: 94 % intervals of the means and the spreads",

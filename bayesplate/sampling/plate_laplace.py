@@ -125,6 +125,9 @@ class PlateFit:
 def fit_plate(case, *, model=None, rng=None, prior_mean=None, prior_sd=None, **prepare_options):
     """One plate's setup on its certified fast model and its likelihood's Laplace at the MAP.
 
+    The MAP is B's (:func:`~bayesplate.sampling.setup.prepare`); where B did not converge
+    (a step out of the physical region from a weak prior), :func:`plate_mode`'s.
+
     Parameters
     ----------
     case : bayesplate.io.Case
@@ -149,8 +152,12 @@ def fit_plate(case, *, model=None, rng=None, prior_mean=None, prior_sd=None, **p
     setup = prepare(case, model=model, rng=rng, prior_mean=prior_mean, prior_sd=prior_sd,
                     **prepare_options)  # fmt: skip
     problem = setup.problem_on_fast_model()
-    laplace = linearise(problem, setup.estimate.b)
-    return PlateFit(case.name, laplace, setup.estimate, problem, time.perf_counter() - started)
+    own = setup.estimate
+    if not own.converged:  # B left the physical region: the mode by damped steps in ln c
+        start = None if setup.pilot is None or not setup.pilot.converged else setup.pilot.b
+        own = plate_mode(problem, start)
+    laplace = linearise(problem, own.b)
+    return PlateFit(case.name, laplace, own, problem, time.perf_counter() - started)
 
 
 def relinearise(fit, z):
