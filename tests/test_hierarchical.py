@@ -210,3 +210,47 @@ def test_study_quick_tier(study):
     s = study.main(quick=True)
     assert s["n"] == 1 and s["rhat_max"] < 1.01 and s["ess_min"] >= 400
     assert s["all_mu"] >= 4 / 6 and s["all_tau"] >= 4 / 6  # one replicate: most covered
+
+
+@pytest.fixture(scope="module")
+def case_files(tmp_path_factory):
+    """Four plates' case files (the fourth E1 15 % low), on a 12 x 6 mesh."""
+    many = load_study("many_plates")
+    folder = tmp_path_factory.mktemp("plates")
+    return many.write_cases(folder, odd=True, mesh=(12, 6), data_mesh=(24, 12))
+
+
+def test_cli_hierarchical_refuses_other_priors_in_one_line(case_files, tmp_path, capsys):
+    from bayesplate.cli.main import main
+
+    other = tmp_path / "other.toml"
+    other.write_text(
+        case_files[1].read_text().replace("E1_GPa = { mean = 140", "E1_GPa = { mean = 99")
+    )
+    assert main(["sample", str(case_files[0]), str(other), "--hierarchical"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "prior.E1_GPa" in err and str(other) in err
+    assert main(["sample", str(case_files[0]), "--hierarchical"]) == 2
+    assert "several case files" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_cli_hierarchical_on_the_pool_writes_table_json_netcdf_figure(case_files, tmp_path, capsys):
+    import json
+
+    from bayesplate.cli.main import main
+    from bayesplate.sampling.stopping import load_arviz
+
+    out = tmp_path / "pop.json"
+    argv = ["sample", *map(str, case_files), "--hierarchical", "--seed", "1", "--workers", "2",
+            "--min-ess", "400", "--max-steps", "20000", "--walkers", "24", "-o", str(tmp_path),
+            "--out", str(tmp_path / "pop.nc"), "--json", str(out)]  # fmt: skip
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert "4 plates of one material" in text and "P(outlier)" in text and "E1_GPa" in text
+    doc = json.loads(out.read_text())
+    assert doc["status"] == "converged" and len(doc["plates"]) == 4
+    assert doc["chain"]["rhat_max"] < 1.01
+    idata = load_arviz().from_netcdf(str(tmp_path / "pop.nc"))
+    assert idata.posterior["plate"].shape[-2:] == (4, 6)
+    assert (tmp_path / "population.png").stat().st_size > 0
