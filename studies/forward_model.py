@@ -27,7 +27,7 @@ from matplotlib.figure import Figure
 from scipy.optimize import linear_sum_assignment
 
 from bayesplate import plots
-from bayesplate.discrepancy.physics.location import mode_kinds
+from bayesplate.discrepancy.search.locate import mode_kinds
 from bayesplate.io import bundled_case_path, load_case
 from bayesplate.laminate import stiffness_from_engineering
 from bayesplate.model import PlateModel

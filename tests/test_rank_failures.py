@@ -6,7 +6,8 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from bayesplate.discrepancy.search.rank import CandidateResult, _phase
+from bayesplate.discrepancy.search.phases import run_phase as _phase
+from bayesplate.discrepancy.search.rank import CandidateResult
 
 
 class _Physics:

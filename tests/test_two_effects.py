@@ -6,6 +6,7 @@ pairs are fitted and which is chosen, not the fitting, which the slow test of
 """
 
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import pytest
 
@@ -76,7 +77,7 @@ def _run(monkeypatch, pairs_gain_chi2):
     monkeypatch.setattr(stage, "rank", rank)
     physics, ranked = _singles()
     said = []
-    fitting = dict(model=None, scans={}, say=said.append)
+    fitting = SimpleNamespace(model=None, scans={}, say=said.append)
     chosen, pairs = stage.two_effects(ranked[0], ranked, physics, fitting, 3.0, 0.01, M)
     return chosen, pairs, turns, said
 

@@ -1,9 +1,9 @@
 """Model discrepancy: candidate physics the nominal model leaves out, and their diagnosis.
 
-Every candidate implements the small interface of :class:`.base.Physics`: its parameters
+Every candidate implements the small interface of :class:`.physics.base.Physics`: its parameters
 with units and priors, and how it changes the plate (a modified ``PlateModel``). A located
-candidate (:mod:`.point_mass`, :mod:`.local_stiffness_loss`, :mod:`.cutout`,
-:mod:`.point_support`) also implements the hooks
+candidate (:mod:`.physics.point_mass`, :mod:`.physics.local_stiffness_loss`, :mod:`.physics.cutout`,
+:mod:`.physics.point_support`) also implements the hooks
 ``location_map`` and ``scan``, which :func:`.diagnose.diagnose` calls on every candidate:
 a new candidate, located or not, is one module.
 """

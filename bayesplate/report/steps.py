@@ -138,7 +138,7 @@ def _check_data(check):
 
 def modes_step(case, model, b, n_modes, n_shapes):
     """Modes, normalised sensitivities, mode kinds and the first `n_shapes` shapes at `b`."""
-    from ..discrepancy.physics.location import mode_kinds
+    from ..discrepancy.search.locate import mode_kinds
 
     modal = model.solve(np.asarray(b, dtype=float), n_modes)
     return {

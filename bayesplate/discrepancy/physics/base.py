@@ -8,7 +8,7 @@ coefficients, so the estimators, the posterior and the sampler work on it unchan
 A *located* candidate (an effect at a place on the plate: a point mass, a damaged patch)
 also implements the two optional hooks :meth:`Physics.location_map` (first order: where a
 small effect would explain the residuals) and :meth:`Physics.scan` (exact in a Ritz basis:
-where, and how large, over a grid the candidate declares). :func:`.diagnose.diagnose` calls
+where, and how large, over a grid the candidate declares). :func:`..diagnose.diagnose` calls
 them on every candidate and keys what they return by :attr:`Physics.name`; a new located
 candidate is one module.
 """
@@ -117,7 +117,7 @@ class Physics:
 
         Linearised at the nominal fit: the column of each place is the derivative of the
         paired eigenvalues with respect to the effect's size there, whitened, with what the
-        constants absorb projected out (:func:`.locate.effect_map` does that part).
+        constants absorb projected out (:func:`.location.effect_map` does that part).
 
         Parameters
         ----------
@@ -133,7 +133,7 @@ class Physics:
         sigma_lambda : numpy.ndarray, shape (m,)
             Deviations of the measured eigenvalues, rad^2/s^2.
         projector : numpy.ndarray, shape (m, m)
-            Onto what the constants cannot absorb (:func:`.locate.absorbable_projector`).
+            Onto what the constants cannot absorb (:func:`.location.absorbable_projector`).
 
         Returns
         -------
@@ -154,7 +154,7 @@ class Physics:
         model : PlateModel
             The nominal plate.
         basis : RitzBasis
-            Rigid-body motions and elastic modes at the nominal fit (:mod:`.scan`).
+            Rigid-body motions and elastic modes at the nominal fit (:mod:`.ritz_scan`).
         b : numpy.ndarray, shape (6,)
             Stiffness coefficients of the nominal fit, Pa.
         Y, sigma : numpy.ndarray, shape (m,)
@@ -162,7 +162,7 @@ class Physics:
         modes : numpy.ndarray of int, shape (m,)
             0-based elastic modes paired with the measured ones.
         projector : numpy.ndarray, shape (m, m)
-            Onto what the constants cannot absorb (:func:`.locate.absorbable_projector`).
+            Onto what the constants cannot absorb (:func:`.location.absorbable_projector`).
 
         Returns
         -------
@@ -182,17 +182,17 @@ class Physics:
         b : numpy.ndarray, shape (6,)
             Nominal stiffness coefficients, Pa (for priors scaled to the plate).
         basis : numpy.ndarray, shape (n_dofs, r)
-            From :func:`.pencil.ritz_basis`.
+            From :func:`.reduced_model.ritz_basis`.
         near : numpy.ndarray, shape (k,), optional
             When given, the form need only be exact at ``near`` and accurate around it (the
-            pencil of a round of :mod:`.polish`, exact at its snapshot): a candidate whose
+            pencil of a round of :mod:`..search.settling`, exact at its snapshot): a candidate whose
             exact form over the whole range is costly may build a cheaper local one.
 
         Returns
         -------
         callable or None
             ``theta -> (terms (6, r, r), constant (r, r), mass (r, r))`` (see
-            :class:`.pencil.CandidatePencil`); None (the default) when the candidate has no
+            :class:`.reduced_model.CandidatePencil`); None (the default) when the candidate has no
             cheap reduced form and is fitted on the finite-element model.
         """
         return None

@@ -2,7 +2,7 @@
 
 A :class:`Pair` is a :class:`~.base.Physics` whose parameters are its two components', one
 after the other (each prefixed by its component's name: ``point_mass.mass_g``), so that the
-joint fit, the reduced models and the ranking of :mod:`.rank` run on it unchanged.
+joint fit, the reduced models and the ranking of :mod:`..search.rank` run on it unchanged.
 
 Composition. The candidates' :meth:`~.base.Physics.apply` do not all compose by applying one
 to the other's plate (a taper rebuilds the stiffness and mass from the element matrices, a
@@ -43,7 +43,7 @@ class Pair(Physics):
     Parameters
     ----------
     first, second : Physics
-        The components (the first is the best single candidate in :func:`.diagnose.diagnose`).
+        The components (the first is the best single candidate in :func:`..diagnose.diagnose`).
     b : numpy.ndarray, shape (6,)
         Stiffness coefficients at which mirror images are checked, Pa (the best single
         fit's; see :meth:`mirror_images`).

@@ -183,7 +183,7 @@ class Cutout(Physics):
 
         A difference in the place or the diameter visits only the elements along the rim; the
         sum of those wholly inside is kept while they stay the same
-        (:meth:`~.pencil.RegionProjection.inside`).
+        (:meth:`~.reduced_model.RegionProjection.inside`).
         """
         terms, constant, mass = project(model, basis)
         element = np.concatenate([model.element_stiffness_terms(), model.element_mass()[None]])
@@ -272,7 +272,7 @@ def cutout_scan(model, basis, b, Y, sigma, modes, projector, diameters_mm, strid
     modes : numpy.ndarray of int, shape (m,)
         0-based elastic modes paired with the measured ones.
     projector : numpy.ndarray, shape (m, m)
-        Onto what the constants cannot absorb (:func:`.locate.absorbable_projector`).
+        Onto what the constants cannot absorb (:func:`.location.absorbable_projector`).
     diameters_mm : array_like
     stride : int
 

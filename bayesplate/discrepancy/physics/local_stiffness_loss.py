@@ -100,7 +100,7 @@ class LocalStiffnessLoss(Physics):
 
         Every element of the plate has the same matrices ``K_j^e``; only the elements the
         rectangle touches are projected at each evaluation (the sum of those wholly inside
-        kept while they stay the same: :meth:`~.pencil.RegionProjection.inside`), and a
+        kept while they stay the same: :meth:`~.reduced_model.RegionProjection.inside`), and a
         difference in a place or a side only the elements along the edges that moved.
         """
         terms, constant, mass = project(model, basis)
@@ -218,7 +218,7 @@ def stiffness_loss_scan(model, basis, b, Y, sigma, modes, projector, sizes_mm, f
     modes : numpy.ndarray of int, shape (m,)
         0-based elastic modes paired with the measured ones.
     projector : numpy.ndarray, shape (m, m)
-        Onto what the constants cannot absorb (:func:`.locate.absorbable_projector`).
+        Onto what the constants cannot absorb (:func:`.location.absorbable_projector`).
     sizes_mm : sequence of (dx_mm, dy_mm)
     factors : array_like
         Fractions of ``C22, C12, C66, C44, C55`` kept inside.

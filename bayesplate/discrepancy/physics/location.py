@@ -1,4 +1,4 @@
-"""Locate a misfit: which modes carry it, what kind they are, where on the plate it sits.
+"""Location maps: where on the plate a local change would explain the misfit.
 
 Everything here is linearised at the nominal fit and pure array computation. Residuals and
 effect columns are whitened by the observation deviations, and the part of every effect
@@ -6,7 +6,9 @@ that the six elastic constants can absorb is projected out first: only what the 
 cannot explain points at missing physics.
 
 The maps of the located candidates are built here from the derivative columns each
-candidate computes in its :meth:`~.base.Physics.location_map` (:func:`effect_map`).
+candidate computes in its :meth:`~.base.Physics.location_map` (:func:`effect_map`); the
+kinds of the modes and the best place over the maps are the search's
+(:mod:`..search.locate`).
 """
 
 from __future__ import annotations
@@ -15,55 +17,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import mirror_positions
-
 __all__ = [
     "LocationMap",
     "absorbable_projector",
-    "best_region",
     "explained_chi2",
     "effect_map",
-    "mode_kinds",
 ]
-
-_KIND_BY_COEFFICIENT = {0: "bending along x", 1: "bending along y", 3: "torsion"}
-
-
-def mode_kinds(model, result, threshold=0.6):
-    """Name each mode by where its energy sits.
-
-    A mode is ``in-plane`` when most of its kinetic energy is in ``u0, v0``; otherwise it is
-    named by the stiffness coefficient that carries most of its strain energy (the
-    normalised sensitivities of eq. 29 sum to one): C11 -> ``bending along x`` (plate x),
-    C22 -> ``bending along y``, C66 -> ``torsion``; ``mixed`` when no share exceeds
-    ``threshold``. For angle plies the names refer to the lamina coefficients.
-
-    Parameters
-    ----------
-    model : PlateModel
-    result : ModalResult
-
-    Returns
-    -------
-    list of str, one per mode
-    """
-    phi = result.vectors
-    inplane = np.zeros(model.mesh.n_dofs)
-    inplane[np.concatenate([model.mesh.dofs("u"), model.mesh.dofs("v")])] = 1.0
-    kinetic_inplane = np.einsum(
-        "di,di->i", phi * inplane[:, None], model.mass @ (phi * inplane[:, None])
-    )
-    shares = result.normalised_sensitivities()
-    kinds = []
-    for k, s in zip(kinetic_inplane, shares, strict=True):
-        j = int(np.argmax(s))
-        if k > 0.5:
-            kinds.append("in-plane")
-        elif s[j] > threshold and j in _KIND_BY_COEFFICIENT:
-            kinds.append(_KIND_BY_COEFFICIENT[j])
-        else:
-            kinds.append("mixed")
-    return kinds
 
 
 def absorbable_projector(sensitivity_whitened):
@@ -161,15 +120,3 @@ def effect_map(derivatives, sigma_lambda, residual_whitened, projector, points_m
     effects = derivatives / sigma_lambda[:, None]
     drop, amp = explained_chi2(residual_whitened, effects, projector)
     return LocationMap(points_mm, drop, amp, amp > 0, shape)
-
-
-def best_region(model, maps):
-    """The best located place over all maps (mm), with its mirror images; ``(None, [])``."""
-    best = None
-    for m in maps.values():
-        i = m.best()
-        if i is not None and (best is None or m.chi2_drop[i] > best[0]):
-            best = (m.chi2_drop[i], tuple(float(v) for v in m.points_mm[i]))
-    if best is None:
-        return None, []
-    return best[1], [tuple(float(v) for v in p) for p in mirror_positions(model, *best[1])]

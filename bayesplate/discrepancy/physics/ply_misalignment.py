@@ -33,7 +33,7 @@ class PlyMisalignment(Physics):
     def ritz(self, model, b, basis, near=None):
         """Exact: a turned ply's stiffness holds the harmonics 0, 2 and 4 of the angle.
 
-        ``near`` given: a quadratic exact there (:func:`~.pencil.local_ritz`, nodes a tenth
+        ``near`` given: a quadratic exact there (:func:`~.reduced_model.local_ritz`, nodes a tenth
         of the prior deviation apart), three plates instead of five.
         """
         if near is not None:

@@ -115,7 +115,7 @@ def point_mass_scan(model, basis, Y, sigma, modes, projector, masses_g, stride=2
     modes : numpy.ndarray of int, shape (m,)
         0-based elastic modes paired with the measured ones.
     projector : numpy.ndarray, shape (m, m)
-        Onto what the constants cannot absorb (:func:`.locate.absorbable_projector`).
+        Onto what the constants cannot absorb (:func:`.location.absorbable_projector`).
     masses_g : array_like
         Masses to try, g.
     stride : int

@@ -134,7 +134,7 @@ def point_support_scan(model, basis, Y, sigma, modes, projector, springs_N_m, st
 
     In the Ritz basis: ``(Lambda + k w_p w_p^T) q = lambda q`` with ``w_p`` the basis' ``w``
     at node ``p``. The bouncing motion the spring lifts is told from the elastic modes by
-    its share on the rigid-body motions (as :mod:`.pencil` does), so a stiff spring whose
+    its share on the rigid-body motions (as :mod:`.reduced_model` does), so a stiff spring whose
     bouncing mode rises among the elastic ones is scanned right.
 
     Parameters
@@ -146,7 +146,7 @@ def point_support_scan(model, basis, Y, sigma, modes, projector, springs_N_m, st
     modes : numpy.ndarray of int, shape (m,)
         0-based elastic modes paired with the measured ones.
     projector : numpy.ndarray, shape (m, m)
-        Onto what the constants cannot absorb (:func:`.locate.absorbable_projector`).
+        Onto what the constants cannot absorb (:func:`.location.absorbable_projector`).
     springs_N_m : array_like
         Springs to try, N/m.
     stride : int

@@ -41,7 +41,7 @@ __all__ = [
 #: pencil built at a point was off there by up to 4e-5 in eigenvalue (a local loss) and 5e-3
 #: in its sensitivities, at 1e-12 by under 1e-10 and 1e-5 (50 x 50 Frederiksen plate; the
 #: eigenvalues and sensitivities of its own snapshot, the exactness its rounds rely on:
-#: :mod:`.polish`).
+#: :mod:`..search.settling`).
 BASIS_TOL = 1e-12
 #: Eigenvalues of an element matrix below this fraction of its largest (in magnitude) are
 #: taken as round-off in its factors (:class:`RegionProjection`).
@@ -121,7 +121,7 @@ def local_ritz(plate_at, V, near, step):
     """A family's reduced matrices as a quadratic in one parameter around ``near``.
 
     Exact at ``near`` (a node), its first derivative there to ``O(step^2)``: the form of a
-    round of :mod:`.polish`, whose pencil need only be exact at its snapshot (three plates
+    round of :mod:`..search.settling`, whose pencil need only be exact at its snapshot (three plates
     assembled and projected instead of a whole range's nodes).
 
     Parameters
@@ -418,7 +418,7 @@ def candidate_pencil(model, physics, b, thetas, n_modes, nominal_modes=None, ear
         :attr:`~CandidatePencil.snapshots`: they stay exact).
     local : bool
         The pencil need only be exact at the last of ``thetas`` and accurate around it (a
-        round of :mod:`.polish`): the candidate may build a cheaper local form there
+        round of :mod:`..search.settling`): the candidate may build a cheaper local form there
         (:meth:`~.base.Physics.ritz`'s ``near``).
 
     Returns

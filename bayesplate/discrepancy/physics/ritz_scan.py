@@ -1,6 +1,6 @@
 """Ritz scans: where, and how large, a located effect could be, beyond first order.
 
-The location maps of :mod:`.locate` are linear in the effect's size. A large effect (a
+The location maps of :mod:`.location` are linear in the effect's size. A large effect (a
 sensor of a few percent of the plate's mass, a patch that lost half its stiffness) shifts
 the eigenvalues far beyond that, reorders modes, and a local fit started from the map's
 peak stops in a false minimum. A scan solves the modified plate exactly in the Ritz basis

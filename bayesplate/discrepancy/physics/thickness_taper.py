@@ -56,7 +56,7 @@ class ThicknessTaper(Physics):
 
         The ply integrals of the third-order theory scale as powers of the thickness up to
         the seventh, with the shear-correction coefficient as its inverse square. ``near``
-        given: a quadratic exact there (:func:`~.pencil.local_ritz`, nodes a tenth of the
+        given: a quadratic exact there (:func:`~.reduced_model.local_ritz`, nodes a tenth of the
         prior deviation apart), three tapered plates instead of eight.
         """
         if near is not None:

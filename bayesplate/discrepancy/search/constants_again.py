@@ -12,8 +12,8 @@ constants alone is the nominal problem of the plate *with* the effect, and the n
 global stage applies to it unchanged: a reduced model over the prior's box
 (:func:`.nominal.nominal_reduced`) and its first round (:func:`.nominal.first_round`: the
 prior mean and random draws as starts). Its best distinct optima, joined
-to ``theta``, start the candidate's joint fit again (:func:`.fit.settle`). Used by
-:func:`.diagnose.diagnose` only when the best candidate's refit is rejected, before pairs
+to ``theta``, start the candidate's joint fit again (:func:`.joint_fit.settle`). Used by
+:func:`..diagnose.diagnose` only when the best candidate's refit is rejected, before pairs
 of effects are tried.
 """
 
@@ -53,7 +53,7 @@ def constants_anew(problem, fitted, coarse, polish, workers=1):
     coarse : PlateModel
         The half mesh of the plate (the global stage's reduced model is built on it).
     polish : callable
-        ``polish(z, earlier=())`` of the candidate (:func:`.fit.settle`).
+        ``polish(z, earlier=())`` of the candidate (:func:`.joint_fit.settle`).
     workers : int
 
     Returns

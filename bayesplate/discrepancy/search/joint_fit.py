@@ -19,7 +19,7 @@ volume is its prior volume, which is the right Occam penalty.
 Each fit may run on three levels: every start on a cheap model (a reduced model, or the
 coarse mesh), the best optima polished on a reduced model of the working mesh, and the
 result finished on the working mesh (:func:`fit`; tightly, at a canonical mirror image:
-:mod:`.finish`). Over 400 lines (a written reason, as the
+:mod:`.tight_finish`). Over 400 lines (a written reason, as the
 project asks): the problem, its levels and the Laplace summary share the whitened unknowns
 and the cached evaluation; split, each part would reach into the others' internals.
 """
@@ -85,7 +85,7 @@ class JointFit:
         The other local optima reached on the working mesh: their stiffness coefficients
         ``b`` (Pa) and objective ``chi2 + chi2_prior``, best first.
     check : FitCheck or None
-        When the fit was settled on reduced models of the working mesh (:mod:`.polish`):
+        When the fit was settled on reduced models of the working mesh (:mod:`.settling`):
         the full model at its answer. None when it ran on the finite-element model itself
         or was not refined.
     rough_optima : tuple of numpy.ndarray
@@ -184,7 +184,9 @@ class JointProblem:
         return other
 
     def on_pencil(self, pencil, scale=None):
-        """The same problem on a reduced candidate model (:class:`.pencil.CandidatePencil`).
+        """The same problem on a reduced candidate model.
+
+        (:class:`..physics.reduced_model.CandidatePencil`.)
 
         ``scale`` as for :meth:`on` (the pencil's mesh to this problem's).
         """
@@ -327,7 +329,7 @@ def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None, keep
         mesh, exact at ``z`` (a finite-element snapshot there; :meth:`JointProblem.on_pencil`)
         and keeping the vectors ``basis``. Each of the ``keep`` rough optima is then polished
         on it and, where it can still win, settled in rounds checked by the finite-element
-        model (:mod:`.polish`); the best settled one is reported, its chi-square, evidence
+        model (:mod:`.settling`); the best settled one is reported, its chi-square, evidence
         and derivatives those of the finite-element model at its answer.
     tol : float
         ``ftol`` and ``xtol`` of the fits on ``problem`` after a rough stage.
@@ -394,7 +396,7 @@ def settle(problem, polish, starts, rounds=MAX_ROUNDS):
     """The best of the optima ``starts`` settled on reduced models of the working mesh.
 
     Each is settled in rounds of reduced models exact where they reach, each checked by
-    the finite-element model (:func:`.polish.polish_and_finish`); the reported fit's
+    the finite-element model (:func:`.settling.polish_and_finish`); the reported fit's
     chi-square, evidence and derivatives are the finite-element model's at its answer.
 
     Parameters

@@ -1,7 +1,7 @@
 """Local least-squares fits of a joint problem from many starts, and their distinct optima.
 
 Each start is fitted by scipy's trust-region reflective least squares on the whitened
-residuals ``r(z)`` of :class:`.fit.JointProblem` (``|r|^2 = chi2 + chi2_prior``), within the
+residuals ``r(z)`` of :class:`.joint_fit.JointProblem` (``|r|^2 = chi2 + chi2_prior``), within the
 problem's bounds, the independent starts on forked workers (:func:`bayesplate.parallel.fork_map`).
 """
 

@@ -9,8 +9,8 @@ stiffer), and the nominal fit's six constants absorb that part; what they cannot
 
 ``S_f`` the sensitivities of the frequencies to the stiffness coefficients (``d f / d b =
 f / (2 lambda) d lambda / d b``) at the same point, whitened like ``e`` (the projector of
-:func:`.locate.absorbable_projector`). ``"whole"`` adds ``e`` to the deviations in quadrature
-where it is not well under them (diagnose's default); ``"unabsorbed"`` adds ``e_left``
+:func:`..physics.location.absorbable_projector`). ``"whole"`` adds ``e`` to the deviations
+in quadrature where it is not well under them (diagnose's default); ``"unabsorbed"`` adds ``e_left``
 instead, so that what the constants take is not counted twice, once by the fit and once in
 the deviations.
 """
@@ -24,7 +24,7 @@ from ..physics.location import absorbable_projector
 
 __all__ = ["MESH_ERROR_PARTS", "coarse_model", "mesh_error", "unabsorbed"]
 
-#: What of the mesh's estimated error :func:`.diagnose.diagnose` adds to the deviations.
+#: What of the mesh's estimated error :func:`..diagnose.diagnose` adds to the deviations.
 MESH_ERROR_PARTS = ("whole", "unabsorbed")
 
 

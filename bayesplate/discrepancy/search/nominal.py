@@ -60,7 +60,7 @@ def fit_nominal(problem, rough, rng, n_starts=N_STARTS, workers=1, keep=3):
     problem : JointProblem
         The nominal problem on the working mesh.
     rough : JointProblem or PlateModel
-        The same problem on a cheaper model (:meth:`.fit.JointProblem.on`); a plate model
+        The same problem on a cheaper model (:meth:`.joint_fit.JointProblem.on`); a plate model
         is taken as a coarse mesh without correction.
     rng : numpy.random.Generator
     n_starts, workers, keep : int
@@ -94,7 +94,7 @@ def first_round(rough, rng, n_starts, workers=1):
     Returns
     -------
     list of scipy.optimize.OptimizeResult
-        Lowest cost first (:func:`.local.local_fits`, 200 evaluations each at most).
+        Lowest cost first (:func:`.local_fits.local_fits`, 200 evaluations each at most).
     """
     starts = [np.zeros(6)] + [rng.standard_normal(6) for _ in range(n_starts)]
     return local_fits(rough, starts, 200, workers)
@@ -104,7 +104,7 @@ def nominal_polisher(problem):
     """``polish(z, earlier=())``: the nominal plate's pencil on the working mesh, exact at z.
 
     Its basis holds the working mesh's modes at ``z`` (:data:`POLISH_EXTRA_MODES` beyond the
-    highest paired one) and the ``earlier`` snapshots (at the points before: :mod:`.polish`).
+    highest paired one) and the ``earlier`` snapshots (at the points before: :mod:`.settling`).
     """
     n = int(problem.modes.max()) + 1 + POLISH_EXTRA_MODES
 

@@ -1,6 +1,6 @@
 """Posterior probabilities of "nothing left out" and of each candidate, from their evidences.
 
-With the Laplace log-evidences :func:`.diagnose.diagnose` computes, ``ln Z_0`` of the
+With the Laplace log-evidences :func:`..diagnose.diagnose` computes, ``ln Z_0`` of the
 nominal model and ``ln Z_i = ln Z_0 + g_i`` of each fitted candidate (``g_i`` its evidence
 gain, nats), Bayes' rule gives
 
@@ -11,12 +11,12 @@ nats neither overflow nor underflow to all zeros; adding a constant to every log
 leaves the probabilities unchanged, so only the gains are needed).
 
 Variants. A candidate fitted in several variants (a taper along x and one along y, which
-share a :attr:`~.base.Physics.name`) is *one* candidate whose variant is a discrete
+share a :attr:`~..physics.base.Physics.name`) is *one* candidate whose variant is a discrete
 parameter with a uniform prior: each variant gets ``1 / n_variants`` of the candidate's
 prior odds and the candidate's probability is the sum of its variants'. A candidate thus
 weighs the same in the prior however many variants it is fitted in, and the probabilities
-are keyed by candidate name. (A pair of effects, :mod:`.pair`, is a candidate of its own,
-named ``first+second``.)
+are keyed by candidate name. (A pair of effects, :mod:`..physics.combined`, is a candidate
+of its own, named ``first+second``.)
 
 Prior odds are equal (odds 1 for every candidate against the nominal model) unless given.
 
@@ -44,8 +44,8 @@ def model_probabilities(results, prior_odds=None, nominal=0.0):
     ----------
     results : sequence of (str, float)
         ``(name, log_evidence)`` of every fitted candidate variant: its
-        :attr:`~.base.Physics.name` and its ``ln Z`` in nats, on the scale where the nominal
-        model's is ``nominal`` (with the default 0: the evidence gains). Variants share a
+        :attr:`~..physics.base.Physics.name` and its ``ln Z`` in nats, on the scale where the
+        nominal model's is ``nominal`` (with the default 0: the evidence gains). Variants share a
         name. A value of ``-inf`` or NaN (a fit that left the physical region) has
         probability zero.
     prior_odds : dict, optional
@@ -107,7 +107,7 @@ def images_log_weight(theta, covariance, images):
     covariance : numpy.ndarray, shape (k, k)
         Their posterior (Laplace) covariance.
     images : sequence of numpy.ndarray, shape (k,)
-        The mirror images of ``theta`` (:meth:`~.base.Physics.mirror_images`).
+        The mirror images of ``theta`` (:meth:`~..physics.base.Physics.mirror_images`).
 
     Returns
     -------

@@ -242,42 +242,71 @@ def made_again(first, one_pass, model, pairing, measured, prior, say, settled):
     Diagnosis
         The pass kept, with a note and its ``peak_modes``.
     """
+    passes, last = _passes(first, one_pass, model, pairing, measured, prior, say, settled)
+    if len(passes) == 1:
+        return _first_kept(first, *last)
+    return _best_kept(passes, pairing, say)
+
+
+def _passes(first, one_pass, model, pairing, measured, prior, say, settled):
+    """The passes run, and the last check.
+
+    Returns ``[(diagnosis, assignment used, score, Reassignment)]`` and ``(label, change,
+    the fit's own assignment, the assignment used)`` of the last pass checked.
+    """
     f, s = np.asarray(measured.frequency_Hz), np.asarray(measured.sigma_Hz)
     current, used = first, full_modes(pairing, f.size)
     order = pairing.how == "order"  # the null (every peak its own mode) until set aside
-    passes = []  # (diagnosis, assignment used, score, what the check found)
+    passes = []
     while True:
         fit_, label, log_evidence = verdict_fit(current)
         s_pass = np.array(s)  # the deviations the pass fitted (widened by its mesh's error)
         s_pass[used >= 0] = current.sigma_Hz
         change, terms, best = check(model, fit_, label, used, f, s_pass, prior)
         passes.append((current, used, log_evidence + terms, change))
-        tried = [p[1] for p in passes]
         if order:  # checked: one pass unless set aside (see the module docstring)
             if not change.changed or best.keeps_order:
                 break
-            order, again = False, settled()
-            peaks = full_modes(again, f.size)
-            if np.array_equal(peaks, used):  # B settles the order: on as by likelihood
-                again, peaks = pairing_of(best, "likelihood"), best.modes
+            order = False
+            again, peaks = _set_aside(settled(), best, used, f.size)
             say(f"pairing by order set aside at {label}'s constants ({change.describe()}); "
                 "diagnosing again by likelihood")  # fmt: skip
-            current, used = one_pass(again), peaks
-            continue
-        if (not change.changed or len(passes) == MAX_PASSES
-                or any(np.array_equal(best.modes, t) for t in tried)):  # fmt: skip
-            break
-        say(f"assignment made again: {change.describe()}; diagnosing again with it")
-        current, used = one_pass(pairing_of(best, "likelihood")), best.modes
-    if len(passes) == 1:
-        note = (f"assignment made again at {label}'s constants: the most probable one is "
-                "the one used")  # fmt: skip
-        if change.changed:  # the order kept (one pass), its outliers named
-            which = ", ".join(str(i + 1) for i in best.spurious)
-            note = (f"assignment made again at {label}'s constants: it pairs no peak with "
-                    f"another mode than the order's (it would call peak(s) {which} spurious: "
-                    "outliers of this fit, kept)")  # fmt: skip
-        return replace(first, notes=[*first.notes, note], peak_modes=used)
+        else:
+            if (not change.changed or len(passes) == MAX_PASSES
+                    or any(np.array_equal(best.modes, p[1]) for p in passes)):  # fmt: skip
+                break
+            again, peaks = pairing_of(best, "likelihood"), best.modes
+            say(f"assignment made again: {change.describe()}; diagnosing again with it")
+        current, used = one_pass(again), peaks
+    return passes, (label, change, best, used)
+
+
+def _set_aside(settled, best, used, m):
+    """The next pass's pairing and peaks where the order is set aside.
+
+    B's (``settled``), unless B settles the order itself: then the verdict fit's own, as by
+    likelihood.
+    """
+    peaks = full_modes(settled, m)
+    if np.array_equal(peaks, used):  # B settles the order: on as by likelihood
+        return pairing_of(best, "likelihood"), best.modes
+    return settled, peaks
+
+
+def _first_kept(first, label, change, best, used):
+    """The one pass kept, with its note and its ``peak_modes``."""
+    note = (f"assignment made again at {label}'s constants: the most probable one is "
+            "the one used")  # fmt: skip
+    if change.changed:  # the order kept (one pass), its outliers named
+        which = ", ".join(str(i + 1) for i in best.spurious)
+        note = (f"assignment made again at {label}'s constants: it pairs no peak with "
+                f"another mode than the order's (it would call peak(s) {which} spurious: "
+                "outliers of this fit, kept)")  # fmt: skip
+    return replace(first, notes=[*first.notes, note], peak_modes=used)
+
+
+def _best_kept(passes, pairing, say):
+    """The pass of the highest ``ln p(all peaks | model, a)``, with a note of them all."""
     k = int(np.argmax([p[2] for p in passes]))
     kept, peaks = passes[k][0], passes[k][1]
     story = "; ".join(f"pass {i + 1} ({p[0].verdict}): ln p(all peaks) {p[2]:.1f}"

@@ -3,11 +3,11 @@
 A rough optimum ``z`` (found on a cheap model) is settled in rounds. Each round builds the
 fit's reduced model of the working mesh with a snapshot at the current point (``polish(z,
 basis)``: the finite-element plate solved there, its modes added to the basis of the rounds
-before, :func:`.pencil.candidate_pencil`). Such a pencil is exact at its snapshot: its
-eigenvalues are the finite-element ones and so are their first derivatives (Rayleigh
-quotients of vectors in the basis; :data:`.pencil.BASIS_TOL`). At the new point the round
-therefore knows the full model's residuals ``r`` and Jacobian ``J`` (of the whitened
-residuals, prior terms included), and with them the Newton decrement
+before, :func:`..physics.reduced_model.candidate_pencil`). Such a pencil is exact at its
+snapshot: its eigenvalues are the finite-element ones and so are their first derivatives
+(Rayleigh quotients of vectors in the basis; :data:`..physics.reduced_model.BASIS_TOL`). At
+the new point the round therefore knows the full model's residuals ``r`` and Jacobian ``J``
+(of the whitened residuals, prior terms included), and with them the Newton decrement
 
     delta = r^T J (J^T J)^-1 J^T r,
 
@@ -32,9 +32,9 @@ settled objective by more than :data:`FINISH_MARGIN` plus the largest promise er
 far (``|promise - settled|``) is kept as an alternative and not settled.
 
 Mirror images: a located effect whose images fit equally (the plate's symmetry, exact on its
-symmetric mesh: :meth:`~.base.Physics.mirror_images`) is settled at one canonical image, the
-one with the smallest parameters (in order: a mass's ``x`` then ``y``), so that the answer
-does not depend on which image a path reached.
+symmetric mesh: :meth:`~..physics.base.Physics.mirror_images`) is settled at one canonical
+image, the one with the smallest parameters (in order: a mass's ``x`` then ``y``), so that the
+answer does not depend on which image a path reached.
 """
 
 from __future__ import annotations
@@ -378,8 +378,8 @@ def _tight(problem, z, bounds=None):
 def canonical(problem, z):
     """The image of ``z`` with the smallest physics parameters (``z`` itself if it has none).
 
-    The images (:meth:`~.base.Physics.mirror_images`) are the plate's exact symmetries: they
-    fit exactly as well, so the choice needs no evaluation.
+    The images (:meth:`~..physics.base.Physics.mirror_images`) are the plate's exact
+    symmetries: they fit exactly as well, so the choice needs no evaluation.
     """
     if problem.physics is None:
         return np.asarray(z, dtype=float)

@@ -1,6 +1,6 @@
 """Where diagnose keeps its finished stages, so that a run killed half-way can resume.
 
-The store is an interface in the style of emcee's backends: :func:`.diagnose.diagnose`
+The store is an interface in the style of emcee's backends: :func:`..diagnose.diagnose`
 takes any object with ``get(key)`` (the value stored under ``key``, or None) and
 ``put(key, value)`` (``value``: plain picklable data), and never touches a disk itself.
 :class:`MemoryStore` is a dict; the on-disk one is the edge's
@@ -134,7 +134,7 @@ def digest(*parts):
 
 
 def fit_digest(fit):
-    """The part of a :class:`.fit.JointFit` later stages build on (its optimum and value)."""
+    """The part of a :class:`.joint_fit.JointFit` later stages build on (its optimum and value)."""
     return digest(fit.b, fit.theta, fit.chi2, fit.chi2_prior, fit.log_evidence, fit.refined,
                   [(b, v) for b, v in fit.alternatives])  # fmt: skip
 

@@ -1,6 +1,6 @@
 """The last steps of a joint fit on the working mesh: tight convergence, a canonical image.
 
-The fit reported by :func:`.fit.fit` must not depend on round-off. Two things made it do so:
+The fit reported by :func:`.joint_fit.fit` must not depend on round-off. Two things made it do so:
 a least-squares stop at relative changes of 1e-8 leaves a poorly informed constant wherever
 the path happened to stop (a whitened step of ``sqrt(2 ftol cost)``, 1e-4 and more), and a
 located effect whose mirror images fit equally (the plate's symmetry) was reported at
@@ -34,7 +34,7 @@ def finish(problem, res, max_nfev):
     Parameters
     ----------
     problem : JointProblem
-        On the working mesh (its physics' :meth:`~.base.Physics.mirror_images` are used).
+        On the working mesh (its physics' :meth:`~..physics.base.Physics.mirror_images` are used).
     res : scipy.optimize.OptimizeResult
         A least-squares result on ``problem`` (``x``: whitened unknowns, shape (6 + k,)).
     max_nfev : int

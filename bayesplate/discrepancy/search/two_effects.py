@@ -1,9 +1,10 @@
-"""Two effects at once: the pairs' stage of :func:`.diagnose.diagnose`.
+"""Two effects at once: the pairs' stage of a pass (:mod:`.refit`).
 
 It runs when the best single candidate's refit is rejected. The leading single candidates
 are taken in turn, best first (at most :data:`LEADERS` of distinct names): each is paired
-with every other candidate (:func:`.pair.pairs_with`), leaving out the pairs fitted already,
-and the pairs are ranked on the same evidence scale as the single ones (:func:`.rank.rank`).
+with every other candidate (:func:`..physics.combined.pairs_with`), leaving out the pairs
+fitted already, and the pairs are ranked on the same evidence scale as the single ones
+(:func:`.rank.rank`).
 A pair is chosen when it gains more than the threshold over the best single candidate; the
 turn ends there if its refit is not rejected. The next leader's turn is for a recording
 whose two effects the best single candidate does not stand for: a 1 g mass with a 3 degree
@@ -41,9 +42,8 @@ def two_effects(best, ranked, physics, fitting, threshold, alpha, m, leaders=Non
         Every single candidate, best first.
     physics : list of Physics
         The single candidates.
-    fitting : dict
-        What :func:`.rank.rank` takes besides the candidates: ``model``, ``level``, ``Y``,
-        ``sigma``, ``mu_b``, ``V_b``, ``modes``, ``nominal``, ``scans``, ``say``, ``stages``.
+    fitting : Fitting
+        What :func:`.rank.rank` takes besides the candidates (:class:`.state.Fitting`).
     threshold : float
         Evidence gain over the best single candidate for a pair to be chosen, nats.
     alpha : float
@@ -69,11 +69,11 @@ def two_effects(best, ranked, physics, fitting, threshold, alpha, m, leaders=Non
             continue
         names.append(leader.name)
         if len(names) > 1:
-            fitting["say"](f"no pair with {names[0]} explains: {leader.name} paired as well")
-        todo = [p for p in pairs_with(leader, physics, ranked, fitting["model"], fitting["scans"])
+            fitting.say(f"no pair with {names[0]} explains: {leader.name} paired as well")
+        todo = [p for p in pairs_with(leader, physics, ranked, fitting.model, fitting.scans)
                 if _key(p) not in done]  # fmt: skip
         done |= {_key(p) for p in todo}
-        fitted += rank(physics_list=todo, **fitting)
+        fitted += rank(fitting=fitting, physics_list=todo)
         top = max((c for c in fitted if c.fit.refined), default=None,
                   key=lambda c: c.log_evidence_gain)  # fmt: skip
         if top is not None and top.log_evidence_gain > best.log_evidence_gain + threshold:

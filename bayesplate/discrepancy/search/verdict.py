@@ -1,8 +1,8 @@
 """The checks of a fit and the verdict: predictive p-values, unidentified constants, basins.
 
-Step 1 and step 5 of :func:`.diagnose.diagnose`: what a fit's Laplace posterior says about
+Step 1 and step 5 of :func:`..diagnose.diagnose`: what a fit's Laplace posterior says about
 each measured mode and each constant, which other optima fit about as well, and the
-verdicts. Pure computation on :class:`.fit.JointFit` results.
+verdicts. Pure computation on :class:`.joint_fit.JointFit` results.
 """
 
 from __future__ import annotations

@@ -1,0 +1,88 @@
+"""One phase of the ranking (:func:`.rank.rank`) over the candidates: in parallel, stored.
+
+A phase computes each candidate's next fit from its earlier one, on forked workers
+(:func:`bayesplate.parallel.fork_map`), looking each up in the stages' store first
+(:mod:`.store`) and storing it as soon as it is fitted; a fit that meets a plate that
+cannot be solved keeps the candidate's earlier result, marked ``failed``.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import replace
+
+import numpy as np
+
+from ...parallel import fork_map
+from .store import fit_digest
+
+__all__ = ["run_phase"]
+
+log = logging.getLogger(__name__)
+
+
+def run_phase(stages, name, compute, items, results, hits, workers, say, then=None):
+    """One phase of :func:`.rank.rank`: ``compute((physics, earlier fit))`` for each item, stored.
+
+    ``items`` are ``(index, physics, earlier fit or None)``; each result goes to
+    ``results[index]`` (its ``fit.physics`` the very object given); the phase's name is
+    appended to ``hits[index]`` when it came from the store (each stage used is announced:
+    a rerun after an interruption shows what it took). A candidate whose fit meets a plate
+    that cannot be solved (a far reduced model's mass no longer positive definite, say)
+    keeps its earlier phase's result, marked ``failed`` (None for the first phase: the
+    candidate is left out), and the failure is said; nothing is stored for it.
+
+    ``then``, optional ``(name, compute, wanted)``: the next phase, which an item goes on
+    to in the same task when ``wanted(its result of this one)``. Its results are those of
+    the two phases run one after the other, where that next phase depends on a candidate's
+    own result only: a worker then need not wait for the others' first phase.
+    """
+    if not items:
+        return
+    steps = [(name, compute)] + ([tuple(then[:2])] if then is not None else [])
+
+    def key(name, physics, earlier):
+        return stages.key(name, physics, *(() if earlier is None else (fit_digest(earlier),)))
+
+    def step(name, compute, physics, earlier):
+        """``(result, taken from the store, why it failed or "")``."""
+        try:
+            if stages is None:
+                return compute((physics, earlier) if earlier is not None else physics), False, ""
+            found, value = stages.get(key(name, physics, earlier))
+            if not found:
+                value = compute((physics, earlier) if earlier is not None else physics)
+                stages.put(key(name, physics, earlier), value)
+        except np.linalg.LinAlgError as error:
+            log.warning("%s: %s fit failed: %s", physics.name, name, error)
+            return None, False, f"its {name} fit failed ({type(error).__name__}: {error})"
+        return value, found, ""
+
+    def task(item):
+        """The outcome of each phase the item went through (the first, maybe the next)."""
+        _, physics, earlier = item
+        done = [step(*steps[0], physics, earlier)]
+        value, _, failed = done[0]
+        if then is not None and not failed and then[2](value):
+            done.append(step(*steps[1], physics, replace(value.fit, physics=physics)))
+        return done
+
+    done = fork_map(task, items, workers)
+    for (i, physics, earlier), outcomes in zip(items, done, strict=True):
+        for n, ((name, _), (value, found, failed)) in enumerate(
+            zip(steps[: len(outcomes)], outcomes, strict=True)
+        ):
+            if failed:
+                failed += "; left out" if results[i] is None else "; the phase before kept"
+                say(f"{physics.name}{''.join(f' ({v})' for v in physics.settings().values())}"
+                    f": {failed}")  # fmt: skip
+                if results[i] is not None:
+                    results[i] = replace(results[i], failed=failed)
+                break
+            if n > 0:  # the next phase, built on the result of this one
+                earlier = results[i].fit
+            results[i] = replace(value, fit=replace(value.fit, physics=physics))
+            if found:
+                hits[i].append(name)
+            if stages is not None and workers > 1 and not found:  # a worker's put may not arrive
+                stages.put(key(name, physics, earlier), value)
