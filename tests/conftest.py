@@ -104,6 +104,16 @@ _CI_TIER = {
     "test_diagnose.py::test_concealed_point_mass_is_named_and_recovered": "130 s in CI",
     "test_diagnose.py::test_a_located_candidate_defined_outside_the_package_is_mapped_scanned_"
     "and_fitted": "81 s in CI",
+    "test_diagnose.py::test_control_without_effect_is_consistent": "a diagnosis (84 s); the "
+    "diagnose command in test_mesh_error, its stages in test_scan, test_verdict, test_two_effects",
+    "test_run_layer.py::test_the_posterior_is_the_same_through_the_three": "three samplers "
+    "(105 s); the estimate through the three stays in the quick run",
+    "test_verdict.py::test_a_constructed_tie_is_ambiguous_and_names_all": "a diagnosis (82 s); "
+    "the module's closed forms",
+    "test_batch.py::test_a_case_with_an_error_scale_gets_it_in_the_summary": "two estimates "
+    "(25 s); the batch's task in test_run_layer",
+    "test_inputs_posterior.py::test_cli_sample_shows_the_inputs": "a sampler (17 s); the sample "
+    "command in test_run_layer",
     "test_diagnose_reassign.py": "seven diagnoses (190 s in CI); test_sampling_assignment",
     "test_diagnose_store.py": "diagnoses stopped and resumed (157 s)",
     "test_error_scale.py::test_the_study_quick": "the study (41 s)",
