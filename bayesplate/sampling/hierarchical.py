@@ -22,7 +22,7 @@ plausible, 25 % unlikely), carried to ``ln tau``.
 The chain: the one-plate sampler's moves (:mod:`bayesplate.sampling.moves`: 80 % an
 independence Student-t proposal tuned on the ensemble, 20 % differential evolution) in
 coordinates whitened by the Laplace approximation of ``theta`` at its MAP, with its tuning
-rounds (:func:`~bayesplate.sampling.chain._tune`); the stretch move alone had
+rounds (:func:`~bayesplate.sampling.chain._tune`, longer ones); the stretch move alone had
 autocorrelation times of 110 steps, differential evolution 50-70, on ten synthetic plates (the
 density costs a few milliseconds for 48 walkers and 10 plates), stopped when it is longer than
 ``target_tau_factor`` autocorrelation times, and every population parameter has ``min_ess``
@@ -275,7 +275,12 @@ def _run(density, rng, n_walkers, max_steps, check_every, target_tau_factor, min
     sampler = emcee.EnsembleSampler(n_walkers, 12, density, moves=moves, vectorize=True)
     sampler.random_state = np.random.RandomState(int(rng.integers(2**32))).get_state()
     state = emcee.State(0.5 * rng.standard_normal((n_walkers, 12)))
-    state, n_tune = _tune(sampler, state, laplace, TUNE_ROUNDS, TUNE_STEPS, max_steps, None)
+    # tuned on a longer run than one plate's (4 x 240 steps, not 3 x 30): the population's
+    # ln tau is skewed, and a proposal fitted to a short run from the starting ball was
+    # accepted 13 % of the time (autocorrelation 115 steps, R-hat 1.016 after 8000 steps on
+    # ten synthetic plates); fitted to the longer run 23 % (19 steps, converged at 3460)
+    state, n_tune = _tune(sampler, state, laplace, TUNE_ROUNDS + 1, 8 * TUNE_STEPS, max_steps,
+                          None)  # fmt: skip
     burn, tau_max, ess, rhat, done = n_tune, np.inf, np.zeros(12), np.full(12, np.inf), False
     while sampler.iteration < max_steps and not done:
         state = sampler.run_mcmc(state, min(check_every, max_steps - sampler.iteration))
