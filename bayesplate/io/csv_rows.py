@@ -14,7 +14,7 @@ import numpy as np
 from .csv_table import csv_lines
 from .errors import CaseError
 
-__all__ = ["numeric_table", "read_csv_rows"]
+__all__ = ["check_columns", "check_width", "numeric_table", "read_csv_rows"]
 
 
 def read_csv_rows(path: str, min_rows: int = 8, lines=None) -> tuple[int, list[str], list]:
@@ -37,13 +37,30 @@ def read_csv_rows(path: str, min_rows: int = 8, lines=None) -> tuple[int, list[s
     return header_line, header, rows
 
 
+def check_columns(header_line: int, header: list[str], allowed=None, required=()) -> None:
+    """Refuse a header with a column not in `allowed` (None: any) or without one of `required`."""
+    for name in header if allowed is not None else ():
+        if name not in allowed:
+            rule = f"unknown column; allowed: {', '.join(allowed)}"
+            raise CaseError(f"line {header_line}, column {name}", name, rule)
+    for name in required:
+        if name not in header:
+            rule = f"required column is missing from the header ({', '.join(header)})"
+            raise CaseError(f"line {header_line}, column {name}", rule=rule)
+
+
+def check_width(number: int, cells: list[str], header: list[str]) -> None:
+    """Refuse a row (at line `number`) that has not one value per column of `header`."""
+    if len(cells) != len(header):
+        rule = f"must have {len(header)} comma-separated values ({', '.join(header)})"
+        raise CaseError(f"line {number}", ",".join(cells), rule)
+
+
 def numeric_table(header: list[str], rows) -> dict[str, np.ndarray]:
     """Columns of finite numbers by name; a bad row or cell raises a CaseError naming it."""
     values = np.empty((len(rows), len(header)))
     for i, (number, cells) in enumerate(rows):
-        if len(cells) != len(header):
-            rule = f"must have {len(header)} comma-separated values ({', '.join(header)})"
-            raise CaseError(f"line {number}", ",".join(cells), rule)
+        check_width(number, cells, header)
         for j, (name, cell) in enumerate(zip(header, cells, strict=True)):
             try:
                 value = float(cell)

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .csv_rows import numeric_table, read_csv_rows
+from .csv_rows import check_columns, numeric_table, read_csv_rows
 from .errors import CaseError
 from .points import read_points
 
@@ -191,9 +191,7 @@ def read_frf_csv(path, points=None) -> FRFData:
     path = os.fspath(path)
     try:
         header_line, header, rows = read_csv_rows(path)
-        if "frequency_Hz" not in header:
-            rule = f"required column is missing from the header ({', '.join(header)})"
-            raise CaseError(f"line {header_line}, column frequency_Hz", rule=rule)
+        check_columns(header_line, header, required=("frequency_Hz",))
         names = [name for name in header if name != "frequency_Hz"]
         for name in names:
             if not (name.startswith("H") and name.endswith(("_re", "_im")) and len(name) > 4):
@@ -201,10 +199,7 @@ def read_frf_csv(path, points=None) -> FRFData:
                 raise CaseError(f"line {header_line}, column {name}", name, rule)
         prefixes = list(dict.fromkeys(name.rsplit("_", 1)[0] for name in names))  # header order
         for point in prefixes:
-            for part in ("_re", "_im"):
-                if point + part not in header:
-                    rule = f"required column is missing from the header ({', '.join(header)})"
-                    raise CaseError(f"line {header_line}, column {point}{part}", rule=rule)
+            check_columns(header_line, header, required=(f"{point}_re", f"{point}_im"))
         if not prefixes:
             rule = "required: give Hk_re and Hk_im columns for at least one response point"
             raise CaseError(f"line {header_line}, column H1_re", rule=rule)

@@ -10,7 +10,7 @@ import os
 
 import numpy as np
 
-from .csv_rows import numeric_table, read_csv_rows
+from .csv_rows import check_columns, check_width, numeric_table, read_csv_rows
 from .errors import CaseError
 
 __all__ = ["read_points"]
@@ -43,19 +43,10 @@ def read_points(path) -> tuple[tuple[str, ...], np.ndarray]:
     path = os.fspath(path)
     try:
         header_line, header, rows = read_csv_rows(path, min_rows=1)
-        for name in header:
-            if name not in _POINT_COLUMNS:
-                rule = f"unknown column; allowed: {', '.join(_POINT_COLUMNS)}"
-                raise CaseError(f"line {header_line}, column {name}", name, rule)
-        for name in _POINT_COLUMNS:
-            if name not in header:
-                rule = f"required column is missing from the header ({', '.join(header)})"
-                raise CaseError(f"line {header_line}, column {name}", rule=rule)
+        check_columns(header_line, header, _POINT_COLUMNS, _POINT_COLUMNS)
         names = []
         for number, cells in rows:
-            if len(cells) != len(header):
-                rule = f"must have {len(header)} comma-separated values ({', '.join(header)})"
-                raise CaseError(f"line {number}", ",".join(cells), rule)
+            check_width(number, cells, header)
             name = cells[header.index("point")]
             if not name:
                 raise CaseError(f"line {number}, column point", rule="must name the point")

@@ -23,7 +23,7 @@ import os
 
 import numpy as np
 
-from .csv_rows import read_csv_rows
+from .csv_rows import check_columns, check_width, read_csv_rows
 from .errors import CaseError
 from .export import atomic_write_text, save_figure
 from .poles import Pole, PoleAnalysis
@@ -89,19 +89,10 @@ def read_poles(path) -> tuple[Pole, ...]:
 
 def _read_poles(path: str) -> tuple[Pole, ...]:
     header_line, header, rows = read_csv_rows(path, min_rows=0)
-    for name in header:
-        if name not in _COLUMNS:
-            rule = f"unknown column; allowed: {', '.join(_COLUMNS)}"
-            raise CaseError(f"line {header_line}, column {name}", name, rule)
-    for name in _COLUMNS[:3]:
-        if name not in header:
-            rule = f"required column is missing from the header ({', '.join(header)})"
-            raise CaseError(f"line {header_line}, column {name}", rule=rule)
+    check_columns(header_line, header, _COLUMNS, _COLUMNS[:3])
     kept = []
     for number, cells in rows:
-        if len(cells) != len(header):
-            rule = f"must have {len(header)} comma-separated values ({', '.join(header)})"
-            raise CaseError(f"line {number}", ",".join(cells), rule)
+        check_width(number, cells, header)
         row = dict(zip(header, cells, strict=True))
         keep = _KEEP.get(row["keep"].lower())
         if keep is None:
