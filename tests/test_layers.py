@@ -49,28 +49,31 @@ def _top(path):
     return path.relative_to(PACKAGE).parts[0].removesuffix(".py")
 
 
+def _imports(path, package=PACKAGE):
+    """Each name `path` imports anywhere in it (absolute or relative, lazy too), resolved.
+
+    One tuple a name, most specific first: ``from .chain import sample`` in
+    ``bayesplate/sampling/x.py`` gives ``("bayesplate.sampling.chain.sample",
+    "bayesplate.sampling.chain")`` (the name may be a submodule or a name in that module).
+    """
+    package_parts = ("bayesplate",) + path.relative_to(package).parent.parts
+    found = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            found += [(a.name,) for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                module = (node.module,) if node.module else ()
+                base = ".".join(package_parts[: len(package_parts) - node.level + 1] + module)
+            found += [(f"{base}.{a.name}", base) for a in node.names]
+    return found
+
+
 def _imported_rooms(path, package=PACKAGE):
     """Top-level rooms of bayesplate that `path` imports (absolute or relative)."""
-    tree = ast.parse(path.read_text())
-    package_parts = ("bayesplate",) + path.relative_to(package).parent.parts
-    rooms = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            names = [a.name for a in node.names]
-        elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = package_parts[: len(package_parts) - node.level + 1]
-                module = ".".join(base + ((node.module,) if node.module else ()))
-                names = [module] if node.module else [f"{module}.{a.name}" for a in node.names]
-            else:
-                names = [node.module or ""]
-        else:
-            continue
-        for name in names:
-            parts = name.split(".")
-            if parts[0] == "bayesplate" and len(parts) > 1:
-                rooms.add(parts[1])
-    return rooms
+    parts = (names[0].split(".") for names in _imports(path, package))
+    return {p[1] for p in parts if p[0] == "bayesplate" and len(p) > 1}
 
 
 def test_every_module_is_in_a_layer():
@@ -119,20 +122,7 @@ def _dotted(path, package=PACKAGE):
 def _imported_modules(path, known, package=PACKAGE):
     """Modules of `known` that `path` imports anywhere in it (a name of a package's
     ``from . import name`` counts as its submodule when there is one)."""
-    package_parts = ("bayesplate",) + path.relative_to(package).parent.parts
-    found = set()
-    for node in ast.walk(ast.parse(path.read_text())):
-        if isinstance(node, ast.Import):
-            wanted = [[a.name] for a in node.names]
-        elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:
-                base = ".".join(package_parts[: len(package_parts) - node.level + 1]
-                                + ((node.module,) if node.module else ()))  # fmt: skip
-            wanted = [[f"{base}.{a.name}", base] for a in node.names]
-        else:
-            continue
-        found |= {next((n for n in names if n in known), None) for names in wanted}
+    found = {next((n for n in names if n in known), None) for names in _imports(path, package)}
     return found - {None, _dotted(path, package)}
 
 
