@@ -6,6 +6,7 @@ from _studies import load_study
 
 from bayesplate import stiffness_from_engineering
 from bayesplate.discrepancy import PointMass, ThicknessTaper
+from bayesplate.quantities import CASE_SCALE
 
 MESH = (20, 8)
 
@@ -21,8 +22,7 @@ def plate(study):
     from bayesplate.model import PlateModel
 
     model = PlateModel.from_case(load_case(bundled_case_path(study.CASE)), mesh=MESH)
-    c = np.array(study.CONSTANTS_GPA) * np.array([1e9, 1e9, 1.0, 1e9, 1e9, 1e9])
-    return model, stiffness_from_engineering(c)
+    return model, stiffness_from_engineering(np.array(study.CONSTANTS_GPA) * CASE_SCALE)
 
 
 def test_a_small_mass_shifts_each_mode_as_first_order_perturbation_says(study, plate):
