@@ -32,9 +32,11 @@ from collections import Counter
 
 import pytest
 
+from bayesplate.report.pdf import find_browser
+
 PNG = b"\x89PNG\r\n\x1a\n"
 FIVE_MB = 5 * 1024 * 1024
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+CHROMIUM = find_browser()  # the one report --pdf would use
 
 
 # ------------------------------------------------------------------------------- the page

@@ -2,15 +2,14 @@
 
 import os
 import re
-import shutil
 import stat
 
 import pytest
 
 from bayesplate.cli import main
-from bayesplate.report.pdf import PdfError, print_pdf
+from bayesplate.report.pdf import PdfError, find_browser, print_pdf
 
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+CHROMIUM = find_browser()  # the one report --pdf would use
 PAGE = """<!doctype html><html><head><meta charset="utf-8"><title>t</title></head>
 <body><h1>Plate 1</h1><p>E1 = 144.9 GPa</p>{more}</body></html>"""
 
