@@ -314,7 +314,8 @@ def _settle(fits, mu_b, V_b, options, rounds=4):
     outlier too, whose likelihood the Gauss-Newton model then extrapolates to its own mode)
     is where its likelihood matters; a plate whose mean lies over :data:`REFINE_DISTANCE`
     of its own deviations (``H``'s metric) from its linearisation point is linearised again
-    there (one solve), up to `rounds` times.
+    there (one solve), up to `rounds` times. Returns the fits, the plates moved, and the
+    density whitened at the last round when no plate moved in it (else None: rebuild it).
     """
     moved = set()
     for _ in range(rounds):
@@ -328,12 +329,12 @@ def _settle(fits, mu_b, V_b, options, rounds=4):
             and (d := mean[p] - f.laplace.z0) @ f.laplace.H @ d > REFINE_DISTANCE**2
         ]
         if not far:
-            break
+            return fits, tuple(sorted(moved)), density
         from .plate_laplace import relinearise
 
         fits = [relinearise(f, mean[p]) if p in far else f for p, f in enumerate(fits)]
         moved.update(far)
-    return fits, tuple(sorted(moved))
+    return fits, tuple(sorted(moved)), None
 
 
 def sample_population(fits, mu_b, V_b, rng=None, n_walkers=48, max_steps=20000,
@@ -375,19 +376,15 @@ def sample_population(fits, mu_b, V_b, rng=None, n_walkers=48, max_steps=20000,
         max_rhat=max_rhat,
     )
     options = dict(tau_scale=tau_scale, outlier_prior=outlier_prior)  # fmt: skip
-    refined = ()
+    refined, density = (), None
     if refine:
-        fits, refined = _settle(fits, mu_b, V_b, options)
-    done = _sample_once([f.laplace for f in fits], mu_b, V_b, rng, chain, options)
+        fits, refined, density = _settle(fits, mu_b, V_b, options)
+    if density is None:  # not settled, or its last round moved a plate
+        laplaces = [f.laplace for f in fits]
+        density = PopulationDensity(laplaces, mu_b, V_b, **options)
+        density.whiten(_start(laplaces, mu_b))
+    done = (density, *_run(density, rng, **chain))
     return _result(fits, done, refined, time.perf_counter() - started, rng)
-
-
-def _sample_once(laplaces, mu_b, V_b, rng, chain, options):
-    """One chain: (density, plates' shrunk mean, sampler, burn, tau_max, ess, rhat, done)."""
-    density = PopulationDensity(laplaces, mu_b, V_b, **options)
-    density.whiten(_start(laplaces, mu_b))
-    sampler, burn, tau_max, ess, rhat, ok = _run(density, rng, **chain)
-    return density, None, sampler, burn, tau_max, ess, rhat, ok
 
 
 def _kept(density, sampler, burn):
@@ -400,7 +397,7 @@ def _kept(density, sampler, burn):
 def _result(fits, done, refined, wall, rng):
     from .population_draws import inference_data, plate_draws
 
-    density, _, sampler, burn, tau_max, ess, rhat, ok = done
+    density, sampler, burn, tau_max, ess, rhat, ok = done
     theta = _kept(density, sampler, burn)
     plates, resp = plate_draws(density, theta, rng)
     names = tuple(f.name for f in fits)
