@@ -277,7 +277,7 @@ def hierarchical_text(hier, timings=None):
     shrunk, own = to_case_units(hier.plate_mean), to_case_units(hier.own)
     for p, name in enumerate(hier.names):
         cells = " ".join(f"{shrunk[p, i]:#8.4g} ({own[p, i]:#8.4g})" for i in range(6))
-        flag = " OUTLIER" if hier.outlier[p] > 0.5 else ""
+        flag = " OUTLIER" if p in hier.flagged else ""
         which = ENGINEERING_KEYS[c] if (c := hier.outlier_constant[p]) < 6 else "all"
         note = f" ({which})" if flag else ""
         lines.append(f"{name[:12]:>12} {cells} {hier.outlier[p]:10.3f}{flag}{note}")

@@ -47,7 +47,7 @@ def population_figure(result, reference=None, title=None, fig=None):
         ax.errorbar(own, y + 0.18, xerr=half, fmt="o", color="0.55", capsize=2, ms=4)
         lo, hi = result.plate_hdi[0, :, j] * s, result.plate_hdi[1, :, j] * s
         mean = result.plate_mean[:, j] * s
-        out = result.outlier > 0.5
+        out = np.isin(np.arange(len(result.names)), result.flagged)
         for mask, color in ((~out, "C0"), (out, "C3")):
             ax.errorbar(mean[mask], y[mask] - 0.18,
                         xerr=[mean[mask] - lo[mask], hi[mask] - mean[mask]], fmt="s",
