@@ -79,12 +79,15 @@ def assignment_at(case, model, b, covariance_b, pairing):
     """
     b = np.asarray(b, dtype=float)
     extra = pairing.n_modes() - case.measured.size
-    again = pair_measured(case, model, b, "likelihood", extra_modes=extra,
-                          prior=(b, covariance_b), start=pairing)  # fmt: skip
+    again = pair_measured(
+        case, model, b, "likelihood", extra_modes=extra, prior=(b, covariance_b), start=pairing
+    )
     return again.assignment
 
 
 def refuted_order(assignment):
     """One clause: why pairing by order was set aside (1-based numbers)."""
-    return (f"pairing by order set aside: at its estimate the most probable assignment has "
-            f"{assignment.describe()}; paired by likelihood instead")  # fmt: skip
+    return (
+        f"pairing by order set aside: at its estimate the most probable assignment has "
+        f"{assignment.describe()}; paired by likelihood instead"
+    )

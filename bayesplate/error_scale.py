@@ -99,8 +99,9 @@ class ErrorScalePrior:
     def __post_init__(self):
         for name in ("median", "upper95"):
             value = getattr(self, name)
-            if not (isinstance(value, (int, float, np.floating)) and np.isfinite(value)
-                    and value > 0):  # fmt: skip
+            if not (
+                isinstance(value, (int, float, np.floating)) and np.isfinite(value) and value > 0
+            ):
                 raise ValueError(f"{name}: must be a positive number")
         if not MEDIAN_RANGE[0] <= self.median <= MEDIAN_RANGE[1]:
             low, high = MEDIAN_RANGE
@@ -142,8 +143,12 @@ def log_marginal(chi2, m, logdet_V, prior):
     float or numpy.ndarray
     """
     a, beta = prior.shape, prior.scale
-    const = (special.gammaln(a + m / 2) - special.gammaln(a) + a * np.log(beta)
-             - 0.5 * (m * np.log(2 * np.pi) + logdet_V))  # fmt: skip
+    const = (
+        special.gammaln(a + m / 2)
+        - special.gammaln(a)
+        + a * np.log(beta)
+        - 0.5 * (m * np.log(2 * np.pi) + logdet_V)
+    )
     return const - (a + m / 2) * np.log(beta + 0.5 * np.asarray(chi2))
 
 
@@ -179,8 +184,12 @@ def loo_pointwise(r, Q, prior):
     a1 = prior.shape + (m - 1) / 2
     b1 = prior.scale + 0.5 * (chi2 - e2)
     # Student-t: ln G(a1 + 1/2) - ln G(a1) - ln(2 pi b1 / q)/2 - (a1 + 1/2) ln(1 + e2/(2 b1))
-    return (special.gammaln(a1 + 0.5) - special.gammaln(a1) - 0.5 * np.log(2 * np.pi * b1 / q)
-            - (a1 + 0.5) * np.log1p(0.5 * e2 / b1))  # fmt: skip
+    return (
+        special.gammaln(a1 + 0.5)
+        - special.gammaln(a1)
+        - 0.5 * np.log(2 * np.pi * b1 / q)
+        - (a1 + 0.5) * np.log1p(0.5 * e2 / b1)
+    )
 
 
 def draw_scale(chi2, m, prior, rng):
@@ -232,8 +241,9 @@ def scale_from_draws(problem, samples_b, forward, rng=None, max_draws=4000):
     n = len(samples_b)
     rows = np.sort(rng.choice(n, max_draws, replace=False)) if n > max_draws else np.arange(n)
     n_modes, modes = problem.pairing.n_modes(), problem.pairing.modes
-    chi2 = np.array([problem.chi2(np.asarray(forward(b, n_modes).eigenvalues)[modes])
-                     for b in samples_b[rows]])  # fmt: skip
+    chi2 = np.array(
+        [problem.chi2(np.asarray(forward(b, n_modes).eigenvalues)[modes]) for b in samples_b[rows]]
+    )
     s = draw_scale(chi2, problem.m, problem.error_scale, rng)
     return summarise_scale(s, problem.error_scale), s
 
@@ -263,9 +273,11 @@ class ScaleSummary:
 
     def __str__(self):
         lo, hi = self.interval
-        return (f"error scale s: median {self.median:.3g}, 94 % interval [{lo:.3g}, {hi:.3g}] "
-                f"({self.source}; prior median {self.prior.median:g}, upper 95 % "
-                f"{self.prior.upper95:g})")  # fmt: skip
+        return (
+            f"error scale s: median {self.median:.3g}, 94 % interval [{lo:.3g}, {hi:.3g}] "
+            f"({self.source}; prior median {self.prior.median:g}, upper 95 % "
+            f"{self.prior.upper95:g})"
+        )
 
 
 def summarise_scale(s, prior, source="draws"):
@@ -391,5 +403,3 @@ def linearised_at(problem, b, covariance_b=None):
         w, U = np.linalg.eigh(0.5 * (W + W.T))
         W = (U * np.maximum(w, 0.0)) @ U.T
     return linearised_scale(S, r, problem.V_Y, W, problem.error_scale)
-
-

@@ -110,18 +110,25 @@ def input_sources(plate):
     rho = plate.density
     h, a, b = plate.thickness, plate.length, plate.width
     sd[1] = plate.mass_sd
-    D = np.array([  # d (h, rho, a, b) / d (h, m, a, b)
-        [1.0, 0.0, 0.0, 0.0],
-        [-rho / h, rho / plate.mass, -rho / a, -rho / b],
-        [0.0, 0.0, 1.0, 0.0],
-        [0.0, 0.0, 0.0, 1.0],
-    ])  # fmt: skip
+    D = np.array(
+        [  # d (h, rho, a, b) / d (h, m, a, b)
+            [1.0, 0.0, 0.0, 0.0],
+            [-rho / h, rho / plate.mass, -rho / a, -rho / b],
+            [0.0, 0.0, 1.0, 0.0],
+            [0.0, 0.0, 0.0, 1.0],
+        ]
+    )
     return ("thickness", "mass", "length", "width"), D * sd[None, :]
 
 
 #: Each reading's multiplier from SI to case units and the unit (the case keys' units).
-READING_UNITS = {"thickness": (1e3, "mm"), "length": (1e3, "mm"), "width": (1e3, "mm"),
-                 "density": (1.0, "kg/m^3"), "mass": (1e3, "g")}  # fmt: skip
+READING_UNITS = {
+    "thickness": (1e3, "mm"),
+    "length": (1e3, "mm"),
+    "width": (1e3, "mm"),
+    "density": (1.0, "kg/m^3"),
+    "mass": (1e3, "g"),
+}
 
 
 def describe_inputs(plate) -> str:
@@ -130,8 +137,11 @@ def describe_inputs(plate) -> str:
     sd = input_sd(plate)
     if plate.mass is not None:
         sd[1] = plate.mass_sd
-    parts = [f"{name} {value * READING_UNITS[name][0]:.3g} {READING_UNITS[name][1]}"
-             for name, value in zip(names, sd, strict=True) if value > 0]  # fmt: skip
+    parts = [
+        f"{name} {value * READING_UNITS[name][0]:.3g} {READING_UNITS[name][1]}"
+        for name, value in zip(names, sd, strict=True)
+        if value > 0
+    ]
     return ", ".join(parts) or "none"
 
 
@@ -360,5 +370,3 @@ def variance_budget(P, S, V_Y, V_b, J_p, sd_p, b, method="B", names=INPUT_NAMES)
     if status != "ok" and closure <= APPROXIMATE_TOL:
         status = "approximate"
     return VarianceBudget(method, sources, variance, covariance, cov_e, closure, status)
-
-

@@ -100,16 +100,30 @@ class PlateModel:
     def from_case(cls, case, mesh=None, **kwargs):
         """Model of a :class:`bayesplate.io.Case`, on ``mesh`` or the case's own mesh."""
         p = case.plate
-        return cls(p.length, p.width, p.thickness, p.density, p.layup_deg, p.ply_thickness,
-                   mesh=mesh or case.mesh or DEFAULT_MESH, **kwargs)  # fmt: skip
+        return cls(
+            p.length,
+            p.width,
+            p.thickness,
+            p.density,
+            p.layup_deg,
+            p.ply_thickness,
+            mesh=mesh or case.mesh or DEFAULT_MESH,
+            **kwargs,
+        )
 
     def on_mesh(self, mesh):
         """The same plate (geometry, layup, density, boundary, element) on ``mesh``, (nx, ny)."""
         return type(self)(
-            self.mesh.a, self.mesh.b, self.thickness, self.density, self.layup_deg,
-            self.ply_thickness, mesh=mesh, boundary=self.boundary,
+            self.mesh.a,
+            self.mesh.b,
+            self.thickness,
+            self.density,
+            self.layup_deg,
+            self.ply_thickness,
+            mesh=mesh,
+            boundary=self.boundary,
             shear_order=self.element.shear_order,
-        )  # fmt: skip
+        )
 
     def laminate(self, b, thickness_scale=1.0, angle_offset_deg=0.0):
         """Laminate integrals of eqs. 24-25 for stiffness coefficients ``b``.
@@ -258,9 +272,12 @@ class PlateModel:
         :func:`bayesplate.plate_bounds.lowest_eigenvalue_bound` of this plate.
         """
         return plate_bounds.lowest_eigenvalue_bound(
-            self.laminate(b), laminate.inertias(self.density, self.ply_thickness)[0],
-            self.mesh.a, self.mesh.b, self.boundary,
-        )  # fmt: skip
+            self.laminate(b),
+            laminate.inertias(self.density, self.ply_thickness)[0],
+            self.mesh.a,
+            self.mesh.b,
+            self.boundary,
+        )
 
     def solve(self, b, n_modes=14, method="block"):
         """Lowest ``n_modes`` elastic modes and their sensitivities.

@@ -73,8 +73,9 @@ def die_with_parent(parent=None, *, watch=False):
             return
     if os.getppid() != parent:
         os._exit(1)
-    threading.Thread(target=_watch_parent, args=(parent,), name="bayesplate-parent-watch",
-                     daemon=True).start()  # fmt: skip
+    threading.Thread(
+        target=_watch_parent, args=(parent,), name="bayesplate-parent-watch", daemon=True
+    ).start()
 
 
 def _watch_parent(parent):
@@ -84,8 +85,9 @@ def _watch_parent(parent):
 
 
 #: Signals held (blocked) from before a fork until the child has set its own handling.
-_HELD = frozenset(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP")
-                  if hasattr(signal, name))  # fmt: skip
+_HELD = frozenset(
+    getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name)
+)
 
 
 class _signals_held:
@@ -203,8 +205,12 @@ def fork_map(function, items, workers=1):
     global _TASK
     items = list(items)
     n = min(int(workers), len(items))
-    serial = (n <= 1 or "fork" not in multiprocessing.get_all_start_methods()
-              or _TASK is not None or multiprocessing.current_process().daemon)  # fmt: skip
+    serial = (
+        n <= 1
+        or "fork" not in multiprocessing.get_all_start_methods()
+        or _TASK is not None
+        or multiprocessing.current_process().daemon
+    )
     if serial:
         # nested maps run serially, as do maps inside a daemonic process (a Dask worker's
         # task: it may not have children); at one BLAS thread, as the workers: the results
@@ -282,8 +288,9 @@ class Forked:
             ok, value = self._receive.recv()  # before join: a large result fills the pipe
         except EOFError:
             self._process.join()
-            raise RuntimeError(f"the forked process ended without a result "
-                               f"(exit code {self._process.exitcode})") from None  # fmt: skip
+            raise RuntimeError(
+                f"the forked process ended without a result (exit code {self._process.exitcode})"
+            ) from None
         finally:
             self._close()
         self._process.join()

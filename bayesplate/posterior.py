@@ -182,8 +182,7 @@ class GaussianProblem:
         Wall time spent in them.
     """
 
-    def __init__(self, Y, V_Y, mu_b, V_b, forward: Callable, pairing: Pairing,
-                 error_scale=None):  # fmt: skip
+    def __init__(self, Y, V_Y, mu_b, V_b, forward: Callable, pairing: Pairing, error_scale=None):
         self.error_scale = error_scale
         self.Y = np.asarray(Y, dtype=float)
         self.V_Y = np.asarray(V_Y, dtype=float)
@@ -269,23 +268,25 @@ class GaussianProblem:
 
     def with_prior(self, mu_b, V_b):
         """The same data and forward model with another prior on ``b``."""
-        return type(self)(self.Y, self.V_Y, mu_b, V_b, self.forward, self.pairing,
-                          self.error_scale)  # fmt: skip
+        return type(self)(self.Y, self.V_Y, mu_b, V_b, self.forward, self.pairing, self.error_scale)
 
     def with_forward(self, forward):
         """The same data and prior on another forward model, ``forward(b, n_modes)``."""
-        return type(self)(self.Y, self.V_Y, self.mu_b, self.V_b, forward, self.pairing,
-                          self.error_scale)  # fmt: skip
+        return type(self)(
+            self.Y, self.V_Y, self.mu_b, self.V_b, forward, self.pairing, self.error_scale
+        )
 
     def with_observation_covariance(self, V_Y):
         """The same problem with another declared ``V_Y`` (e.g. the inputs marginalised)."""
-        return type(self)(self.Y, V_Y, self.mu_b, self.V_b, self.forward, self.pairing,
-                          self.error_scale)  # fmt: skip
+        return type(self)(
+            self.Y, V_Y, self.mu_b, self.V_b, self.forward, self.pairing, self.error_scale
+        )
 
     def with_error_scale(self, error_scale):
         """The same problem with another error-scale prior (None: ``s = 1``)."""
-        return type(self)(self.Y, self.V_Y, self.mu_b, self.V_b, self.forward, self.pairing,
-                          error_scale)  # fmt: skip
+        return type(self)(
+            self.Y, self.V_Y, self.mu_b, self.V_b, self.forward, self.pairing, error_scale
+        )
 
     def chi2(self, g):
         """``r^T V_Y^-1 r`` with the declared ``V_Y`` at paired model eigenvalues `g`, (m,)."""

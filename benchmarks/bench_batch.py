@@ -56,11 +56,16 @@ def one_run(cases, n_workers, options):
 
     t0 = time.perf_counter()
     with (
-        LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
-                     dashboard_address=None, env=_ONE_THREAD) as cluster,
+        LocalCluster(
+            n_workers=n_workers,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            env=_ONE_THREAD,
+        ) as cluster,
         Client(cluster) as client,
         tempfile.TemporaryDirectory(prefix="bench-batch-") as out,
-    ):  # fmt: skip
+    ):
         client.wait_for_workers(n_workers)
         t1 = time.perf_counter()
         lines = []
@@ -89,8 +94,10 @@ def _stamp(line):
 
 def _shipped(cases, options, out):
     """Largest pickled task arguments and result, bytes."""
-    args = max(len(pickle.dumps(("x", str(p), p.read_bytes(), "estimate",
-                                 options.for_step("estimate")))) for p in cases)  # fmt: skip
+    args = max(
+        len(pickle.dumps(("x", str(p), p.read_bytes(), "estimate", options.for_step("estimate"))))
+        for p in cases
+    )
     import json
 
     back = 0
@@ -130,11 +137,21 @@ def run_benchmark(runs, copies, mesh):
             for n in (1, 2):
                 results[n].append(one_run(cases, n, options))
                 r = results[n][-1]
-                print(f"run {i + 1}, {n} worker(s): start {r['start']:.1f} s, "
-                      f"tasks {r['batch']:.1f} s", flush=True)  # fmt: skip
+                print(
+                    f"run {i + 1}, {n} worker(s): start {r['start']:.1f} s, "
+                    f"tasks {r['batch']:.1f} s",
+                    flush=True,
+                )
         load.append(os.getloadavg())
-    return {"results": results, "load": load, "n_cases": len(cases), "runs": runs,
-            "copies": copies, "mesh": mesh, "build": model_build(tuple(mesh))}  # fmt: skip
+    return {
+        "results": results,
+        "load": load,
+        "n_cases": len(cases),
+        "runs": runs,
+        "copies": copies,
+        "mesh": mesh,
+        "build": model_build(tuple(mesh)),
+    }
 
 
 def write_report(bench, info, out_dir):

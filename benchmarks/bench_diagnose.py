@@ -72,18 +72,35 @@ def one(index, workers, quick=False, mesh=None, frequencies=None):
     seconds, cpu = time.perf_counter() - start, _cpu() - cpu
     chosen = None
     if d.chosen is not None:
-        chosen = d.chosen.name + "".join(f" ({v})" for v in d.chosen.parameters.values()
-                                         if isinstance(v, str))  # fmt: skip
+        chosen = d.chosen.name + "".join(
+            f" ({v})" for v in d.chosen.parameters.values() if isinstance(v, str)
+        )
     refined = sum(c.fit.refined for c in d.candidates)
-    best_pair = max((c for c in d.candidates if "+" in c.name), default=None,
-                    key=lambda c: c.log_evidence_gain)  # fmt: skip
-    print(json.dumps({"index": index, "effect": label, "size": size, "seconds": seconds,
-                      "cpu": cpu, "verdict": d.verdict, "chosen": chosen,
-                      "p_value": d.p_value, "refined": refined, "mesh": list(mesh),
-                      "frequencies": int(f.size), "workers": workers,
-                      "load": [load, os.getloadavg()[0]],
-                      "best_pair": None if best_pair is None else
-                      [best_pair.name, best_pair.log_evidence_gain]}))  # fmt: skip
+    best_pair = max(
+        (c for c in d.candidates if "+" in c.name), default=None, key=lambda c: c.log_evidence_gain
+    )
+    print(
+        json.dumps(
+            {
+                "index": index,
+                "effect": label,
+                "size": size,
+                "seconds": seconds,
+                "cpu": cpu,
+                "verdict": d.verdict,
+                "chosen": chosen,
+                "p_value": d.p_value,
+                "refined": refined,
+                "mesh": list(mesh),
+                "frequencies": int(f.size),
+                "workers": workers,
+                "load": [load, os.getloadavg()[0]],
+                "best_pair": None
+                if best_pair is None
+                else [best_pair.name, best_pair.log_evidence_gain],
+            }
+        )
+    )
 
 
 def _label(tree):
@@ -106,12 +123,18 @@ def _cpu():
 def run(index, tree, workers, quick=False, mesh=None, frequencies=None):
     """Scenario ``index`` in a fresh process on the code of ``tree``; its result dict."""
     env = {**os.environ, "PYTHONPATH": str(tree)}
-    command = [sys.executable, __file__, "--one", str(index), "--workers", str(workers),
-               *(["--quick"] if quick else []),
-               *(["--mesh", f"{mesh[0]}x{mesh[1]}"] if mesh else []),
-               *(["--frequencies", str(frequencies)] if frequencies else [])]  # fmt: skip
-    out = subprocess.run(command, env=env, check=True, capture_output=True,
-                         text=True).stdout  # fmt: skip
+    command = [
+        sys.executable,
+        __file__,
+        "--one",
+        str(index),
+        "--workers",
+        str(workers),
+        *(["--quick"] if quick else []),
+        *(["--mesh", f"{mesh[0]}x{mesh[1]}"] if mesh else []),
+        *(["--frequencies", str(frequencies)] if frequencies else []),
+    ]
+    out = subprocess.run(command, env=env, check=True, capture_output=True, text=True).stdout
     return json.loads(out.strip().splitlines()[-1])
 
 
@@ -143,9 +166,12 @@ def write_report(rows, base_rows, info, out_dir, base_label, started):
         b = base.get(r["index"])
         cells = ["-"] * 4
         if b is not None:
-            cells = [f"{b['seconds']:.0f}", f"{b['cpu']:.0f}",
-                     f"{b['verdict']} {b['chosen'] or ''}".strip(),
-                     f"{b['seconds'] / r['seconds']:.1f}x"]  # fmt: skip
+            cells = [
+                f"{b['seconds']:.0f}",
+                f"{b['cpu']:.0f}",
+                f"{b['verdict']} {b['chosen'] or ''}".strip(),
+                f"{b['seconds'] / r['seconds']:.1f}x",
+            ]
         lines.append(
             f"| {r['index']} | {r['effect']} | {r['size']} | {r['verdict']} | "
             f"{r['chosen'] or '-'} | {r['refined']} | {r['seconds']:.0f} | {r['cpu']:.0f} | "
@@ -154,9 +180,12 @@ def write_report(rows, base_rows, info, out_dir, base_label, started):
     pairs = [(base[r["index"]]["seconds"], r["seconds"]) for r in rows if r["index"] in base]
     if pairs:
         ratios = [b / n for b, n in pairs]
-        lines += ["", f"Base ({base_label}) / now, wall time on the same recordings in this run: "
-                  + ", ".join(f"{x:.1f}x" for x in ratios)
-                  + f" (median {statistics.median(ratios):.1f}x)."]  # fmt: skip
+        lines += [
+            "",
+            f"Base ({base_label}) / now, wall time on the same recordings in this run: "
+            + ", ".join(f"{x:.1f}x" for x in ratios)
+            + f" (median {statistics.median(ratios):.1f}x).",
+        ]
     return _machine.write_report(out_dir, REPORT, [*lines, ""])
 
 
@@ -183,17 +212,22 @@ def write_scaling(scaling, info, out_dir, started):
     ]
     for r in scaling:
         nx, ny = r["mesh"]
-        lines.append(f"| {nx} x {ny} | {r['frequencies']} | {8 * (nx + 1) * (ny + 1)} | "
-                     f"{r['seconds']:.0f} | {r['cpu']:.0f} | {r['load'][0]:.1f} / "
-                     f"{r['load'][1]:.1f} | {r['verdict']} {r['chosen'] or ''} | "
-                     f"{r['refined']} |")  # fmt: skip
+        lines.append(
+            f"| {nx} x {ny} | {r['frequencies']} | {8 * (nx + 1) * (ny + 1)} | "
+            f"{r['seconds']:.0f} | {r['cpu']:.0f} | {r['load'][0]:.1f} / "
+            f"{r['load'][1]:.1f} | {r['verdict']} {r['chosen'] or ''} | "
+            f"{r['refined']} |"
+        )
     by_mesh = [r for r in scaling if r["frequencies"] == 14]
     if len(by_mesh) >= 2:
         n = np.log([8 * (r["mesh"][0] + 1) * (r["mesh"][1] + 1) for r in by_mesh])
         t = np.log([r["seconds"] for r in by_mesh])
         slope = np.polyfit(n, t, 1)[0]
-        lines += ["", f"Wall time against unknowns at 14 frequencies: slope {slope:.2f} on "
-                  "log-log axes (a least-squares fit over the meshes above)."]  # fmt: skip
+        lines += [
+            "",
+            f"Wall time against unknowns at 14 frequencies: slope {slope:.2f} on "
+            "log-log axes (a least-squares fit over the meshes above).",
+        ]
     return _machine.write_report(out_dir, SCALING_REPORT, [*lines, ""])
 
 
@@ -219,19 +253,23 @@ def write_pairs(rows, info, out_dir, base_label, started):
     for r in rows:
         best = r["best_pair"]
         pair = "-" if best is None else f"{best[0]} ({best[1]:+.1f})"
-        lines.append(f"| {r['code']} | {r['seconds']:.0f} | {r['cpu']:.0f} | "
-                     f"{r['load'][0]:.1f} / {r['load'][1]:.1f} | "
-                     f"{r['verdict']} {r['chosen'] or ''} | {pair} |")  # fmt: skip
+        lines.append(
+            f"| {r['code']} | {r['seconds']:.0f} | {r['cpu']:.0f} | "
+            f"{r['load'][0]:.1f} / {r['load'][1]:.1f} | "
+            f"{r['verdict']} {r['chosen'] or ''} | {pair} |"
+        )
     now = [r["seconds"] for r in rows if r["code"].startswith("this")]
     then = [r["seconds"] for r in rows if not r["code"].startswith("this")]
     if now and then:
-        lines += ["", f"Base ({base_label}) / this code, median wall times in this run: "
-                  f"{statistics.median(then) / statistics.median(now):.1f}x."]  # fmt: skip
+        lines += [
+            "",
+            f"Base ({base_label}) / this code, median wall times in this run: "
+            f"{statistics.median(then) / statistics.median(now):.1f}x.",
+        ]
     return _machine.write_report(out_dir, PAIRS_REPORT, [*lines, ""])
 
 
-def main(out_dir, runs, workers, base=None, base_runs=(), quick=False, scaling=False,
-         pairs=0):  # fmt: skip
+def main(out_dir, runs, workers, base=None, base_runs=(), quick=False, scaling=False, pairs=0):
     started = _machine.utc_now()
     rows, base_rows, scale_rows = [], [], []
     info = _machine.machine()
@@ -245,8 +283,9 @@ def main(out_dir, runs, workers, base=None, base_runs=(), quick=False, scaling=F
     if scaling:
         for mesh in SCALING_MESHES:
             for frequencies in SCALING_FREQUENCIES if mesh == SCALING_MESHES[-1] else (14,):
-                scale_rows.append(run(SCALING_RUN, ROOT, workers, mesh=mesh,
-                                      frequencies=frequencies))  # fmt: skip
+                scale_rows.append(
+                    run(SCALING_RUN, ROOT, workers, mesh=mesh, frequencies=frequencies)
+                )
                 print("scaling", json.dumps(scale_rows[-1]), flush=True)
                 write_scaling(scale_rows, info, out_dir, started)
     pair_rows = []
@@ -269,8 +308,13 @@ if __name__ == "__main__":
     parser.add_argument("--base", help="another checkout to compare with")
     parser.add_argument("--base-runs", type=int, nargs="*", default=[0, 2])
     parser.add_argument("--scaling", action="store_true", help="the mesh and frequency rows")
-    parser.add_argument("--pairs", type=int, default=0, metavar="N",
-                        help="the two-effect recording N times (with --base: in turn)")
+    parser.add_argument(
+        "--pairs",
+        type=int,
+        default=0,
+        metavar="N",
+        help="the two-effect recording N times (with --base: in turn)",
+    )
     parser.add_argument("--out", default=ROOT / "reports")
     parser.add_argument("--quick", action="store_true", help="12 x 6 mesh: a regression run")
     args = parser.parse_args()
@@ -282,5 +326,13 @@ if __name__ == "__main__":
         from concealment import scenarios
 
         runs = args.runs if args.runs is not None else list(range(len(scenarios())))
-        main(args.out, runs, args.workers, args.base, args.base_runs, args.quick,
-             args.scaling, args.pairs)  # fmt: skip
+        main(
+            args.out,
+            runs,
+            args.workers,
+            args.base,
+            args.base_runs,
+            args.quick,
+            args.scaling,
+            args.pairs,
+        )

@@ -46,9 +46,15 @@ def one(argv, cwd, kill_after=None):
     """(exit status, wall s, processor s, stdout) of one command, interrupted on request."""
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     cpu, start = _cpu(), time.perf_counter()
-    proc = subprocess.Popen(argv, cwd=cwd, env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.DEVNULL, text=True,
-                            preexec_fn=_default_sigint)  # fmt: skip
+    proc = subprocess.Popen(
+        argv,
+        cwd=cwd,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+        preexec_fn=_default_sigint,
+    )
     if kill_after is not None:
         try:
             proc.wait(timeout=kill_after)
@@ -59,8 +65,21 @@ def one(argv, cwd, kill_after=None):
 
 
 def main(case, mesh, at, out_dir):
-    base = [sys.executable, "-m", "bayesplate.cli", "diagnose", case, "--mesh", *map(str, mesh),
-            "--seed", "1", "--workers", "2", "--json", "out.json"]  # fmt: skip
+    base = [
+        sys.executable,
+        "-m",
+        "bayesplate.cli",
+        "diagnose",
+        case,
+        "--mesh",
+        *map(str, mesh),
+        "--seed",
+        "1",
+        "--workers",
+        "2",
+        "--json",
+        "out.json",
+    ]
     load = [os.getloadavg()]
     with tempfile.TemporaryDirectory(prefix="bench-resume-") as tmp:
         tmp = pathlib.Path(tmp)
@@ -103,11 +122,16 @@ def main(case, mesh, at, out_dir):
         "",
         f"Processor time saved by the store: {saved:.1f} s of {cpu_full:.1f} s "
         f"({saved / cpu_full:.0%}); the run again's JSON document is "
-        + ("identical to the uninterrupted one, byte for byte." if same else
-           "the same in its numbers." if same_numbers else "DIFFERENT from the uninterrupted one.")
+        + (
+            "identical to the uninterrupted one, byte for byte."
+            if same
+            else "the same in its numbers."
+            if same_numbers
+            else "DIFFERENT from the uninterrupted one."
+        )
         + " Startup (imports, the case, the pairing, the mesh check, the maps and scans) is "
         "not stored and is paid again.",
-    ]  # fmt: skip
+    ]
     path = pathlib.Path(out_dir) / REPORT
     path.write_text("\n".join(lines) + "\n")
     print("\n".join(lines))

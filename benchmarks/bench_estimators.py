@@ -68,17 +68,31 @@ def measure_case(name, runs, n_measured=None):
             (result, _), t = _timed(estimate_on_fast, case, method, model, fast)
             times.append(t)
         diff = float(np.max(np.abs(result.constants / full.constants - 1.0)))
-        rows.append({
-            "method": method, "iterations": (result.iterations, full.iterations),
-            "status": (result.status, full.status), "full_s": t_full,
-            "fast_s": statistics.median(times), "fast_all": times,
-            "full_solves": full.n_solves, "check_solves": result.check.n_full_solves,
-            "diff": diff, "check": result.check.max_rel_error,
-        })  # fmt: skip
+        rows.append(
+            {
+                "method": method,
+                "iterations": (result.iterations, full.iterations),
+                "status": (result.status, full.status),
+                "full_s": t_full,
+                "fast_s": statistics.median(times),
+                "fast_all": times,
+                "full_solves": full.n_solves,
+                "check_solves": result.check.n_full_solves,
+                "diff": diff,
+                "check": result.check.max_rel_error,
+            }
+        )
         print(f"{name} {method}: full {t_full:.1f} s, fast {rows[-1]['fast_s']:.2f} s", flush=True)
-    return {"case": name, "m": case.measured.size, "mesh": (model.mesh.nx, model.mesh.ny),
-            "dofs": model.mesh.n_dofs, "build_s": build, "build_solves": fast.build_solves,
-            "basis": fast.reduced.size, "rows": rows}  # fmt: skip
+    return {
+        "case": name,
+        "m": case.measured.size,
+        "mesh": (model.mesh.nx, model.mesh.ny),
+        "dofs": model.mesh.n_dofs,
+        "build_s": build,
+        "build_solves": fast.build_solves,
+        "basis": fast.reduced.size,
+        "rows": rows,
+    }
 
 
 def markdown(results, runs, load):

@@ -113,8 +113,11 @@ def compare(model, b, n_modes, runs, paths=("old", "new", "split")):
         for name in paths:
             outs[name], wall, cpu = _time(solvers[name], model, b, n_modes)
             times[name].append((wall, cpu))
-    row = {f"{name}_{k}": float(np.median([t[i] for t in times[name]])) for name in paths
-           for i, k in enumerate(("wall", "cpu"))}  # fmt: skip
+    row = {
+        f"{name}_{k}": float(np.median([t[i] for t in times[name]]))
+        for name in paths
+        for i, k in enumerate(("wall", "cpu"))
+    }
     if "old" in paths:
         lo, vo, _ = outs["old"]
         diffs, overlaps = [], []

@@ -70,8 +70,11 @@ def run_benchmark(runs, case, mesh):
             results[n].append(one_run(case, mesh, workers, threads))
             r = results[n][-1]
             r["load_after"] = os.getloadavg()[0]
-            print(f"run {i + 1}, workers={n}: {r['seconds']:.1f} s, {r['verdict']} "
-                  f"{r['chosen']}, load {os.getloadavg()[0]:.2f}", flush=True)  # fmt: skip
+            print(
+                f"run {i + 1}, workers={n}: {r['seconds']:.1f} s, {r['verdict']} "
+                f"{r['chosen']}, load {os.getloadavg()[0]:.2f}",
+                flush=True,
+            )
     load.append(os.getloadavg())
     return {"results": results, "load": load, "runs": runs, "case": case, "mesh": mesh}
 

@@ -68,8 +68,9 @@ def run_frederiksen():
     load.append(os.getloadavg()[0])
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        result = sample(case, rng=SEED, setup=setup, progress=False, min_ess=MIN_ESS,
-                        max_rhat=MAX_RHAT)  # fmt: skip
+        result = sample(
+            case, rng=SEED, setup=setup, progress=False, min_ess=MIN_ESS, max_rhat=MAX_RHAT
+        )
     total_wall, total_cpu = time.perf_counter() - wall, time.process_time() - cpu
     load.append(os.getloadavg()[0])
     draws = result.samples_b[np.linspace(0, len(result.samples_b) - 1, N_FULL + 50).astype(int)]
@@ -116,8 +117,9 @@ def agreement(setup, result):
 
     est = setup.estimate
     problem = setup.problem_on_fast_model()
-    H = engineering_covariance(engineering_from_stiffness(est.b),
-                               curvature_covariance(problem, est.b, est.covariance_b))  # fmt: skip
+    H = engineering_covariance(
+        engineering_from_stiffness(est.b), curvature_covariance(problem, est.b, est.covariance_b)
+    )
     a = covariance_agreement(result, est.covariance)
     a["sd_hessian"] = np.sqrt(np.diag(H))
     a["linearisation"] = linearisation_band(problem, est.b, est.covariance_b)
@@ -152,22 +154,46 @@ def _agreement_lines(title, setup, result, a):
     for i, name in enumerate(NAMES):
         s = TO_CASE[i]
         verdict = "agrees" if a["agrees_with_lin"][i] else "**disagrees**"
-        rows.append([
-            f"{name} ({UNITS[i]})", f"{est.constants[i] * s:#.4g}", f"{result.mean[i] * s:#.4g}",
-            f"{a['mean_shift'][i]:+.2f}", f"{a['sd_linear'][i] * s:#.3g}",
-            f"{a['sd_sampled'][i] * s:#.3g}", f"{a['ratio'][i]:.3f}",
-            f"{a['sd_hessian'][i] / a['sd_linear'][i]:.3f}", f"{a['band'][i]:.3f}",
-            f"{a['linearisation'][i]:.3f}", f"{result.ess_bulk[i]:.0f}", verdict,
-        ])  # fmt: skip
-    head = ["constant", "B (MAP)", "posterior mean", "(mean - MAP) / sd", "sd of P",
-            "sd sampled", "sampled / P", "full Hessian / P", "MC band (4 se)",
-            "linearisation band", "ESS", "within MC + linearisation"]  # fmt: skip
+        rows.append(
+            [
+                f"{name} ({UNITS[i]})",
+                f"{est.constants[i] * s:#.4g}",
+                f"{result.mean[i] * s:#.4g}",
+                f"{a['mean_shift'][i]:+.2f}",
+                f"{a['sd_linear'][i] * s:#.3g}",
+                f"{a['sd_sampled'][i] * s:#.3g}",
+                f"{a['ratio'][i]:.3f}",
+                f"{a['sd_hessian'][i] / a['sd_linear'][i]:.3f}",
+                f"{a['band'][i]:.3f}",
+                f"{a['linearisation'][i]:.3f}",
+                f"{result.ess_bulk[i]:.0f}",
+                verdict,
+            ]
+        )
+    head = [
+        "constant",
+        "B (MAP)",
+        "posterior mean",
+        "(mean - MAP) / sd",
+        "sd of P",
+        "sd sampled",
+        "sampled / P",
+        "full Hessian / P",
+        "MC band (4 se)",
+        "linearisation band",
+        "ESS",
+        "within MC + linearisation",
+    ]
     corr = []
     for i in range(6):
-        corr.append([NAMES[i]] + [
-            f"{a['corr_sampled'][i, j]:+.2f} / {a['corr_linear'][i, j]:+.2f}"
-            + ("" if a["corr_agrees"][i, j] else " *") for j in range(6)
-        ])  # fmt: skip
+        corr.append(
+            [NAMES[i]]
+            + [
+                f"{a['corr_sampled'][i, j]:+.2f} / {a['corr_linear'][i, j]:+.2f}"
+                + ("" if a["corr_agrees"][i, j] else " *")
+                for j in range(6)
+            ]
+        )
     return [
         f"### {title}",
         "",
@@ -194,16 +220,19 @@ def write_report(m, plate1, out_dir, date=None):
     t = r.timings
     met = m["total_wall"] < TARGET_S and r.ess_min >= MIN_ESS and r.rhat_max < MAX_RHAT
     summary = [
-        ["total wall time (model assembly, pilot, fast model, MAP, sampling)",
-         f"{m['total_wall']:.1f} s (CPU {m['total_cpu']:.1f} s)"],
+        [
+            "total wall time (model assembly, pilot, fast model, MAP, sampling)",
+            f"{m['total_wall']:.1f} s (CPU {m['total_cpu']:.1f} s)",
+        ],
         ["pilot B on a 25 x 25 mesh", f"{t['pilot']:.1f} s"],
-        ["fast model: build + certify", f"{t['build']:.1f} s "
-         f"({setup.n_full_solves} full solves)"],
+        ["fast model: build + certify", f"{t['build']:.1f} s ({setup.n_full_solves} full solves)"],
         ["MAP (B to TOL 1e-7 on the fast model)", f"{t['map']:.2f} s"],
         ["sampling", f"{r.wall_time:.1f} s"],
         ["certificate", str(cert)],
-        ["walkers x steps (tuning, burn-in)",
-         f"{r.n_walkers} x {r.n_steps} ({r.settings['n_tune']}, {r.n_burn})"],
+        [
+            "walkers x steps (tuning, burn-in)",
+            f"{r.n_walkers} x {r.n_steps} ({r.settings['n_tune']}, {r.n_burn})",
+        ],
         ["log-density evaluations", f"{r.n_evaluations}"],
         ["full solves while sampling (box fallbacks)", f"{r.n_full}"],
         ["DE proposals rejected on the Ritz bound (no solve)", f"{r.n_screened}"],
@@ -211,13 +240,17 @@ def write_report(m, plate1, out_dir, date=None):
         ["largest tau (sampler coordinates)", f"{np.max(r.tau):.1f} steps"],
         ["smallest bulk ESS / tail ESS", f"{r.ess_min:.0f} / {np.min(r.ess_tail):.0f}"],
         ["largest R-hat", f"{r.rhat_max:.4f}"],
-        ["effective samples per second (smallest bulk ESS / sampling time)",
-         f"{ess_per_s:.0f} /s ({r.ess_min / m['total_wall']:.0f} /s over the whole run)"],
+        [
+            "effective samples per second (smallest bulk ESS / sampling time)",
+            f"{ess_per_s:.0f} /s ({r.ess_min / m['total_wall']:.0f} /s over the whole run)",
+        ],
         ["fast forward evaluation (eigenvalues, best of 5 x 200)", f"{m['fast_s'] * 1e3:.3f} ms"],
-        ["full forward evaluation (frequencies + sensitivities, mean of 3)",
-         f"{m['full_wall']:.2f} s wall / {m['full_cpu']:.2f} s CPU"],
+        [
+            "full forward evaluation (frequencies + sensitivities, mean of 3)",
+            f"{m['full_wall']:.2f} s wall / {m['full_cpu']:.2f} s CPU",
+        ],
         ["ratio full / fast (wall)", f"{ratio:,.0f}"],
-    ]  # fmt: skip
+    ]
     loads = m["load"]
     lines = [
         f"Made by `python benchmarks/bench_sampling.py` (seed {SEED}) on {date}; not part of "
@@ -260,7 +293,7 @@ def write_report(m, plate1, out_dir, date=None):
                 ]
                 for i, (n, u) in enumerate(zip(NAMES, UNITS, strict=True))
             ],
-        ),  # fmt: skip
+        ),
         "",
         "## Linearised (B) against sampled covariance",
         "",
@@ -279,7 +312,7 @@ def write_report(m, plate1, out_dir, date=None):
             plate1[0],
             plate1[1],
             plate1[2],
-        ),  # fmt: skip
+        ),
         "## Findings",
         "",
         *_findings(m, plate1),
@@ -326,8 +359,13 @@ def figures(m, out_dir):
     case, setup, r = m["case"], m["setup"], m["result"]
     mve = setup.run_estimator("MVE")
     title = "Frederiksen T300/epoxy (case prior), 50 x 50 mesh"
-    figs = sampling_figures(r, {"B": setup.estimate, "MVE": mve}, case.reference, title=title,
-                            reference_label="Frederiksen's constants")  # fmt: skip
+    figs = sampling_figures(
+        r,
+        {"B": setup.estimate, "MVE": mve},
+        case.reference,
+        title=title,
+        reference_label="Frederiksen's constants",
+    )
     out = pathlib.Path(out_dir)
     for name, fig in figs.items():
         path = out / FIGURES.format(name)
@@ -345,8 +383,10 @@ def main(out_dir="reports"):
     figures(m, out_dir)
     write_report(m, plate1, out_dir)
     r = m["result"]
-    print(f"total {m['total_wall']:.1f} s, ESS {r.ess_min:.0f}, R-hat {r.rhat_max:.4f}, "
-          f"fast {m['fast_s'] * 1e3:.3f} ms, full {m['full_wall']:.2f} s")  # fmt: skip
+    print(
+        f"total {m['total_wall']:.1f} s, ESS {r.ess_min:.0f}, R-hat {r.rhat_max:.4f}, "
+        f"fast {m['fast_s'] * 1e3:.3f} ms, full {m['full_wall']:.2f} s"
+    )
     return m, plate1
 
 

@@ -77,8 +77,10 @@ def run_benchmark(runs, base_dir=None):
     python = sys.executable
     trees = [ROOT] + ([base_dir] if base_dir is not None else [])
     rows, load = [], [os.getloadavg()]
-    for label, argv in (("python -c pass", [python, "-c", "pass"]),
-                        ("python -c 'import numpy'", [python, "-c", "import numpy"])):  # fmt: skip
+    for label, argv in (
+        ("python -c pass", [python, "-c", "pass"]),
+        ("python -c 'import numpy'", [python, "-c", "import numpy"]),
+    ):
         rows.append({"command": label, "now": time_in_turn(argv, [None], runs)[None]})
     for args in [["--help"]] + [[c, "--help"] for c in subcommands()]:
         times = time_in_turn([python, "-m", "bayesplate.cli", *args], trees, runs)

@@ -83,24 +83,31 @@ def one_run(sheet):
     with tempfile.TemporaryDirectory(prefix="bench-taps-") as folder:
         case, out = pathlib.Path(folder) / "case.toml", pathlib.Path(folder) / "estimate.json"
         load = os.getloadavg()[0]
-        imp = timed([*python, "import", *map(str, TAPS), "--plate", str(sheet), "-o",
-                     str(case)], folder)  # fmt: skip
-        est = timed([*python, "estimate", str(case), "--method", "B", "--json", str(out), "-q"],
-                    folder)  # fmt: skip
+        imp = timed(
+            [*python, "import", *map(str, TAPS), "--plate", str(sheet), "-o", str(case)], folder
+        )
+        est = timed(
+            [*python, "estimate", str(case), "--method", "B", "--json", str(out), "-q"], folder
+        )
         result = json.loads(out.read_text())
     built = FAST_BUILT.search(est[2])
     fast_s = float(built.group(1)) if built else None
     return {
         "load": load,
-        "import_s": imp[0], "import_cpu": imp[1],
+        "import_s": imp[0],
+        "import_cpu": imp[1],
         "fast_s": fast_s,
-        "estimate_s": est[0] - (fast_s or 0.0), "estimate_cpu": est[1],
+        "estimate_s": est[0] - (fast_s or 0.0),
+        "estimate_cpu": est[1],
         "total_s": imp[0] + est[0],
-        "kept_s": result["wall_time_s"], "solves": result["n_solves"],
-        "status": result["status"], "message": result["message"],
+        "kept_s": result["wall_time_s"],
+        "solves": result["n_solves"],
+        "status": result["status"],
+        "message": result["message"],
         "constants": {k: result["constants"][k]["mean"] for k in REFERENCE},
-        "peaks": len(result["measured_Hz"]), "modes": result["modes"],
-    }  # fmt: skip
+        "peaks": len(result["measured_Hz"]),
+        "modes": result["modes"],
+    }
 
 
 def run_benchmark(runs):
@@ -113,8 +120,11 @@ def run_benchmark(runs):
         for i in range(runs):
             rows.append(one_run(sheet))
             r = rows[-1]
-            print(f"run {i + 1}: import {r['import_s']:.1f} s, estimate {r['estimate_s']:.1f} s, "
-                  f"total {r['total_s']:.1f} s (load {r['load']:.2f})", flush=True)  # fmt: skip
+            print(
+                f"run {i + 1}: import {r['import_s']:.1f} s, estimate {r['estimate_s']:.1f} s, "
+                f"total {r['total_s']:.1f} s (load {r['load']:.2f})",
+                flush=True,
+            )
         load.append(os.getloadavg())
     return {"rows": rows, "load": load, "runs": runs}
 
@@ -134,20 +144,29 @@ def _work_line(cpu):
         "contention this counts BLAS threads spinning as they wait for each other too)"
     )
     if cpu / 2 >= TARGET_S:
-        return (f"{head}; were it all work, both cores busy on it throughout could not bring "
-                f"the wall time below half of it, {cpu / 2:.1f} s: on this count the target is "
-                "missed on an idle machine too.")  # fmt: skip
+        return (
+            f"{head}; were it all work, both cores busy on it throughout could not bring "
+            f"the wall time below half of it, {cpu / 2:.1f} s: on this count the target is "
+            "missed on an idle machine too."
+        )
     if cpu >= TARGET_S:
-        return (f"{head}: on an idle machine the target needs more than one core busy for "
-                f"{100 * (1 - TARGET_S / cpu):.0f} % of it.")  # fmt: skip
+        return (
+            f"{head}: on an idle machine the target needs more than one core busy for "
+            f"{100 * (1 - TARGET_S / cpu):.0f} % of it."
+        )
     return f"{head}: within the target; the wall time over it is the wait for a core."
 
 
 def _modified_files():
     """The package's files that differ from the commit (other work in the same tree)."""
     try:
-        proc = subprocess.run(["git", "status", "--porcelain", "--", "bayesplate"], cwd=ROOT,
-                              capture_output=True, text=True, check=True)  # fmt: skip
+        proc = subprocess.run(
+            ["git", "status", "--porcelain", "--", "bayesplate"],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            check=True,
+        )
     except (OSError, subprocess.CalledProcessError):
         return None
     return [line[3:] for line in proc.stdout.splitlines()]
@@ -160,15 +179,20 @@ def write_report(bench, info, out_dir, started):
     machine = ", ".join(f"{k} {v}" for k, v in info.items())
     modified = _modified_files()
     if modified:
-        tree = (f"{code_version()}: the commit, with {len(modified)} files of `bayesplate/` "
-                f"modified in the working tree by work in progress beside this run "
-                f"({', '.join(modified)})")  # fmt: skip
+        tree = (
+            f"{code_version()}: the commit, with {len(modified)} files of `bayesplate/` "
+            f"modified in the working tree by work in progress beside this run "
+            f"({', '.join(modified)})"
+        )
     else:
         tree = code_version()
     total = _median(rows, "total_s")
     fast = [r["fast_s"] for r in rows]
-    fast_cell = ("0 (not built: B iterates on the full model)" if all(f is None for f in fast)
-                 else f"{statistics.median(f or 0.0 for f in fast):.1f}")  # fmt: skip
+    fast_cell = (
+        "0 (not built: B iterates on the full model)"
+        if all(f is None for f in fast)
+        else f"{statistics.median(f or 0.0 for f in fast):.1f}"
+    )
     busy = l1 > 1.0  # the 1-minute load before the runs: other work on the two cores
     lines = [
         "# Raw hammer taps to elastic constants: spruce plate 5R",
@@ -217,11 +241,14 @@ def write_report(bench, info, out_dir, started):
     ]
     for i, r in enumerate(rows, start=1):
         c = r["constants"]
-        lines.append(f"| {i} | {r['load']:.2f} | {r['status']} | {r['peaks']} | "
-                     f"{c['E1_GPa']:.3f} | {c['E2_GPa']:.4f} | {c['G12_GPa']:.4f} |")  # fmt: skip
+        lines.append(
+            f"| {i} | {r['load']:.2f} | {r['status']} | {r['peaks']} | "
+            f"{c['E1_GPa']:.3f} | {c['E2_GPa']:.4f} | {c['G12_GPa']:.4f} |"
+        )
     ref = rows[-1]["constants"]
-    diffs = ", ".join(f"{k.split('_')[0]} {100 * (ref[k] / v - 1):+.1f} %"
-                      for k, v in REFERENCE.items())  # fmt: skip
+    diffs = ", ".join(
+        f"{k.split('_')[0]} {100 * (ref[k] / v - 1):+.1f} %" for k, v in REFERENCE.items()
+    )
     verdict = "met" if total < TARGET_S else "**missed**"
     cpu = _median(rows, "import_cpu") + _median(rows, "estimate_cpu")
     lines += [

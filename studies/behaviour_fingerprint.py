@@ -66,8 +66,9 @@ def chain():
     import inspect
 
     seed = {"rng": 7} if "rng" in inspect.signature(sample).parameters else {"seed": 7}
-    r = sample(case, **seed, n_walkers=16, max_steps=200, min_ess=100.0, progress=False,
-               pairing="order")  # fmt: skip
+    r = sample(
+        case, **seed, n_walkers=16, max_steps=200, min_ess=100.0, progress=False, pairing="order"
+    )
     samples = np.ascontiguousarray(np.asarray(r.samples_b, dtype=float))
     return {
         "samples_b_sha256": hashlib.sha256(samples.tobytes()).hexdigest(),

@@ -125,10 +125,12 @@ THREE_STARTS = ("3b28b25", "b9a300c", "7d51a9c", "d373176", "ff4f0ea", "087f58f"
 
 def _six_starts(rows):
     """Why ``rows`` made with three located starts are run again."""
-    return (f"made on 2026-11-26 and 2026-11-27 by code whose located candidates started from "
-            f"the three best places of their scans; since 1cd1ff4 they start from six (a "
-            f"concealed point support's best basin had been missed): {rows} run again with "
-            f"six, as the point support's rows were")  # fmt: skip
+    return (
+        f"made on 2026-11-26 and 2026-11-27 by code whose located candidates started from "
+        f"the three best places of their scans; since 1cd1ff4 they start from six (a "
+        f"concealed point support's best basin had been missed): {rows} run again with "
+        f"six, as the point support's rows were"
+    )
 
 
 #: Rows of one candidate (or ``"clean"``: the clean plates') made by these code versions,
@@ -164,17 +166,40 @@ RETIRED_EFFECT = {
     ),
     "local_stiffness_loss": ((THREE_STARTS, _six_starts("the local stiffness loss's rows")),),
     "point_mass": ((THREE_STARTS, _six_starts("the point mass's rows")),),
-    "clean": ((THREE_STARTS, _six_starts("the clean plates' rows, where any located candidate "
-                                         "could raise a false alarm,")),),
+    "clean": (
+        (
+            THREE_STARTS,
+            _six_starts(
+                "the clean plates' rows, where any located candidate could raise a false alarm,"
+            ),
+        ),
+    ),
     # not located themselves, but a located rival that now reaches a better basin can take
     # the name from them or tie with them
-    "thickness_taper": ((THREE_STARTS, _six_starts("the thickness taper's rows, whose located "
-                                                   "rivals search more places now,")),),
-    "ply_misalignment": ((THREE_STARTS, _six_starts("the ply misalignment's rows, whose located "
-                                                    "rivals search more places now,")),),
-    "elastic_foundation": ((THREE_STARTS, _six_starts("the elastic foundation's rows, whose "
-                                                      "located rivals (the point support "
-                                                      "above all) search more places now,")),),
+    "thickness_taper": (
+        (
+            THREE_STARTS,
+            _six_starts("the thickness taper's rows, whose located rivals search more places now,"),
+        ),
+    ),
+    "ply_misalignment": (
+        (
+            THREE_STARTS,
+            _six_starts(
+                "the ply misalignment's rows, whose located rivals search more places now,"
+            ),
+        ),
+    ),
+    "elastic_foundation": (
+        (
+            THREE_STARTS,
+            _six_starts(
+                "the elastic foundation's rows, whose "
+                "located rivals (the point support "
+                "above all) search more places now,"
+            ),
+        ),
+    ),
 }
 #: Single rows set aside to run again first, by (code, key), and why: a change since can
 #: alter their outcome and no other row's on the measure the report counts.
@@ -195,17 +220,28 @@ POWER_FAMILY = "frederiksen_t300"
 #: Places on the Frederiksen plate (100.1 x 53.0 mm) away from its lines of symmetry.
 EFFECTS = {
     "point_mass": (PointMass, lambda s: [s, 23.0, 14.0], "g", np.geomspace(0.01, 3.0, 8)),
-    "thickness_taper": (lambda: ThicknessTaper("x"), lambda s: [s], "",
-                        np.geomspace(0.002, 0.3, 8)),
+    "thickness_taper": (
+        lambda: ThicknessTaper("x"),
+        lambda s: [s],
+        "",
+        np.geomspace(0.002, 0.3, 8),
+    ),
     "ply_misalignment": (PlyMisalignment, lambda s: [s], "deg", np.geomspace(0.02, 10.0, 8)),
-    "elastic_foundation": (ElasticFoundation, lambda s: [s], "N/m^3",
-                           np.geomspace(1e4, 1e9, 11)),
-    "local_stiffness_loss": (LocalStiffnessLoss, lambda s: [70.0, 35.0, 20.0, 15.0, 1.0 - s],
-                             "stiffness lost", np.geomspace(0.01, 0.95, 8)),
+    "elastic_foundation": (ElasticFoundation, lambda s: [s], "N/m^3", np.geomspace(1e4, 1e9, 11)),
+    "local_stiffness_loss": (
+        LocalStiffnessLoss,
+        lambda s: [70.0, 35.0, 20.0, 15.0, 1.0 - s],
+        "stiffness lost",
+        np.geomspace(0.01, 0.95, 8),
+    ),
     "cutout": (Cutout, lambda s: [70.0, 20.0, s], "mm", np.geomspace(0.5, 17.0, 8)),
-    "point_support": (PointSupport, lambda s: [np.log10(s), 80.0, 40.0], "N/m",
-                      np.geomspace(1.0, 1e7, 15)),
-}  # fmt: skip
+    "point_support": (
+        PointSupport,
+        lambda s: [np.log10(s), 80.0, 40.0],
+        "N/m",
+        np.geomspace(1.0, 1e7, 15),
+    ),
+}
 
 
 # ---------------------------------------------------------------- the ideal test
@@ -417,8 +453,12 @@ def sizes(quick=False):
                 at = size_for(grid, lams, noncentrality_for(p, m))
             found.append(None if at is None or factor * at > grid[-1] else factor * at)
         rounded = [None if s is None else float(f"{s:.2g}") for s in found]
-        out[name] = {"grid": list(map(float, grid)), "lambda": lams, "fitted_lambda": fitted,
-                     "sizes": rounded}  # fmt: skip
+        out[name] = {
+            "grid": list(map(float, grid)),
+            "lambda": lams,
+            "fitted_lambda": fitted,
+            "sizes": rounded,
+        }
     return out
 
 
@@ -503,8 +543,9 @@ def absorbed(size_table, quick=False, widen=None, power=False):
                 continue
             plate = make().apply(fine, np.asarray(theta_of(size), dtype=float))
             lam = np.sort(plate.solve(b, m).eigenvalues)
-            left, A = fitted_residual(lam - nominal.eigenvalues, nominal.sensitivities,
-                                      sigma_lambda)  # fmt: skip
+            left, A = fitted_residual(
+                lam - nominal.eigenvalues, nominal.sensitivities, sigma_lambda
+            )
             if power:
                 rng = np.random.default_rng(DRAWS_SEED)
                 out[name].append(recorded_noise_power(left, A, widen, m - N_CONSTANTS, rng))
@@ -524,8 +565,9 @@ def tasks(size_table, quick=False):
     n_clean, n_power = (2, 1) if quick else (N_CLEAN, N_POWER)
     first = [j for j, entry in enumerate(SIZES) if entry[0] == "fitted 0.9"]
     rest = [j for j in range(len(SIZES)) if j not in first]
-    clean = [("clean", family, None, None, None, rep)
-             for rep in range(n_clean) for family in FAMILIES]  # fmt: skip
+    clean = [
+        ("clean", family, None, None, None, rep) for rep in range(n_clean) for family in FAMILIES
+    ]
     per_round = -(-len(clean) // n_power)  # clean replicates after each round
     out = []
 
@@ -565,8 +607,12 @@ def task_key(task):
 def _seed(task):
     """The replicate's seed, from what its key says (family, effect, size's value, rep)."""
     kind, family, effect, _, size, rep = task
-    spawn = (list(FAMILIES).index(family), 0 if effect is None else 1 + list(EFFECTS).index(effect),
-             0 if size is None else zlib.crc32(size_key(size).encode()), rep)  # fmt: skip
+    spawn = (
+        list(FAMILIES).index(family),
+        0 if effect is None else 1 + list(EFFECTS).index(effect),
+        0 if size is None else zlib.crc32(size_key(size).encode()),
+        rep,
+    )
     return np.random.SeedSequence(SEED, spawn_key=spawn)
 
 
@@ -579,12 +625,23 @@ def run_task_recorded(task, quick=False, code=None, options=None):
     except Exception as exc:  # noqa: BLE001 - every failure is a result of the study
         kind, family, effect, label, size, rep = task
         row = {
-            "key": task_key(task), "kind": kind, "family": family, "effect": effect,
-            "size_label": label, "size": size, "rep": rep, "verdict": "error", "chosen": None,
-            "rival": None, "error": f"{type(exc).__name__}: {exc}",
-            "traceback": traceback.format_exc()[-2000:], "recovered": None, "images": [],
-            "truth": None, "seconds": time.perf_counter() - start,
-        }  # fmt: skip
+            "key": task_key(task),
+            "kind": kind,
+            "family": family,
+            "effect": effect,
+            "size_label": label,
+            "size": size,
+            "rep": rep,
+            "verdict": "error",
+            "chosen": None,
+            "rival": None,
+            "error": f"{type(exc).__name__}: {exc}",
+            "traceback": traceback.format_exc()[-2000:],
+            "recovered": None,
+            "images": [],
+            "truth": None,
+            "seconds": time.perf_counter() - start,
+        }
     row["code"] = code
     row["finished"] = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
     row["load"] = list(os.getloadavg())
@@ -638,27 +695,39 @@ def run_task(task, quick=False, options=None):
     seconds = time.perf_counter() - start
     b_true = stiffness_from_engineering(case.reference)
     row = {
-        "key": task_key(task), "kind": kind, "family": family, "effect": effect,
-        "size_label": label, "size": size, "rep": rep, "verdict": d.verdict,
+        "key": task_key(task),
+        "kind": kind,
+        "family": family,
+        "effect": effect,
+        "size_label": label,
+        "size": size,
+        "rep": rep,
+        "verdict": d.verdict,
         "chosen": d.chosen.name if d.chosen else None,
         "rival": d.rival.name if d.rival is not None else None,
         "also": [c.name for c in d.also_tied],
-        "p_value": float(d.p_value), "refit_p": float(d.refit_p_value),
+        "p_value": float(d.p_value),
+        "refit_p": float(d.refit_p_value),
         "gains": {c.name: float(c.log_evidence_gain) for c in d.candidates},
         "chi2": {c.name: float(c.fit.chi2) for c in d.candidates},
         "probabilities": {k: float(v) for k, v in d.probabilities.items()},
-        "ideal_chi2": ideal_chi2, "m": int(f.size),
+        "ideal_chi2": ideal_chi2,
+        "m": int(f.size),
         "ideal_lambda": noncentrality(f_true, f0),
         "truth": None if physics is None else physics.labelled(model, b_true, theta),
-        "recovered": None, "images": [], "seconds": seconds,
+        "recovered": None,
+        "images": [],
+        "seconds": seconds,
         "widening": (d.sigma_Hz / sigma).tolist(),
-    }  # fmt: skip
+    }
     if physics is not None and d.chosen is not None and d.chosen.name == effect:
         c = d.chosen
         numeric = {k: float(v) for k, v in c.parameters.items() if not isinstance(v, str)}
         row["recovered"] = {k: [v, float(c.parameters_sd[k])] for k, v in numeric.items()}
-        row["images"] = [{k: float(v) for k, v in image.items() if not isinstance(v, str)}
-                         for image in c.mirror_images]  # fmt: skip
+        row["images"] = [
+            {k: float(v) for k, v in image.items() if not isinstance(v, str)}
+            for image in c.mirror_images
+        ]
     return row
 
 
@@ -720,8 +789,14 @@ def _settings(quick):
 
 
 def _empty(quick):
-    return {"settings": _settings(quick), "sizes": None, "rows": {}, "retired": {},
-            "seconds": 0.0, "runs": []}  # fmt: skip
+    return {
+        "settings": _settings(quick),
+        "sizes": None,
+        "rows": {},
+        "retired": {},
+        "seconds": 0.0,
+        "runs": [],
+    }
 
 
 def load(out_dir, quick):
@@ -763,8 +838,10 @@ def migrate(stored):
         stored["seconds"] = 0.0
     for run in stored.get("runs", []):  # the wall time of retired code goes with its rows
         if run.get("code") in RETIRED and not run.get("retired") and run.get("end"):
-            took = (datetime.datetime.fromisoformat(run["end"])
-                    - datetime.datetime.fromisoformat(run["start"])).total_seconds()  # fmt: skip
+            took = (
+                datetime.datetime.fromisoformat(run["end"])
+                - datetime.datetime.fromisoformat(run["start"])
+            ).total_seconds()
             spent = stored.setdefault("retired_seconds", {})
             spent[run["code"]] = spent.get(run["code"], 0.0) + took
             stored["seconds"] = max(0.0, stored.get("seconds", 0.0) - took)
@@ -795,8 +872,9 @@ def _retired(row, key):
     """Why a cached row is set aside (its code, its candidate's rows of that code, or it
     alone), or None."""
     group = row.get("effect") or row["kind"]  # a candidate's power rows, or "clean"
-    because = next((why for codes, why in RETIRED_EFFECT.get(group, ())
-                    if row["code"] in codes), None)  # fmt: skip
+    because = next(
+        (why for codes, why in RETIRED_EFFECT.get(group, ()) if row["code"] in codes), None
+    )
     return RETIRED.get(row["code"]) or because or RETIRED_ROWS.get((row["code"], key))
 
 
@@ -820,32 +898,54 @@ def main(out_dir="reports", quick=False, workers=None, report_only=False, effect
         migrate(stored)  # rows keyed by the size's value: those of sizes still run are kept
         if not report_only:
             atomic_write_text(path, json.dumps(stored))
-    todo = [] if report_only else [t for t in tasks(stored["sizes"], quick)
-                                   if task_key(t) not in stored["rows"]
-                                   and (effects is None or t[2] in effects)]  # fmt: skip
+    todo = (
+        []
+        if report_only
+        else [
+            t
+            for t in tasks(stored["sizes"], quick)
+            if task_key(t) not in stored["rows"] and (effects is None or t[2] in effects)
+        ]
+    )
     again = {key for _, key in RETIRED_ROWS}
     todo.sort(key=lambda t: task_key(t) not in again)  # rows set aside to run again first
     print(f"{len(todo)} replicates to run ({len(stored['rows'])} cached)", flush=True)
     start, base = time.perf_counter(), stored.get("seconds", 0.0)
     code = code_version()
     if todo:
-        stored["runs"].append({"start": _now(), "end": None, "code": code, "workers": workers,
-                               "rows": 0, "load": list(os.getloadavg())})  # fmt: skip
+        stored["runs"].append(
+            {
+                "start": _now(),
+                "end": None,
+                "code": code,
+                "workers": workers,
+                "rows": 0,
+                "load": list(os.getloadavg()),
+            }
+        )
 
     def keep(position, row):  # each row stored as it comes: an interrupted run resumes
         stored["rows"][row["key"]] = row
         stored["seconds"] = base + time.perf_counter() - start
         stored["runs"][-1].update(end=_now(), rows=stored["runs"][-1]["rows"] + 1)
         atomic_write_text(path, json.dumps(stored))
-        print(f"{_now()} {row['key']:48s} {row['verdict']:12s} {row['chosen'] or '-':22s} "
-              f"{row['seconds']:5.0f} s ({position + 1}/{len(todo)})"
-              + (f" {row['error']}" if row["verdict"] == "error" else ""), flush=True)  # fmt: skip
+        print(
+            f"{_now()} {row['key']:48s} {row['verdict']:12s} {row['chosen'] or '-':22s} "
+            f"{row['seconds']:5.0f} s ({position + 1}/{len(todo)})"
+            + (f" {row['error']}" if row["verdict"] == "error" else ""),
+            flush=True,
+        )
         write_report(out_dir, stored, quick, workers)
 
     _ship_by_value()
     if todo:
-        map_tasks(functools.partial(run_task_recorded, quick=quick, code=code), todo,
-                  workers=workers, progress=False, on_result=keep)  # fmt: skip
+        map_tasks(
+            functools.partial(run_task_recorded, quick=quick, code=code),
+            todo,
+            workers=workers,
+            progress=False,
+            on_result=keep,
+        )
     return write_report(out_dir, stored, quick, workers)
 
 
@@ -866,8 +966,9 @@ def write_report(out_dir, stored, quick, workers):
     out = pathlib.Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     if stored["sizes"] is not None:  # the fitted-constants noncentralities, kept beside
-        side = _cache_path(out_dir, quick).with_name(f"calibration{'-quick' if quick else ''}"
-                                                     "-absorbed.json")  # fmt: skip
+        side = _cache_path(out_dir, quick).with_name(
+            f"calibration{'-quick' if quick else ''}-absorbed.json"
+        )
         kept = json.loads(side.read_text()) if side.exists() else {}
         if kept.get("sizes") != stored["sizes"]:
             kept = {"sizes": stored["sizes"], "absorbed": absorbed(stored["sizes"], quick)}
@@ -907,9 +1008,10 @@ def power_cells(rows):
     for r in rows:
         if r["kind"] != "power":
             continue
-        c = cells.setdefault((r["effect"], size_key(r["size"])), {
-            "n": 0, "named": 0, "wrong": 0, "pair": 0, "ideal": 0, "rejected": 0,
-            "verdicts": {}})  # fmt: skip
+        c = cells.setdefault(
+            (r["effect"], size_key(r["size"])),
+            {"n": 0, "named": 0, "wrong": 0, "pair": 0, "ideal": 0, "rejected": 0, "verdicts": {}},
+        )
         c["n"] += 1
         c["named"] += named(r)
         c["wrong"] += wrong_name(r)
@@ -940,25 +1042,32 @@ def _load_line(rows):
     loads = [r["load"][0] for r in rows if r.get("load")]
     if not loads:
         return ""
-    return (f" Load average (1 min) when each row finished: median {np.median(loads):.2f}, "
-            f"{min(loads):.2f}-{max(loads):.2f}.")  # fmt: skip
+    return (
+        f" Load average (1 min) when each row finished: median {np.median(loads):.2f}, "
+        f"{min(loads):.2f}-{max(loads):.2f}."
+    )
 
 
 def _times(rows):
     seconds = [r["seconds"] for r in rows if r.get("seconds") is not None]
     if not seconds:
         return ""
-    return (f" One diagnosis took {np.median(seconds):.0f} s (median; "
-            f"{min(seconds):.0f}-{max(seconds):.0f} s).")  # fmt: skip
+    return (
+        f" One diagnosis took {np.median(seconds):.0f} s (median; "
+        f"{min(seconds):.0f}-{max(seconds):.0f} s)."
+    )
 
 
 def _partial(done, n_tasks):
     if done >= n_tasks:
         return []
-    return [f"A partial run ({done} of {n_tasks} replicates): the counts below are of the "
-            "replicates finished, in the running order (the fitted 0.9 size round by round "
-            "with the clean replicates between its rounds, then the other sizes replicate by "
-            "replicate); the rest resume from the cache on the next run.", ""]  # fmt: skip
+    return [
+        f"A partial run ({done} of {n_tasks} replicates): the counts below are of the "
+        "replicates finished, in the running order (the fitted 0.9 size round by round "
+        "with the clean replicates between its rounds, then the other sizes replicate by "
+        "replicate); the rest resume from the cache on the next run.",
+        "",
+    ]
 
 
 def report(rows, stored, quick, workers):
@@ -1014,39 +1123,47 @@ def report(rows, stored, quick, workers):
             f"| {q[0]:.2f} / {q[1]:.2f} / {q[2]:.2f} | {gain:+.1f} |"
         )
     left = stored.get("absorbed") or {}  # set by write_report
-    lines += ["", "## Power (Frederiksen plate)", "",
-              "Sizes where the ideal test (chi-square at the true constants on the recordings' "
-              "mesh, 14 dof, 1 %) rejects with probability 0.5 and 0.9, three times the "
-              "latter, and where the fitted test rejects with probability 0.9. The fitted "
-              "test is the same once the six constants have absorbed what they can of the "
-              "effect (linearised, 8 dof, no prior; `fitted_noncentrality`): the power left "
-              "to any method that, like diagnose, does not know the constants. Its size is "
-              "found on the same grid of sizes as the ideal one's (fine mesh, true constants, "
-              "log-log interpolation), rounded to two digits; `fitted P(reject)` and `ideal "
-              "P(reject)` are then computed at the rounded size. `ideal rejects`: the ideal "
-              "test's count on the replicates' recordings. `named right`: `explained` with the "
-              "concealed candidate, or `ambiguous` with it among those named. `wrong names`: "
-              "`explained` with another candidate, and (after the +) `ambiguous` among "
-              "others only. `fitted, 1 dof`: the most powerful test of the fitted nominal model, "
-              "aimed at the effect (below); `fitted, diagnose's deviations`: the fitted test "
-              "with the deviations diagnose tests against and the noise as recorded (below); "
-              "`nominal rejected`: "
-              "diagnose's own nominal chi-square at 1 % (p < 0.01; it names a candidate whose "
-              "evidence gain is warranted whether or not that test rejects).", "",
-              "| candidate | size | fitted P(reject) | fitted, 1 dof | fitted, diagnose's "
-              "deviations | ideal P(reject) | replicates run | ideal rejects | nominal "
-              "rejected | named right | Wilson 95 % | wrong names | verdicts |",
-              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    lines += [
+        "",
+        "## Power (Frederiksen plate)",
+        "",
+        "Sizes where the ideal test (chi-square at the true constants on the recordings' "
+        "mesh, 14 dof, 1 %) rejects with probability 0.5 and 0.9, three times the "
+        "latter, and where the fitted test rejects with probability 0.9. The fitted "
+        "test is the same once the six constants have absorbed what they can of the "
+        "effect (linearised, 8 dof, no prior; `fitted_noncentrality`): the power left "
+        "to any method that, like diagnose, does not know the constants. Its size is "
+        "found on the same grid of sizes as the ideal one's (fine mesh, true constants, "
+        "log-log interpolation), rounded to two digits; `fitted P(reject)` and `ideal "
+        "P(reject)` are then computed at the rounded size. `ideal rejects`: the ideal "
+        "test's count on the replicates' recordings. `named right`: `explained` with the "
+        "concealed candidate, or `ambiguous` with it among those named. `wrong names`: "
+        "`explained` with another candidate, and (after the +) `ambiguous` among "
+        "others only. `fitted, 1 dof`: the most powerful test of the fitted nominal model, "
+        "aimed at the effect (below); `fitted, diagnose's deviations`: the fitted test "
+        "with the deviations diagnose tests against and the noise as recorded (below); "
+        "`nominal rejected`: "
+        "diagnose's own nominal chi-square at 1 % (p < 0.01; it names a candidate whose "
+        "evidence gain is warranted whether or not that test rejects).",
+        "",
+        "| candidate | size | fitted P(reject) | fitted, 1 dof | fitted, diagnose's "
+        "deviations | ideal P(reject) | replicates run | ideal rejects | nominal "
+        "rejected | named right | Wilson 95 % | wrong names | verdicts |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
     cells = power_cells(rows)
     for effect, entry in size_table.items():
         unit = EFFECTS[effect][2]
-        order = sorted(range(len(SIZES)), key=lambda i: (entry["sizes"][i] is None,
-                                                         entry["sizes"][i] or 0.0))  # fmt: skip
+        order = sorted(
+            range(len(SIZES)), key=lambda i: (entry["sizes"][i] is None, entry["sizes"][i] or 0.0)
+        )
         for j in order:
             s = entry["sizes"][j]
             if s is None:
-                lines.append(f"| {effect} | {SIZES[j][0]}: beyond the admissible sizes | - | - "
-                             "| - | - | - | - | - | - | - | - | - |")  # fmt: skip
+                lines.append(
+                    f"| {effect} | {SIZES[j][0]}: beyond the admissible sizes | - | - "
+                    "| - | - | - | - | - | - | - | - | - |"
+                )
                 continue
             c = cells.get((effect, size_key(s)))
             p = f"{ideal_power(lambda_at(entry, s), 14):.2f}"
@@ -1056,8 +1173,10 @@ def report(rows, stored, quick, workers):
             w = "-" if wp is None else f"{wp:.2f}"
             one = entry_p(left, size_table, effect, j, bound_power) if fp is not None else None
             o = "-" if one is None else f"{one:.2f}"
-            head = (f"| {effect} | {f'{s:.2g} {unit}'.strip()} ({SIZES[j][0]}) | {q} | {o} "
-                    f"| {w} | {p} |")  # fmt: skip
+            head = (
+                f"| {effect} | {f'{s:.2g} {unit}'.strip()} ({SIZES[j][0]}) | {q} | {o} "
+                f"| {w} | {p} |"
+            )
             if c is None:
                 lines.append(f"{head} 0 | | | | | | |")
                 continue
@@ -1089,10 +1208,12 @@ def report(rows, stored, quick, workers):
     wrong = [r for r in rows if r["kind"] == "power" and (wrong_name(r) or wrong_pair(r))]
     lines += ["", "## Wrong names", ""]
     if wrong:
-        lines += [f"- `{r['key']}`: {r['verdict']} with {r['chosen']}"
-                  + (f" (rival {r['rival']})" if r["rival"] else "")
-                  + f", nominal p {r['p_value']:.2g}, refit p {r['refit_p']:.2g}"
-                  for r in wrong]  # fmt: skip
+        lines += [
+            f"- `{r['key']}`: {r['verdict']} with {r['chosen']}"
+            + (f" (rival {r['rival']})" if r["rival"] else "")
+            + f", nominal p {r['p_value']:.2g}, refit p {r['refit_p']:.2g}"
+            for r in wrong
+        ]
     else:
         lines.append("None so far.")
     errors = [r for r in rows if r["verdict"] == "error"]
@@ -1114,9 +1235,12 @@ def _provenance(rows, stored):
         by_code.setdefault(r.get("code"), []).append(r)
     for code, mine in sorted(by_code.items(), key=lambda kv: str(kv[0])):
         days = sorted({(r.get("finished") or "")[:10] for r in mine} - {""})
-        out.append(f"- counted: {len(mine)} rows ({sum(r['kind'] == 'clean' for r in mine)} "
-                   f"clean, {sum(r['kind'] == 'power' for r in mine)} power) made by `{code}`"
-                   + (f" on {', '.join(days)}" if days else "") + ".")  # fmt: skip
+        out.append(
+            f"- counted: {len(mine)} rows ({sum(r['kind'] == 'clean' for r in mine)} "
+            f"clean, {sum(r['kind'] == 'power' for r in mine)} power) made by `{code}`"
+            + (f" on {', '.join(days)}" if days else "")
+            + "."
+        )
     retired = list((stored.get("retired") or {}).values())
     reasons = {}
     for r in retired:
@@ -1149,8 +1273,13 @@ def _absorption(size_table, left, rows):
         sf = entry["sizes"][jf]
         ratio = "" if sf is None else f"; fitted 0.9 at {sf / s:.1f} x the size"
         p8, p1 = ideal_power(lam, 14 - N_CONSTANTS), bound_power(lam)
-        parts.append((p8, f"{effect} {p8:.2f} ({p1:.2f} aimed; {100 * (1 - lam / ideal):.0f} % "
-                          f"of the noncentrality absorbed{ratio})"))  # fmt: skip
+        parts.append(
+            (
+                p8,
+                f"{effect} {p8:.2f} ({p1:.2f} aimed; {100 * (1 - lam / ideal):.0f} % "
+                f"of the noncentrality absorbed{ratio})",
+            )
+        )
     if not parts:
         return []
     listed = "; ".join(text for _, text in sorted(parts))
@@ -1190,8 +1319,10 @@ def _widened(stored, cells):
     k = sum(c["rejected"] for c in run if c)
     n = sum(c["n"] for c in run if c)
     if widen.max() <= 1.0:
-        return ["Diagnose tests against the recordings' declared deviations (its mesh's error "
-                "stays below its threshold)."]  # fmt: skip
+        return [
+            "Diagnose tests against the recordings' declared deviations (its mesh's error "
+            "stays below its threshold)."
+        ]
     return [
         "**Diagnose's own test is weaker than the fitted test.** On its working mesh it "
         "estimates the mesh's error (a third of the difference to the mesh half as fine) and, "
@@ -1273,12 +1404,15 @@ def _targets(rows, cells, size_table, left, inside, quick):
             c = cells.get((effect, size_key(s)))
             fp = _fitted_p(left, effect, j)
             expect = "" if fp is None else f" (fitted P(reject) {fp:.2f})"
-            ideal = ("" if c is None else f"; ideal test rejected {c['ideal']} of {c['n']}, "
-                     f"diagnose's nominal test {c['rejected']} of {c['n']}")  # fmt: skip
+            ideal = (
+                ""
+                if c is None
+                else f"; ideal test rejected {c['ideal']} of {c['n']}, "
+                f"diagnose's nominal test {c['rejected']} of {c['n']}"
+            )
             out.append(f"  - {effect} at {s:.2g}{expect}: {_judge(c)}{ideal}")
         if label == "ideal 0.9":
-            short = [e for e in size_table
-                     if entry_p(left, size_table, e, j, bound_power) < 0.8]  # fmt: skip
+            short = [e for e in size_table if entry_p(left, size_table, e, j, bound_power) < 0.8]
             if short:
                 out.append(
                     "  - out of reach by construction (even the most powerful test of "
@@ -1316,8 +1450,9 @@ def plot(rows, size_table, path, widened_grid_power=None):
     import matplotlib.ticker
 
     names = list(size_table)
-    fig, axes = plt.subplots(2, (len(names) + 1) // 2, figsize=(3.2 * ((len(names) + 1) // 2), 6),
-                             squeeze=False)  # fmt: skip
+    fig, axes = plt.subplots(
+        2, (len(names) + 1) // 2, figsize=(3.2 * ((len(names) + 1) // 2), 6), squeeze=False
+    )
     cells = power_cells(rows)
     m = 14
     for ax, effect in zip(axes.flat, names, strict=False):
@@ -1328,12 +1463,12 @@ def plot(rows, size_table, path, widened_grid_power=None):
         ax.semilogx(fine, [ideal_power(x, m) for x in ideal], "k-", label="ideal test")
         if entry.get("fitted_lambda"):
             fitted = _on(fine, grid, entry["fitted_lambda"])
-            ax.semilogx(fine, [ideal_power(x, m - N_CONSTANTS) for x in fitted], "k--",
-                        label="fitted test")  # fmt: skip
+            ax.semilogx(
+                fine, [ideal_power(x, m - N_CONSTANTS) for x in fitted], "k--", label="fitted test"
+            )
         if widened_grid_power and widened_grid_power.get(effect):
             wide = np.interp(np.log(fine), np.log(grid), widened_grid_power[effect])
-            ax.semilogx(fine, wide, ":", color="0.4",
-                        label="fitted, diagnose's deviations")  # fmt: skip
+            ax.semilogx(fine, wide, ":", color="0.4", label="fitted, diagnose's deviations")
         first = True
         for (label, *_), s in zip(SIZES, entry["sizes"], strict=True):
             c = cells.get((effect, size_key(s))) if s is not None else None
@@ -1343,8 +1478,14 @@ def plot(rows, size_table, path, widened_grid_power=None):
                 continue
             p = c["named"] / c["n"]
             lo, hi = wilson(c["named"], c["n"])
-            ax.errorbar([s], [p], yerr=[[p - lo], [hi - p]], fmt="o", color="C0",
-                        label="diagnose names it" if first else None)  # fmt: skip
+            ax.errorbar(
+                [s],
+                [p],
+                yerr=[[p - lo], [hi - p]],
+                fmt="o",
+                color="C0",
+                label="diagnose names it" if first else None,
+            )
             first = False
         ax.set_title(effect.replace("_", " "), fontsize=9)
         ax.set_xlabel(f"size ({EFFECTS[effect][2] or 'ratio'})", fontsize=8)
@@ -1368,7 +1509,12 @@ if __name__ == "__main__":
     parser.add_argument("--workers", type=int, default=None)
     parser.add_argument("--out", default="reports")
     parser.add_argument("--report-only", action="store_true")
-    parser.add_argument("--effect", action="append", choices=list(EFFECTS), default=None,
-                        help="run only this candidate's power replicates (repeatable)")
+    parser.add_argument(
+        "--effect",
+        action="append",
+        choices=list(EFFECTS),
+        default=None,
+        help="run only this candidate's power replicates (repeatable)",
+    )
     args = parser.parse_args()
     print(main(args.out, args.quick, args.workers, args.report_only, args.effect))

@@ -102,29 +102,60 @@ def run_row(row_task, quick=False):
     try:
         d = diagnose(case, model=model, rng=seed)  # the default pairing
     except Exception as exc:  # noqa: BLE001 - every failure is a result of the study
-        where = "; ".join(f"{pathlib.Path(f.filename).name}:{f.lineno}"
-                          for f in traceback.extract_tb(exc.__traceback__)[-4:])  # fmt: skip
-        return {"key": key(row_task), "variant": variant, "kind": task[0], "verdict": "error",
-                "error": f"{type(exc).__name__}: {exc} (at {where})", "named": [],
-                "peaks_right": False,
-                "passes": 0, "outliers_kept": False, "chosen": None,
-                "seconds": time.perf_counter() - start}  # fmt: skip
+        where = "; ".join(
+            f"{pathlib.Path(f.filename).name}:{f.lineno}"
+            for f in traceback.extract_tb(exc.__traceback__)[-4:]
+        )
+        return {
+            "key": key(row_task),
+            "variant": variant,
+            "kind": task[0],
+            "verdict": "error",
+            "error": f"{type(exc).__name__}: {exc} (at {where})",
+            "named": [],
+            "peaks_right": False,
+            "passes": 0,
+            "outliers_kept": False,
+            "chosen": None,
+            "seconds": time.perf_counter() - start,
+        }
     seconds = time.perf_counter() - start
-    note = next((n for n in d.notes
-                 if n.startswith(("assignment made again", "pairing by order set aside"))), "")
+    note = next(
+        (
+            n
+            for n in d.notes
+            if n.startswith(("assignment made again", "pairing by order set aside"))
+        ),
+        "",
+    )
     passes = d.passes
     peaks = None if d.peak_modes is None else [int(j) for j in d.peak_modes]
     return {
-        "key": key(row_task), "variant": variant, "kind": task[0], "family": task[1],
-        "effect": task[2], "size_label": task[3], "rep": task[5], "verdict": d.verdict,
+        "key": key(row_task),
+        "variant": variant,
+        "kind": task[0],
+        "family": task[1],
+        "effect": task[2],
+        "size_label": task[3],
+        "rep": task[5],
+        "verdict": d.verdict,
         "chosen": d.chosen.name if d.chosen else None,
-        "named": [c for c in (d.chosen.name if d.chosen else None,
-                              d.rival.name if d.rival is not None else None,
-                              *[c.name for c in d.also_tied]) if c],
-        "peaks_right": peaks == truth.tolist(), "peak_modes": peaks, "passes": passes,
-        "outliers_kept": "outliers of this fit, kept" in note, "seconds": seconds,
+        "named": [
+            c
+            for c in (
+                d.chosen.name if d.chosen else None,
+                d.rival.name if d.rival is not None else None,
+                *[c.name for c in d.also_tied],
+            )
+            if c
+        ],
+        "peaks_right": peaks == truth.tolist(),
+        "peak_modes": peaks,
+        "passes": passes,
+        "outliers_kept": "outliers of this fit, kept" in note,
+        "seconds": seconds,
         "set_aside": any(n.startswith("pairing by order set aside") for n in d.notes),
-    }  # fmt: skip
+    }
 
 
 def _cache(out_dir, quick=False):
@@ -145,19 +176,33 @@ def main(out_dir="reports", workers=2, quick=False, order_dir=None):
     todo = [r for r in plan(stored_order["sizes"], quick) if key(r) not in done["rows"]]
     print(f"{len(todo)} rows to run ({len(done['rows'])} cached)", flush=True)
     if todo:
-        done["runs"].append({"start": cal._now(), "code": code_version(), "workers": workers,
-                             "load": list(os.getloadavg())})  # fmt: skip
+        done["runs"].append(
+            {
+                "start": cal._now(),
+                "code": code_version(),
+                "workers": workers,
+                "load": list(os.getloadavg()),
+            }
+        )
 
     def keep(position, row):
         done["rows"][row["key"]] = row
         done["runs"][-1]["end"] = cal._now()
         atomic_write_text(path, json.dumps(done))
-        print(f"{cal._now()} {row['key']:56s} {row['verdict']:12s} passes {row['passes']} "
-              f"{row['seconds']:5.0f} s ({position + 1}/{len(todo)})", flush=True)  # fmt: skip
+        print(
+            f"{cal._now()} {row['key']:56s} {row['verdict']:12s} passes {row['passes']} "
+            f"{row['seconds']:5.0f} s ({position + 1}/{len(todo)})",
+            flush=True,
+        )
 
     if todo:
-        map_tasks(functools.partial(run_row, quick=quick), todo, workers=workers,
-                  progress=False, on_result=keep)  # fmt: skip
+        map_tasks(
+            functools.partial(run_row, quick=quick),
+            todo,
+            workers=workers,
+            progress=False,
+            on_result=keep,
+        )
     text = report(list(done["rows"].values()), stored_order["rows"], done["runs"])
     out = pathlib.Path(out_dir) / f"checked_order{'-quick' if quick else ''}.md"
     atomic_write_text(out, text)
@@ -171,21 +216,35 @@ def _said(row):
 def report(rows, order_rows, runs):
     """The report's markdown from the rows and the calibration's rows by order."""
     recorded = [r for r in rows if r["variant"] == "as recorded"]
-    same = [r for r in recorded if r["verdict"] == order_rows[r["key"].split("/", 1)[1]]["verdict"]
-            and r["chosen"] == order_rows[r["key"].split("/", 1)[1]]["chosen"]]  # fmt: skip
+    same = [
+        r
+        for r in recorded
+        if r["verdict"] == order_rows[r["key"].split("/", 1)[1]]["verdict"]
+        and r["chosen"] == order_rows[r["key"].split("/", 1)[1]]["chosen"]
+    ]
     one = sum(r["passes"] == 1 for r in recorded)
     t_new = np.median([r["seconds"] for r in recorded]) if recorded else float("nan")
-    t_old = (np.median([order_rows[r["key"].split("/", 1)[1]]["seconds"] for r in recorded])
-             if recorded else float("nan"))  # fmt: skip
+    t_old = (
+        np.median([order_rows[r["key"].split("/", 1)[1]]["seconds"] for r in recorded])
+        if recorded
+        else float("nan")
+    )
     lines = [
-        "# diagnose with the default pairing (by order, checked)", "",
+        "# diagnose with the default pairing (by order, checked)",
+        "",
         f"Made by `python studies/checked_order.py` on {_machine()}; runs: "
-        + "; ".join(f"{r['start']} to {r.get('end', '?')} (code {r['code']}, {r['workers']} "
-                    f"workers, load at start {r['load'][0]:.1f})" for r in runs) + ".",
+        + "; ".join(
+            f"{r['start']} to {r.get('end', '?')} (code {r['code']}, {r['workers']} "
+            f"workers, load at start {r['load'][0]:.1f})"
+            for r in runs
+        )
+        + ".",
         "The recordings are the calibration study's (`reports/calibration.md`: recordings' "
         "mesh twice as fine, 0.2 % noise, its seeds); diagnose runs blind with its default "
-        "pairing, against the calibration's rows made by order.", "",
-        "## Complete tests: what the order said, kept?", "",
+        "pairing, against the calibration's rows made by order.",
+        "",
+        "## Complete tests: what the order said, kept?",
+        "",
         f"- {len(recorded)} replicates ({sum(r['kind'] == 'clean' for r in recorded)} clean, "
         f"{sum(r['kind'] == 'power' for r in recorded)} with an effect at the sizes "
         f"{' and '.join(SIZES)}): the same verdict and name as by order in {len(same)}; one "
@@ -195,7 +254,8 @@ def report(rows, order_rows, runs):
         "adds a note), so where its verdict differs from the calibration's row, that row "
         "was made by older code (its version in the table).",
         f"- diagnose's median time {t_new:.0f} s against {t_old:.0f} s by order (the "
-        "calibration's rows, made under its own load: a rough comparison).", "",
+        "calibration's rows, made under its own load: a rough comparison).",
+        "",
         "| replicate | by order (calibration row, its code) | default | passes | s |",
         "|---|---|---|---|---|",
     ]
@@ -205,27 +265,36 @@ def report(rows, order_rows, runs):
             continue  # the clean ones that agree are counted above, not listed
         said_o = o["verdict"] + (f" ({o['chosen']})" if o["chosen"] else "")
         said_o += f", {o['code']}" if o.get("code") else ""
-        lines.append(f"| {r['key'].split('/', 1)[1]} | {said_o} | {_said(r)} | {r['passes']} "
-                     f"| {r['seconds']:.0f} |")  # fmt: skip
-    for variant, what in (("mode missed", "the middle peak taken out (its mode missed)"),
-                          ("peak inserted", "a peak put into the widest middle gap")):  # fmt: skip
+        lines.append(
+            f"| {r['key'].split('/', 1)[1]} | {said_o} | {_said(r)} | {r['passes']} "
+            f"| {r['seconds']:.0f} |"
+        )
+    for variant, what in (
+        ("mode missed", "the middle peak taken out (its mode missed)"),
+        ("peak inserted", "a peak put into the widest middle gap"),
+    ):
         got = [r for r in rows if r["variant"] == variant]
         lines += ["", f"## Clean recordings with {what}", ""]
         if not got:
             lines.append("Not run yet.")
             continue
         flagged = sum(bool(r.get("set_aside")) for r in got)
-        lines += [f"- {len(got)} replicates: the order set aside at the first pass's verdict "
-                  f"fit (diagnosed again from the assignment B settles) in {flagged}; every "
-                  f"peak on its right mode in the pass kept in "
-                  f"{sum(bool(r.get('peaks_right')) for r in got)}; median "
-                  f"{np.median([r['seconds'] for r in got]):.0f} s.", "",
-                  "| replicate | verdict kept | order set aside | passes | peaks right | s |",
-                  "|---|---|---|---|---|---|"]
-        lines += [f"| {r['key'].split('/', 1)[1]} | {_said(r)} | {bool(r.get('set_aside'))} "
-                  f"| {r['passes']} | {bool(r.get('peaks_right'))} | {r['seconds']:.0f} |"
-                  + (f" {r['error']}" if r.get("error") else "")
-                  for r in sorted(got, key=lambda r: r["key"])]  # fmt: skip
+        lines += [
+            f"- {len(got)} replicates: the order set aside at the first pass's verdict "
+            f"fit (diagnosed again from the assignment B settles) in {flagged}; every "
+            f"peak on its right mode in the pass kept in "
+            f"{sum(bool(r.get('peaks_right')) for r in got)}; median "
+            f"{np.median([r['seconds'] for r in got]):.0f} s.",
+            "",
+            "| replicate | verdict kept | order set aside | passes | peaks right | s |",
+            "|---|---|---|---|---|---|",
+        ]
+        lines += [
+            f"| {r['key'].split('/', 1)[1]} | {_said(r)} | {bool(r.get('set_aside'))} "
+            f"| {r['passes']} | {bool(r.get('peaks_right'))} | {r['seconds']:.0f} |"
+            + (f" {r['error']}" if r.get("error") else "")
+            for r in sorted(got, key=lambda r: r["key"])
+        ]
     return "\n".join(lines) + "\n"
 
 

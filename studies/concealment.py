@@ -93,9 +93,13 @@ def scenarios(quick=False):
         # added with the candidates of issue 13 (rows 12-14)
         ("cutout", Cutout(), "d = 10 mm", [70.0, 20.0, 10.0]),
         ("point_support", PointSupport(), "1e5 N/m", [5.0, 80.0, 40.0]),
-        ("point_mass+ply_misalignment", Pair(PointMass(), PlyMisalignment(), b_true),
-         "1.0 g + 3 deg", [1.0, 23.0, 14.0, 3.0]),
-    ]  # fmt: skip
+        (
+            "point_mass+ply_misalignment",
+            Pair(PointMass(), PlyMisalignment(), b_true),
+            "1.0 g + 3 deg",
+            [1.0, 23.0, 14.0, 3.0],
+        ),
+    ]
     return [runs[0], runs[3]] if quick else runs
 
 
@@ -144,8 +148,10 @@ def run_scenario(index, quick=False):
         load=os.getloadavg()[0],
         finished=datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
     )
-    print(f"{label:22s} {size:12s} -> {d.verdict:12s} {row['chosen']} "
-          f"({row['seconds']:.0f} s)", flush=True)  # fmt: skip
+    print(
+        f"{label:22s} {size:12s} -> {d.verdict:12s} {row['chosen']} ({row['seconds']:.0f} s)",
+        flush=True,
+    )
     return row
 
 
@@ -172,8 +178,13 @@ def main(out_dir="reports", quick=False, workers=1, scheduler=None, first=()):
         write_report(out_dir, quick)
 
     _ship_by_value()
-    map_tasks(partial(run_scenario, quick=quick), todo, workers=workers, scheduler=scheduler,
-              on_result=keep)  # fmt: skip
+    map_tasks(
+        partial(run_scenario, quick=quick),
+        todo,
+        workers=workers,
+        scheduler=scheduler,
+        on_result=keep,
+    )
     return write_report(out_dir, quick)
 
 
@@ -233,15 +244,22 @@ def _row(label, physics, size, theta, d, case, model, seconds):
     b_true = stiffness_from_engineering(truth)
     truth_params = None if physics is None else physics.labelled(model, b_true, theta)
     return {
-        "effect": label, "size": size, "p_value": d.p_value, "verdict": d.verdict,
-        "chosen": d.chosen.name if d.chosen else None, "recovered": recovered,
+        "effect": label,
+        "size": size,
+        "p_value": d.p_value,
+        "verdict": d.verdict,
+        "chosen": d.chosen.name if d.chosen else None,
+        "recovered": recovered,
         "rival": d.rival.name if getattr(d, "rival", None) is not None else None,
         "also": [c.name for c in getattr(d, "also_tied", [])],
-        "truth": truth_params, "before": before, "after": after, "seconds": seconds,
+        "truth": truth_params,
+        "before": before,
+        "after": after,
+        "seconds": seconds,
         "mirrors": d.chosen.mirror_images if d.chosen else [],
         "gains": {c.name: c.log_evidence_gain for c in d.candidates},
         "unidentified": d.unidentified,
-    }  # fmt: skip
+    }
 
 
 def _with_mirror_images(rows, runs, model):
@@ -257,8 +275,10 @@ def _with_mirror_images(rows, runs, model):
             continue
         names = [p.name for p in physics.parameters(model, np.zeros(6))]
         theta = np.array([row["recovered"][n][0] for n in names])
-        row["mirrors"] = [dict(zip(names, map(float, t), strict=True))
-                          for t in physics.mirror_images(model, theta)]  # fmt: skip
+        row["mirrors"] = [
+            dict(zip(names, map(float, t), strict=True))
+            for t in physics.mirror_images(model, theta)
+        ]
 
 
 def recovery_z(row):
@@ -320,9 +340,11 @@ def _report(rows, mesh, quick):
         for r in rows
     ]
     gains = ["", "Evidence gains (nats) of every candidate, per run:", ""]
-    gains += [f"- {r['effect']} {r['size']}: " + ", ".join(
-        f"{k} {v:+.1f}" for k, v in sorted(r["gains"].items(), key=lambda kv: -kv[1]))
-        for r in rows]  # fmt: skip
+    gains += [
+        f"- {r['effect']} {r['size']}: "
+        + ", ".join(f"{k} {v:+.1f}" for k, v in sorted(r["gains"].items(), key=lambda kv: -kv[1]))
+        for r in rows
+    ]
     return "\n".join(head + lines + gains + _findings(rows)) + "\n"
 
 
@@ -335,12 +357,16 @@ def _provenance(rows):
     for (code, machine), mine in by_code.items():
         days = sorted({r["finished"][:10] for r in mine if r.get("finished")})
         loads = [r["load"] for r in mine if r.get("load") is not None]
-        out.append(f"Rows made by the code of `{code}` on {', '.join(days) or '?'}, "
-                   f"{machine or 'an unrecorded machine'} (2 cores), "
-                   f"load average {min(loads):.1f}-{max(loads):.1f} (other work beside): "
-                   f"{len(mine)} row{'s' * (len(mine) != 1)}, "
-                   f"{sum(r['seconds'] for r in mine) / 60:.0f} min of "
-                   "diagnose." if loads else f"Rows made by `{code}`: {len(mine)}.")  # fmt: skip
+        out.append(
+            f"Rows made by the code of `{code}` on {', '.join(days) or '?'}, "
+            f"{machine or 'an unrecorded machine'} (2 cores), "
+            f"load average {min(loads):.1f}-{max(loads):.1f} (other work beside): "
+            f"{len(mine)} row{'s' * (len(mine) != 1)}, "
+            f"{sum(r['seconds'] for r in mine) / 60:.0f} min of "
+            "diagnose."
+            if loads
+            else f"Rows made by `{code}`: {len(mine)}."
+        )
     for (code, key), why in RETIRED_ROWS.items():
         out.append(f"Scenario {key}'s row of `{code}` was run again ({why}).")
     return out
@@ -352,11 +378,19 @@ def _findings(rows):
     rejected = [r for r in rows if r["effect"] != "control" and r["p_value"] < 0.01]
     named = [r for r in rejected if same(r["chosen"], r["effect"])]
     # `ambiguous` names two or more: right when the truth is one of them
-    among = [r for r in rejected if r["verdict"] == "ambiguous"
-             and any(same(name, r["effect"])
-                     for name in (r["chosen"], r.get("rival"), *r.get("also", [])))]  # fmt: skip
-    better = [r for r in named if r["after"] is not None
-              and np.abs(r["after"]).max() < np.abs(r["before"]).max()]  # fmt: skip
+    among = [
+        r
+        for r in rejected
+        if r["verdict"] == "ambiguous"
+        and any(
+            same(name, r["effect"]) for name in (r["chosen"], r.get("rival"), *r.get("also", []))
+        )
+    ]
+    better = [
+        r
+        for r in named
+        if r["after"] is not None and np.abs(r["after"]).max() < np.abs(r["before"]).max()
+    ]
     within = [r for r in named if recovery_z(r) is not None and recovery_z(r) <= 2.0]
     missed = [r for r in rejected if r not in named and r not in among]
     return [
@@ -369,8 +403,12 @@ def _findings(rows):
         f"{len(named)}; refit consistent: {sum(r['verdict'] == 'explained' for r in named)}; "
         f"declared `ambiguous` with the truth among the two named: {len(among)}; neither: "
         f"{len(missed)}"
-        + "".join(f" ({r['effect']} {r['size']}: {r['verdict']}"
-                  + (f", {r['chosen']} named" if r["chosen"] else "") + ")" for r in missed),
+        + "".join(
+            f" ({r['effect']} {r['size']}: {r['verdict']}"
+            + (f", {r['chosen']} named" if r["chosen"] else "")
+            + ")"
+            for r in missed
+        ),
         f"- of those named, parameters within 2 reported sd of the truth (or of a mirror "
         f"image of it): {len(within)} of {len(named)} (largest |error| / sd per row: "
         + ", ".join(f"{r['effect']} {r['size']} {recovery_z(r):.1f}" for r in named)

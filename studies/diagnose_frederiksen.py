@@ -50,8 +50,7 @@ def run(case, sigma_rel, quick=False):
     model = PlateModel.from_case(case, mesh=mesh)
     start = time.perf_counter()
     # pairing by order, as the paper's and as from_published's check assumes
-    d = diagnose(case, model=model, rng=SEED, pairing="order",
-                 **({"n_starts": 1} if quick else {}))  # fmt: skip
+    d = diagnose(case, model=model, rng=SEED, pairing="order", **({"n_starts": 1} if quick else {}))
     return model, d, time.perf_counter() - start
 
 
@@ -136,26 +135,42 @@ def _section(label, model, d, seconds, figures, local):
     lines += ["| " + " | ".join(NAMES) + " |", "|" + "---|" * 6]
     lines.append("| " + " | ".join(_constants(d.nominal)) + " |")
     found, there = d.nominal.chi2 + d.nominal.chi2_prior, local.chi2 + local.chi2_prior
-    lines += ["", f"Check of the global stage: a local fit started from Frederiksen's published "
-              f"constants reaches objective (chi2 + prior) {there:.2f} (chi2 {local.chi2:.2f}) "
-              f"against diagnose's {found:.2f} (chi2 {d.nominal.chi2:.2f}): "
-              + ("the same optimum, or diagnose's is better." if found <= there + SAME
-                 else "**diagnose's global stage missed a better optimum**, at "
-                 + ", ".join(_constants(local)) + ".")]  # fmt: skip
+    lines += [
+        "",
+        f"Check of the global stage: a local fit started from Frederiksen's published "
+        f"constants reaches objective (chi2 + prior) {there:.2f} (chi2 {local.chi2:.2f}) "
+        f"against diagnose's {found:.2f} (chi2 {d.nominal.chi2:.2f}): "
+        + (
+            "the same optimum, or diagnose's is better."
+            if found <= there + SAME
+            else "**diagnose's global stage missed a better optimum**, at "
+            + ", ".join(_constants(local))
+            + "."
+        ),
+    ]
     lines += ["", "Candidates, best first (Laplace evidence gain over the nominal model):", ""]
     lines += ["| physics | gain (nats) | chi2 | parameters |", "|---|---|---|---|"]
     for c in d.candidates:
         where = "" if c.fit.refined else " (coarse mesh)"
-        params = ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
-                           for k, v in c.parameters.items())  # fmt: skip
-        lines.append(f"| {c.name} | {c.log_evidence_gain:+.1f}{where} | {c.fit.chi2:.2f} | "
-                     f"{params} |")  # fmt: skip
+        params = ", ".join(
+            f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}" for k, v in c.parameters.items()
+        )
+        lines.append(
+            f"| {c.name} | {c.log_evidence_gain:+.1f}{where} | {c.fit.chi2:.2f} | {params} |"
+        )
     if d.chosen is not None:
-        lines += ["", f"Refit with {d.chosen.name}: chi2 = {d.chosen.fit.chi2:.2f} on "
-                  f"{d.refit_dof:.1f} dof, p = {d.refit_p_value:.3g}; constants "
-                  + ", ".join(_constants(d.chosen.fit))]  # fmt: skip
-    lines += ["", "Unidentified by the data (prior dominates): "
-              + (", ".join(d.unidentified) or "none") + "."]  # fmt: skip
+        lines += [
+            "",
+            f"Refit with {d.chosen.name}: chi2 = {d.chosen.fit.chi2:.2f} on "
+            f"{d.refit_dof:.1f} dof, p = {d.refit_p_value:.3g}; constants "
+            + ", ".join(_constants(d.chosen.fit)),
+        ]
+    lines += [
+        "",
+        "Unidentified by the data (prior dominates): "
+        + (", ".join(d.unidentified) or "none")
+        + ".",
+    ]
     lines += [f"Note: {n}." for n in d.notes]
     lines += [""] + [f"![{name}]({path})" for name, path in figures.items()] + [""]
     return "\n".join(lines)
@@ -167,8 +182,10 @@ def _rms_percent(d):
 
 
 def _constants(fit_):
-    return [f"{v / u:.4g} +- {s / u:.2g}"
-            for v, s, u in zip(fit_.constants, fit_.constants_sd, UNITS, strict=True)]  # fmt: skip
+    return [
+        f"{v / u:.4g} +- {s / u:.2g}"
+        for v, s, u in zip(fit_.constants, fit_.constants_sd, UNITS, strict=True)
+    ]
 
 
 if __name__ == "__main__":

@@ -124,8 +124,11 @@ def fit_b(task):
         return None
     lin = linearised_at(problem, result.b)
     sd = np.sqrt(np.diag(engineering_covariance(result.constants, lin.covariance_b)))
-    return (_covers(result.constants, result.sd), _covers(result.constants, sd),
-            np.array(lin.summary.interval))  # fmt: skip
+    return (
+        _covers(result.constants, result.sd),
+        _covers(result.constants, sd),
+        np.array(lin.summary.interval),
+    )
 
 
 def fit_sampler(seed, true_s, rng):
@@ -141,12 +144,12 @@ def fit_sampler(seed, true_s, rng):
         setup = prepare(case, model=model, rng=rng)
         if not setup.estimate.converged:  # as B's failures in fit_b: no walkers around it
             return None
-        result = sample(case, rng=rng, setup=setup, progress=False, min_ess=400,
-                        max_steps=3000)  # fmt: skip
+        result = sample(case, rng=rng, setup=setup, progress=False, min_ess=400, max_steps=3000)
     if not result.converged:
         return None
-    summary, _ = scale_from_draws(setup.problem, result.samples_b, setup.sampling_forward(),
-                                  rng=rng)  # fmt: skip
+    summary, _ = scale_from_draws(
+        setup.problem, result.samples_b, setup.sampling_forward(), rng=rng
+    )
     covers = (result.hdi[0] <= E_TRUE) & (E_TRUE <= result.hdi[1])
     return covers, np.array(summary.interval)
 
@@ -155,20 +158,24 @@ def _covers(estimate, sd):
     return np.abs(estimate - E_TRUE) <= Z94 * sd
 
 
-def run(n_replicates=200, toy_replicates=TOY_REPLICATES, sampler_minutes=10.0, seed=SEED,
-        workers=1):  # fmt: skip
+def run(
+    n_replicates=200, toy_replicates=TOY_REPLICATES, sampler_minutes=10.0, seed=SEED, workers=1
+):
     """All records (see :func:`report`)."""
     rng = np.random.default_rng(seed)
     toy_rng, plate_rng = rng.spawn(2)
     toys = {}
     for prior in TOY_PRIORS:
-        toys[(prior, TRUE_SCALE)] = toy(toy_replicates, toy_rng, ErrorScalePrior(*prior),
-                                        TRUE_SCALE)  # fmt: skip
+        toys[(prior, TRUE_SCALE)] = toy(
+            toy_replicates, toy_rng, ErrorScalePrior(*prior), TRUE_SCALE
+        )
     toys[(TOY_PRIORS[0], 1.0)] = toy(toy_replicates, toy_rng, ErrorScalePrior(*TOY_PRIORS[0]), 1.0)
     seeds = plate_rng.integers(2**63, size=n_replicates)
     started = time.perf_counter()
-    plates = {s: map_tasks(fit_b, [(int(k), s) for k in seeds], workers=workers, progress=False)
-              for s in (TRUE_SCALE, 1.0)}  # fmt: skip
+    plates = {
+        s: map_tasks(fit_b, [(int(k), s) for k in seeds], workers=workers, progress=False)
+        for s in (TRUE_SCALE, 1.0)
+    }
     b_seconds = time.perf_counter() - started
     started = time.perf_counter()
     sampled = []
@@ -224,8 +231,10 @@ def report(toys, plates, sampled, b_seconds, sampler_seconds, command):
         "|---|---|---|---|---|---|",
     ]
     for (prior, true_s), (without, with_, s_in) in toys.items():
-        out.append(f"| {true_s:g} | {prior[0]:g}, {prior[1]:g} | {_cell(without)} | "
-                   f"{_cell(with_)} | {_cell(s_in)} | {_band(without.size)} |")  # fmt: skip
+        out.append(
+            f"| {true_s:g} | {prior[0]:g}, {prior[1]:g} | {_cell(without)} | "
+            f"{_cell(with_)} | {_cell(s_in)} | {_band(without.size)} |"
+        )
     out += [
         "",
         f"## 2. Synthetic plate (B, linearised; prior of s: median {SCALE_PRIOR[0]:g}, upper "
@@ -250,15 +259,25 @@ def report(toys, plates, sampled, b_seconds, sampler_seconds, command):
         for k, name in ((0, "without"), (1, "with")):
             hits = np.array([r[k] for r in used])
             cells = [_cell(hits[:, j]) for j in range(6)]
-            out.append(f"| {true_s:g} | {len(used)} ({failed}) | {name} | {_band(len(used))} | "
-                       + " | ".join(cells) + f" | {_cell(hits)} | "
-                       + (_cell(s_in) if k else "-") + " |")  # fmt: skip
+            out.append(
+                f"| {true_s:g} | {len(used)} ({failed}) | {name} | {_band(len(used))} | "
+                + " | ".join(cells)
+                + f" | {_cell(hits)} | "
+                + (_cell(s_in) if k else "-")
+                + " |"
+            )
         med = np.median(np.sqrt(s_iv.prod(axis=1)))
-        out.append(f"|  |  | (median over replicates of the geometric centre of s's interval: "
-                   f"{med:.2f}) |  |" + "  |" * 8)  # fmt: skip
+        out.append(
+            f"|  |  | (median over replicates of the geometric centre of s's interval: "
+            f"{med:.2f}) |  |" + "  |" * 8
+        )
     done = [r for r in sampled if r is not None]
-    out += ["", f"## 3. Sampler (emcee, the scale integrated out; true noise {TRUE_SCALE:g} "
-            "times the declared)", ""]  # fmt: skip
+    out += [
+        "",
+        f"## 3. Sampler (emcee, the scale integrated out; true noise {TRUE_SCALE:g} "
+        "times the declared)",
+        "",
+    ]
     if not sampled:
         out.append("Not run (quick mode or no time given).")
     else:
@@ -266,13 +285,19 @@ def report(toys, plates, sampled, b_seconds, sampler_seconds, command):
         s_iv = np.array([r[1] for r in done]) if done else np.zeros((0, 2))
         s_in = (s_iv[:, 0] <= TRUE_SCALE) & (TRUE_SCALE <= s_iv[:, 1])
         failed = len(sampled) - len(done)
-        out.append(f"{len(sampled)} replicates sampled ({failed} had no converged MAP or "
-                   f"chain); 94 % HDI coverage pooled over the constants "
-                   f"{_cell(hits) if done else '-'}; s inside its 94 % interval (one draw per "
-                   f"kept draw) {_cell(s_in) if done else '-'}; intervals of s: "
-                   + ", ".join(f"[{a:.2f}, {b:.2f}]" for a, b in s_iv[:6]) + ".")  # fmt: skip
-    out += ["", "Regenerate: `python studies/error_scale.py` (the numbers above come from the "
-            "command at the top)."]  # fmt: skip
+        out.append(
+            f"{len(sampled)} replicates sampled ({failed} had no converged MAP or "
+            f"chain); 94 % HDI coverage pooled over the constants "
+            f"{_cell(hits) if done else '-'}; s inside its 94 % interval (one draw per "
+            f"kept draw) {_cell(s_in) if done else '-'}; intervals of s: "
+            + ", ".join(f"[{a:.2f}, {b:.2f}]" for a, b in s_iv[:6])
+            + "."
+        )
+    out += [
+        "",
+        "Regenerate: `python studies/error_scale.py` (the numbers above come from the "
+        "command at the top).",
+    ]
     return "\n".join(out) + "\n"
 
 

@@ -133,8 +133,14 @@ def sample_replicate(case, model, inputs, rng, **settings):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # full-model fallbacks are counted in the result
         # the replicates are every low mode, sorted: pairing by order (named, issue 16)
-        return sample(case, rng=rng, model=model, inputs=inputs, progress=False,
-                      **{"pairing": "order", **settings})  # fmt: skip
+        return sample(
+            case,
+            rng=rng,
+            model=model,
+            inputs=inputs,
+            progress=False,
+            **{"pairing": "order", **settings},
+        )
 
 
 def fit_sampler(case, model, inputs, rng, **settings):
@@ -237,12 +243,15 @@ def run(out_dir, n_replicates=200, sampler_minutes=None, quick=False, seed=SEED)
         row = _sampler_row(case, model, i, h, rho)
         keep(f"sampler/{i}", row)
         done = sum(k.startswith("sampler/") for k in rows)
-        print(f"sampler {i:3d}: covers (of 6) " + ", ".join(
-            f"{t} {'-' if c is None else sum(c)}" for t, c in row["covers"].items())
+        print(
+            f"sampler {i:3d}: covers (of 6) "
+            + ", ".join(f"{t} {'-' if c is None else sum(c)}" for t, c in row["covers"].items())
             + f"; inputs {row.get('inputs_covers')}; certificate "
             f"{row.get('certificate_in_sd', float('nan')):.2f} sd; {row['seconds']:.1f} s, "
             f"load {row['load']:.1f} ({done}/{n_replicates} done, "
-            f"{time.perf_counter() - started:.0f} s)", flush=True)  # fmt: skip
+            f"{time.perf_counter() - started:.0f} s)",
+            flush=True,
+        )
     return rows, errors, time.perf_counter() - started
 
 
@@ -331,12 +340,18 @@ def _table(records, method):
 
 
 def _certificate_lines(rows):
-    sizes = [r["certificate_in_sd"] for k, r in rows.items()
-             if k.startswith("sampler/") and "certificate_in_sd" in r]  # fmt: skip
+    sizes = [
+        r["certificate_in_sd"]
+        for k, r in rows.items()
+        if k.startswith("sampler/") and "certificate_in_sd" in r
+    ]
     if not sizes:
         return []
-    failed = sum(not r["certificate_passed"] for k, r in rows.items()
-                 if k.startswith("sampler/") and "certificate_passed" in r)  # fmt: skip
+    failed = sum(
+        not r["certificate_passed"]
+        for k, r in rows.items()
+        if k.startswith("sampler/") and "certificate_passed" in r
+    )
     med, hi = np.median(sizes), np.max(sizes)
     return [
         "",
@@ -425,8 +440,12 @@ if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="6 replicates, no sampler")
     parser.add_argument("--replicates", type=int, default=None, help="default 200")
-    parser.add_argument("--sampler-minutes", type=float, default=None,
-                        help="cap on this run's sampling (default: none)")  # fmt: skip
+    parser.add_argument(
+        "--sampler-minutes",
+        type=float,
+        default=None,
+        help="cap on this run's sampling (default: none)",
+    )
     parser.add_argument("--out", default=pathlib.Path(__file__).resolve().parents[1] / "reports")
     args = parser.parse_args()
     print(main(args.out, args.quick, args.replicates, args.sampler_minutes))

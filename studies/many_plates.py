@@ -175,8 +175,9 @@ def main(argv=()):
     singles = [sample(c, rng=11 + i, **opts) for i, c in enumerate(cases[:3])]
     joint = sample_plates(cases[:3], rng=21, **opts)
     four = sample_plates(cases, rng=31, **opts)
-    hier = sample_hierarchical(joint.setup.setups, joint.setup.singles, rng=41, max_steps=1000,
-                               min_ess=opts["min_ess"])  # fmt: skip
+    hier = sample_hierarchical(
+        joint.setup.setups, joint.setup.singles, rng=41, max_steps=1000, min_ess=opts["min_ess"]
+    )
     elapsed = time.perf_counter() - started
     s = joint.sampling
     lines = [
@@ -262,8 +263,10 @@ def main(argv=()):
     hm, hs, hp = to_case_units(hier.mean), to_case_units(hier.sd), to_case_units(hier.plate_mean)
     for j, key in enumerate(ENGINEERING_KEYS):
         plates_j = " | ".join(f"{hp[p, j]:.4g}" for p in range(3))
-        lines.append(f"| {key} | {hm[j]:.4g} | {hs[j]:.3g} | {hier.tau_mean[j]:.3f} | "
-                     f"{hier.tau_hdi[1, j]:.3f} | {plates_j} |")  # fmt: skip
+        lines.append(
+            f"| {key} | {hm[j]:.4g} | {hs[j]:.3g} | {hier.tau_mean[j]:.3f} | "
+            f"{hier.tau_hdi[1, j]:.3f} | {plates_j} |"
+        )
     lines += [
         "",
         "The chain mixes slowly where the plates identify a constant well (E1, E2, G12: "

@@ -104,13 +104,14 @@ def summary(rule_rows, base_rows):
             entry[side] = {
                 "alarms": sum(r["verdict"] != "consistent" for r in rows),
                 "named": sum(cal.named(r) for r in rows if r["kind"] == "power"),
-                "wrong": sum(cal.wrong_name(r) or cal.wrong_pair(r) for r in rows
-                             if r["kind"] == "power"),
+                "wrong": sum(
+                    cal.wrong_name(r) or cal.wrong_pair(r) for r in rows if r["kind"] == "power"
+                ),
                 "verdicts": _verdicts(rows),
                 "p": _p_quantiles(rows),
                 "widening": _widening(rows),
                 "nominal_rejected": sum(r.get("p_value", 1.0) < 0.01 for r in rows),
-            }  # fmt: skip
+            }
         out[group] = entry
     return out
 
@@ -127,16 +128,19 @@ def write_report(out_dir, stored, base_rows, quick, workers):
         f"{', '.join(sorted({r['code'] for r in stored['rows'].values()})) or '-'}; "
         f"{len(stored['rows'])} of {stored['planned']} replicates finished in "
         f"{stored['seconds'] / 60:.0f} min of wall time; one diagnosis took "
-        + (f"{np.median(seconds):.0f} s (median; {min(seconds):.0f}-{max(seconds):.0f} s)."
-           if seconds else "-.")
+        + (
+            f"{np.median(seconds):.0f} s (median; {min(seconds):.0f}-{max(seconds):.0f} s)."
+            if seconds
+            else "-."
+        )
         + f" Load averages (1, 5, 15 min) when written: "
         f"{', '.join(f'{x:.2f}' for x in os.getloadavg())}.",
         "",
         "The calibration study's recordings (its plates, meshes, seeds and 0.2 % noise) "
-        "diagnosed again with `mesh_error_part=\"unabsorbed\"`: the deviations widened only by "
+        'diagnosed again with `mesh_error_part="unabsorbed"`: the deviations widened only by '
         "the part of the mesh's estimated error that the six constants cannot absorb "
         "(`bayesplate.discrepancy.search.mesh_error`), beside the calibration study's rows of the "
-        "same replicates (the default, `\"whole\"`: the whole estimate added). Only "
+        'same replicates (the default, `"whole"`: the whole estimate added). Only '
         "replicates both rules ran are counted. `widening`: the median over the replicates "
         "of each one's median factor on the deviations under the other rule (under the "
         "whole one, 1.0-2.5, median 1.33 on the Frederiksen plate: `calibration.md`; its "
@@ -153,8 +157,10 @@ def write_report(out_dir, stored, base_rows, quick, workers):
         power = group.startswith("power/")
         lines.append(
             f"| {group} | {e['size'] if power else '-'} | {e['n']} | {d['alarms']} / "
-            f"{r['alarms']} | " + (f"{d['named']} / {r['named']}" if power else "-")
-            + " | " + (f"{d['wrong']} / {r['wrong']}" if power else "-")
+            f"{r['alarms']} | "
+            + (f"{d['named']} / {r['named']}" if power else "-")
+            + " | "
+            + (f"{d['wrong']} / {r['wrong']}" if power else "-")
             + f" | {d['nominal_rejected']} / {r['nominal_rejected']} | {d['p']}; {r['p']} | "
             f"{r['widening']} | {r['verdicts']} |"
         )
@@ -175,18 +181,26 @@ def write_report(out_dir, stored, base_rows, quick, workers):
         f"- Wrong names (target: none): whole {sum(e['default']['wrong'] for e in power)}, "
         f"unabsorbed {sum(e['rule']['wrong'] for e in power)}.",
     ]
-    wrong = [(k, r) for k, r in sorted(stored["rows"].items()) if r["kind"] == "power"
-             and (cal.wrong_name(r) or cal.wrong_pair(r)) and k in base_rows]  # fmt: skip
-    alarms = [(k, r) for k, r in sorted(stored["rows"].items()) if r["kind"] == "clean"
-              and r["verdict"] not in ("consistent", "error") and k in base_rows]  # fmt: skip
+    wrong = [
+        (k, r)
+        for k, r in sorted(stored["rows"].items())
+        if r["kind"] == "power" and (cal.wrong_name(r) or cal.wrong_pair(r)) and k in base_rows
+    ]
+    alarms = [
+        (k, r)
+        for k, r in sorted(stored["rows"].items())
+        if r["kind"] == "clean" and r["verdict"] not in ("consistent", "error") and k in base_rows
+    ]
     if wrong or alarms:
         lines += ["", "## Wrong names and false alarms under the other rule", ""]
         for k, r in alarms + wrong:
             named = [n for n in (r["chosen"], r["rival"], *r.get("also", [])) if n]
             base = base_rows[k]
-            lines.append(f"- `{k}`: {r['verdict']} ({' or '.join(named) or '-'}), nominal p "
-                         f"{r['p_value']:.2g}; under the whole rule {base['verdict']}"
-                         + (f" ({base['chosen']})" if base.get("chosen") else ""))  # fmt: skip
+            lines.append(
+                f"- `{k}`: {r['verdict']} ({' or '.join(named) or '-'}), nominal p "
+                f"{r['p_value']:.2g}; under the whole rule {base['verdict']}"
+                + (f" ({base['chosen']})" if base.get("chosen") else "")
+            )
     if errors:
         lines += ["", "## Failures", ""] + [f"- `{r['key']}`: {r['error']}" for r in errors]
     path = pathlib.Path(out_dir) / (REPORT if not quick else "mesh_error_rule-quick.md")
@@ -204,8 +218,11 @@ def main(out_dir="reports", quick=False, workers=None, report_only=False):
         sizes = cal.sizes(quick)
     path = _cache_path(out_dir, quick)
     stored = json.loads(path.read_text()) if path.exists() else {"rows": {}, "seconds": 0.0}
-    todo = [] if report_only else [t for t in selected(sizes, quick)
-                                   if cal.task_key(t) not in stored["rows"]]  # fmt: skip
+    todo = (
+        []
+        if report_only
+        else [t for t in selected(sizes, quick) if cal.task_key(t) not in stored["rows"]]
+    )
     stored["planned"] = len(selected(sizes, quick))
     stored.setdefault("made", datetime.date.today().isoformat())
     print(f"{len(todo)} replicates to run ({len(stored['rows'])} cached)", flush=True)
@@ -217,14 +234,18 @@ def main(out_dir="reports", quick=False, workers=None, report_only=False):
         stored["made"] = datetime.date.today().isoformat()
         path.parent.mkdir(parents=True, exist_ok=True)
         atomic_write_text(path, json.dumps(stored))
-        print(f"{row['key']:48s} {row['verdict']:12s} {row['chosen'] or '-':22s} "
-              f"{row['seconds']:5.0f} s ({position + 1}/{len(todo)})", flush=True)  # fmt: skip
+        print(
+            f"{row['key']:48s} {row['verdict']:12s} {row['chosen'] or '-':22s} "
+            f"{row['seconds']:5.0f} s ({position + 1}/{len(todo)})",
+            flush=True,
+        )
         write_report(out_dir, stored, base_rows, quick, workers)
 
     cal._ship_by_value()
     if todo:
-        task = functools.partial(cal.run_task_recorded, quick=quick, code=code_version(),
-                                 options=RULE)  # fmt: skip
+        task = functools.partial(
+            cal.run_task_recorded, quick=quick, code=code_version(), options=RULE
+        )
         map_tasks(task, todo, workers=workers, progress=False, on_result=keep)
     return write_report(out_dir, stored, base_rows, quick, workers)
 

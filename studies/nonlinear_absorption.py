@@ -114,8 +114,9 @@ def exact_fit(plate, b_true, lam_effect, sigma, prior=None):
 
     out = least_squares(residuals, np.zeros(6), jac=jacobian, xtol=1e-10, ftol=1e-12)
     r = out.fun
-    return Exact(float(np.sum(r[:m] ** 2)), float(np.sum(r[m:] ** 2)), b_true * np.exp(out.x),
-                 r, out.jac)  # fmt: skip
+    return Exact(
+        float(np.sum(r[:m] ** 2)), float(np.sum(r[m:] ** 2)), b_true * np.exp(out.x), r, out.jac
+    )
 
 
 def plate(quick=False):
@@ -129,8 +130,9 @@ def plate(quick=False):
 
 def _recorded(fitted, widening, dof):
     """:func:`calibration.recorded_noise_power` of an :class:`Exact` fit, seeded."""
-    return cal.recorded_noise_power(fitted.residual, fitted.jacobian, widening, dof,
-                                    np.random.default_rng(cal.DRAWS_SEED))  # fmt: skip
+    return cal.recorded_noise_power(
+        fitted.residual, fitted.jacobian, widening, dof, np.random.default_rng(cal.DRAWS_SEED)
+    )
 
 
 def effective_dof(fitted, m):
@@ -171,30 +173,44 @@ def row(task, plated, widening=None):
         seen = exact_fit(working, b, lam, wide, prior)
         dof = effective_dof(seen, m)
         seen_power = _recorded(seen, widening, dof)
-        widened = {"widening": float(np.median(widening)), "widened_prior_term": fitted.prior_term,
-                   "widened_linearised": cal.fitted_noncentrality(delta, nominal.sensitivities,
-                                                                  wide),
-                   "widened_exact": fitted.chi2, "recorded_noise_power": power,
-                   "working_exact": seen.chi2, "working_dof": dof,
-                   "working_power": seen_power}  # fmt: skip
-    return {**widened,
-        "effect": effect, "label": label, "size": float(size), "m": int(m),
+        widened = {
+            "widening": float(np.median(widening)),
+            "widened_prior_term": fitted.prior_term,
+            "widened_linearised": cal.fitted_noncentrality(delta, nominal.sensitivities, wide),
+            "widened_exact": fitted.chi2,
+            "recorded_noise_power": power,
+            "working_exact": seen.chi2,
+            "working_dof": dof,
+            "working_power": seen_power,
+        }
+    return {
+        **widened,
+        "effect": effect,
+        "label": label,
+        "size": float(size),
+        "m": int(m),
         "ideal": float(np.sum((delta / sigma) ** 2)),
         "linearised": cal.fitted_noncentrality(delta, nominal.sensitivities, sigma),
-        "exact": free.chi2, "exact_ratio": (engineering_from_stiffness(free.b) / truth).tolist(),
-        "prior_chi2": held.chi2, "prior_term": held.prior_term,
+        "exact": free.chi2,
+        "exact_ratio": (engineering_from_stiffness(free.b) / truth).tolist(),
+        "prior_chi2": held.chi2,
+        "prior_term": held.prior_term,
         "prior_at_truth": float(np.sum(((truth - prior[0]) / prior[1]) ** 2)),
         "prior_ratio": (engineering_from_stiffness(held.b) / truth).tolist(),
         "seconds": time.perf_counter() - start,
-    }  # fmt: skip
+    }
 
 
 def tasks(size_table, quick=False, effects=None):
     """``(effect, size label, size)`` of every row, in the calibration study's order."""
     labels = [entry[0] for entry in cal.SIZES]
-    return [(name, label, entry["sizes"][labels.index(label)])
-            for name, entry in size_table.items() if effects is None or name in effects
-            for label in LABELS if entry["sizes"][labels.index(label)] is not None]  # fmt: skip
+    return [
+        (name, label, entry["sizes"][labels.index(label)])
+        for name, entry in size_table.items()
+        if effects is None or name in effects
+        for label in LABELS
+        if entry["sizes"][labels.index(label)] is not None
+    ]
 
 
 def calibration(out_dir, quick):
@@ -212,8 +228,9 @@ def diagnosed(rows, effect, size):
     """What the calibration study's replicates of ``effect`` at ``size`` say: the median of
     diagnose's factors on the deviations (None without rows) and how many replicates its
     nominal test rejected at 1 %, of how many."""
-    mine = [r for r in rows if r.get("effect") == effect and r.get("size") == size
-            and "widening" in r]  # fmt: skip
+    mine = [
+        r for r in rows if r.get("effect") == effect and r.get("size") == size and "widening" in r
+    ]
     if not mine:
         return None, 0, 0
     widening = np.median([r["widening"] for r in mine], axis=0)
@@ -229,9 +246,14 @@ def _changed(ratio):
 
 def _run_facts(workers, minutes):
     """When, where and by what code the rows were made (kept with them)."""
-    return {"workers": workers, "minutes": minutes, "code": code_version(), "cpu": cpu(),
-            "made": utc_now(),
-            "load": list(os.getloadavg())}  # fmt: skip
+    return {
+        "workers": workers,
+        "minutes": minutes,
+        "code": code_version(),
+        "cpu": cpu(),
+        "made": utc_now(),
+        "load": list(os.getloadavg()),
+    }
 
 
 def _size_and_power(r, linearised, exact):
@@ -239,8 +261,10 @@ def _size_and_power(r, linearised, exact):
     (``m - 6`` dof, 1 %), as table cells."""
     unit = cal.EFFECTS[r["effect"]][2]
     power = [cal.ideal_power(r[k], r["m"] - cal.N_CONSTANTS) for k in (linearised, exact)]
-    return (f"{r['effect']} | {r['size']:.2g} {unit} ({r['label']})",
-            f"{power[0]:.2f} / {power[1]:.2f}")  # fmt: skip
+    return (
+        f"{r['effect']} | {r['size']:.2g} {unit} ({r['label']})",
+        f"{power[0]:.2f} / {power[1]:.2f}",
+    )
 
 
 def _working(r):

@@ -174,14 +174,25 @@ def fast_rows(specs, models, full_lines, log=print):
             line = judge(line)
             ref = full[(spec, line.stage)]
             diff = np.max(np.abs(line.ours.constants / ref.ours.constants - 1.0))
-            rows.append({"table": spec.table, "source": spec.source, "test": spec.test or "",
-                         "label": spec.label, "stage": line.stage, "diff": float(diff),
-                         "iterations": (line.ours.iterations, ref.ours.iterations),
-                         "status": (_stopped(result), _stopped(ref.run)),
-                         "agrees": (line.agrees, ref.agrees), "check": result.check,
-                         "seconds": time.perf_counter() - started})  # fmt: skip
-        log(f"  fast: Table {spec.table} {spec.source} {spec.test or ''} {spec.label}: "
-            f"{rows[-1]['diff']:.1e}")  # fmt: skip
+            rows.append(
+                {
+                    "table": spec.table,
+                    "source": spec.source,
+                    "test": spec.test or "",
+                    "label": spec.label,
+                    "stage": line.stage,
+                    "diff": float(diff),
+                    "iterations": (line.ours.iterations, ref.ours.iterations),
+                    "status": (_stopped(result), _stopped(ref.run)),
+                    "agrees": (line.agrees, ref.agrees),
+                    "check": result.check,
+                    "seconds": time.perf_counter() - started,
+                }
+            )
+        log(
+            f"  fast: Table {spec.table} {spec.source} {spec.test or ''} {spec.label}: "
+            f"{rows[-1]['diff']:.1e}"
+        )
     return rows
 
 
@@ -227,8 +238,7 @@ def fast_markdown(rows, quick):
     ]
     for r in rows:
         check = r["check"]
-        text = "-" if check is None else (
-            f"{check.max_rel_error:.0e}, {check.rounds} run(s)")  # fmt: skip
+        text = "-" if check is None else (f"{check.max_rel_error:.0e}, {check.rounds} run(s)")
         agree = " / ".join("yes" if a else "**no**" for a in r["agrees"])
         out.append(
             f"| {r['table']} | {r['source']} {r['test']} {r['label']} | {r['stage'] or '-'} | "

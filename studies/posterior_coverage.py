@@ -74,8 +74,11 @@ METHODS = ("sampler", "B", "MVE", "MVE@1e-3")
 #: TOL of each linearised estimator: B as studies/input_coverage.py; MVE at that TOL and at
 #: the command line's default (1e-3), at which it stops where 1e-6 finds it oscillating
 TOLS = {"B": 1e-6, "MVE": 1e-6, "MVE@1e-3": 1e-3}
-LABELS = {"sampler+": "sampler, other-mode replicates left out", "MVE": "MVE (TOL 1e-6)",
-          "MVE@1e-3": "MVE (TOL 1e-3)"}  # fmt: skip
+LABELS = {
+    "sampler+": "sampler, other-mode replicates left out",
+    "MVE": "MVE (TOL 1e-6)",
+    "MVE@1e-3": "MVE (TOL 1e-3)",
+}
 #: the sampler's settings: one replicate in about 6 s on one core (measured before choosing)
 SAMPLER = {"n_walkers": 32, "min_ess": 600.0, "max_steps": 2000}
 QUICK_SAMPLER = {"n_walkers": 32, "min_ess": 300.0, "max_steps": 2000}
@@ -95,8 +98,9 @@ def _model():
 def draw(design, index):
     """Replicate `index` of `design`: (case as written, seed sequence of its chain)."""
     data, chain = np.random.SeedSequence(SEED, spawn_key=(DESIGNS.index(design), index)).spawn(2)
-    prior = {} if design == "drawn" else {"prior_mean": FIXED_PRIOR_MEAN,
-                                          "prior_sd": FIXED_PRIOR_SD}  # fmt: skip
+    prior = (
+        {} if design == "drawn" else {"prior_mean": FIXED_PRIOR_MEAN, "prior_sd": FIXED_PRIOR_SD}
+    )
     case, _, _ = ic.draw(np.random.default_rng(data), input_errors=False, **prior)
     return case, chain
 
@@ -133,8 +137,11 @@ def _cache_path(out_dir, quick):
 
 
 def _settings(quick):
-    return {"seed": SEED, "sampler": QUICK_SAMPLER if quick else SAMPLER,
-            "fixed_prior_rel": [1.1, 0.9, 1.1, 0.9, 1.1, 0.9, 0.5]}  # fmt: skip
+    return {
+        "seed": SEED,
+        "sampler": QUICK_SAMPLER if quick else SAMPLER,
+        "fixed_prior_rel": [1.1, 0.9, 1.1, 0.9, 1.1, 0.9, 0.5],
+    }
 
 
 def load_rows(out_dir, quick):
@@ -146,8 +153,9 @@ def load_rows(out_dir, quick):
     return stored["rows"] if stored.get("settings") == _settings(quick) else {}
 
 
-def main(out_dir, quick=False, replicates=None, designs=("drawn",), workers=None,
-         report_only=False):  # fmt: skip
+def main(
+    out_dir, quick=False, replicates=None, designs=("drawn",), workers=None, report_only=False
+):
     """Run the replicates not yet in the cache, write the report and figure; return the path.
 
     With `report_only`, nothing runs: the report is written from the cached rows.
@@ -157,8 +165,17 @@ def main(out_dir, quick=False, replicates=None, designs=("drawn",), workers=None
     workers = workers or (1 if quick else 2)
     rows = load_rows(out_dir, quick)
     # a replicate not run, or run before a method was added: only what is missing runs
-    todo = [(d, i, tuple(m for m in METHODS if m not in rows.get(f"{d}/{i}", {"intervals": {}})
-                         ["intervals"])) for d in designs for i in range(n)]  # fmt: skip
+    todo = [
+        (
+            d,
+            i,
+            tuple(
+                m for m in METHODS if m not in rows.get(f"{d}/{i}", {"intervals": {}})["intervals"]
+            ),
+        )
+        for d in designs
+        for i in range(n)
+    ]
     todo = [t for t in todo if t[2]]
     if report_only:
         todo = []
@@ -175,10 +192,13 @@ def main(out_dir, quick=False, replicates=None, designs=("drawn",), workers=None
         atomic_write_text(_cache_path(out_dir, quick), json.dumps(stored))
         got = row["intervals"]
         hits = {m: "-" if v is None else int(ic.covers(v).sum()) for m, v in got.items()}
-        print(f"{row['design']} {row['index']:3d}: covers (of 6) " +
-              ", ".join(f"{m} {h}" for m, h in hits.items()) +
-              f" ({sum(row['seconds'].values()):.1f} s; {position + 1}/{len(todo)} done, "
-              f"{time.perf_counter() - start:.0f} s)", flush=True)  # fmt: skip
+        print(
+            f"{row['design']} {row['index']:3d}: covers (of 6) "
+            + ", ".join(f"{m} {h}" for m, h in hits.items())
+            + f" ({sum(row['seconds'].values()):.1f} s; {position + 1}/{len(todo)} done, "
+            f"{time.perf_counter() - start:.0f} s)",
+            flush=True,
+        )
 
     _ship_by_value()
     task = functools.partial(run_replicate, sampler=QUICK_SAMPLER if quick else SAMPLER)
@@ -220,8 +240,9 @@ def log_posterior_gap(row, method="sampler"):
     case, _ = draw(row["design"], row["index"])
     problem = GaussianProblem.from_case(case, _model(), inputs="exact")
     centre = np.mean(row["intervals"][method], axis=0)
-    at = [problem.log_posterior(laminate.stiffness_from_engineering(e))
-          for e in (ic.E_TRUE, centre)]  # fmt: skip
+    at = [
+        problem.log_posterior(laminate.stiffness_from_engineering(e)) for e in (ic.E_TRUE, centre)
+    ]
     return float(at[0] - at[1])
 
 
@@ -231,10 +252,16 @@ def coverage(rows, design, method, skip_other_mode=False):
     With `skip_other_mode`, the replicates where :func:`other_mode` holds for the sampler are
     left out (neither used nor failed).
     """
-    rows = [r for r in rows if r["design"] == design and method in r["intervals"]
-            and not (skip_other_mode and other_mode(r))]  # fmt: skip
-    covering = [None if r["intervals"][method] is None else ic.covers(r["intervals"][method])
-                for r in rows]  # fmt: skip
+    rows = [
+        r
+        for r in rows
+        if r["design"] == design
+        and method in r["intervals"]
+        and not (skip_other_mode and other_mode(r))
+    ]
+    covering = [
+        None if r["intervals"][method] is None else ic.covers(r["intervals"][method]) for r in rows
+    ]
     return ic.summary(covering)
 
 
@@ -278,11 +305,22 @@ def _reading(rows, design):
         inside = [
             k for k, x in zip(ENGINEERING_KEYS, p, strict=True) if TARGET[0] <= x <= TARGET[1]
         ]
-        out.append(f"Sampler: {len(inside)} of 6 constants inside the target "
-                   f"{TARGET[0]:.2f}-{TARGET[1]:.2f}" +
-                   ("" if len(inside) == 6 else " (outside: " + ", ".join(
-                       f"{k} {x:.3f}" for k, x in zip(ENGINEERING_KEYS, p, strict=True)
-                       if k not in inside) + ")") + ".")  # fmt: skip
+        out.append(
+            f"Sampler: {len(inside)} of 6 constants inside the target "
+            f"{TARGET[0]:.2f}-{TARGET[1]:.2f}"
+            + (
+                ""
+                if len(inside) == 6
+                else " (outside: "
+                + ", ".join(
+                    f"{k} {x:.3f}"
+                    for k, x in zip(ENGINEERING_KEYS, p, strict=True)
+                    if k not in inside
+                )
+                + ")"
+            )
+            + "."
+        )
     mine = [r for r in rows if r["design"] == design]
     missed = [r for r in mine if other_mode(r)]
     missed_b = sum(other_mode(r, "B") for r in mine)
@@ -290,18 +328,28 @@ def _reading(rows, design):
     out.append(
         f"The sampler sat in another mode (E1, E2 or G12 off the truth by more than "
         f"{100 * MODE_MISS:.0f} %) in {len(missed)} of {len(mine)} replicates"
-        + (f": {gaps}, log posterior at the truth minus at the interval's centre, in nats"
-           if missed else "") + f"; B, started from the same prior mean, in {missed_b}."
-    )  # fmt: skip
+        + (
+            f": {gaps}, log posterior at the truth minus at the interval's centre, in nats"
+            if missed
+            else ""
+        )
+        + f"; B, started from the same prior mean, in {missed_b}."
+    )
     for method in ("B", "MVE", "MVE@1e-3"):
         used, _, p, wilson = coverage(rows, design, method)
         if not used:
             continue
         lo, hi = ic.nominal_band(used)
-        short = [f"{k} {x:.3f}" for k, x, w in zip(ENGINEERING_KEYS, p, wilson[1], strict=True)
-                 if w < 0.94]  # fmt: skip
-        over = [f"{k} {x:.3f}" for k, x, w in zip(ENGINEERING_KEYS, p, wilson[0], strict=True)
-                if w > 0.94]  # fmt: skip
+        short = [
+            f"{k} {x:.3f}"
+            for k, x, w in zip(ENGINEERING_KEYS, p, wilson[1], strict=True)
+            if w < 0.94
+        ]
+        over = [
+            f"{k} {x:.3f}"
+            for k, x, w in zip(ENGINEERING_KEYS, p, wilson[0], strict=True)
+            if w > 0.94
+        ]
         out.append(
             f"{method}: short of 94 % (Wilson interval below it): "
             f"{', '.join(short) or 'none'}; above it: {', '.join(over) or 'none'}."
@@ -346,17 +394,30 @@ def report(rows, designs, n, command, workers):
         "truth, sd 50 %), the frequentist reading: there no target applies to the "
         "constants the data barely inform.",
     ]
-    titles = {"drawn": "Prior mean drawn from the prior around the truth (sd 25 %)",
-              "fixed": "One fixed weak prior (mean +-10 % off the truth, sd 50 %)"}  # fmt: skip
+    titles = {
+        "drawn": "Prior mean drawn from the prior around the truth (sd 25 %)",
+        "fixed": "One fixed weak prior (mean +-10 % off the truth, sd 50 %)",
+    }
     for design in designs:
         got = sum(1 for r in rows if r["design"] == design)
         partial = "" if got >= n else f" (**partial: {got} of {n} replicates finished**)"
-        out += ["", f"## {titles[design]}{partial}", "", *_table(rows, design), "",
-                _reading(rows, design)]  # fmt: skip
+        out += [
+            "",
+            f"## {titles[design]}{partial}",
+            "",
+            *_table(rows, design),
+            "",
+            _reading(rows, design),
+        ]
     if errors:
         out += ["", "Errors (counted as failed): " + "; ".join(errors)]
-    out += ["", WHY, "", f"Figure: `{FIGURE}` (coverage per constant, Wilson 95 % intervals, "
-            "the binomial band at 0.94 shaded, the target dotted)."]  # fmt: skip
+    out += [
+        "",
+        WHY,
+        "",
+        f"Figure: `{FIGURE}` (coverage per constant, Wilson 95 % intervals, "
+        "the binomial band at 0.94 shaded, the target dotted).",
+    ]
     return "\n".join(out) + "\n"
 
 
@@ -400,8 +461,14 @@ def plot(rows, designs, path):
             if k == 0:
                 ax.axhspan(lo, hi, color="0.88", label=f"binomial band at 0.94 (n = {used})")
             label = f"{LABELS.get(method, method)} ({used} replicates)"
-            ax.errorbar(x + 0.16 * (k - 1.5), p, yerr=[p - wilson[0], wilson[1] - p], fmt=marker,
-                        capsize=3, label=label)  # fmt: skip
+            ax.errorbar(
+                x + 0.16 * (k - 1.5),
+                p,
+                yerr=[p - wilson[0], wilson[1] - p],
+                fmt=marker,
+                capsize=3,
+                label=label,
+            )
         ax.axhline(ic.NOMINAL, color="k", lw=0.8, ls="--", label="nominal 0.94")
         for level in TARGET:
             ax.axhline(level, color="C3", lw=0.6, ls=":")

@@ -99,8 +99,14 @@ def _shared_fast_model(case, model, priors):
         boxes.append(posterior_box(pilot, problem.mu_b, problem.V_b))
         centres.append(pilot.b)
     box = Box(np.min([b.lower for b in boxes], axis=0), np.max([b.upper for b in boxes], axis=0))
-    return fast_model(model, np.mean(centres, axis=0), box, pairing.n_modes() - pairing.extra,
-                      rng=SEED, **FAST_DEFAULTS)  # fmt: skip
+    return fast_model(
+        model,
+        np.mean(centres, axis=0),
+        box,
+        pairing.n_modes() - pairing.extra,
+        rng=SEED,
+        **FAST_DEFAULTS,
+    )
 
 
 def _frederiksen_runs(deviations, min_ess):
@@ -119,8 +125,7 @@ def _frederiksen_runs(deviations, min_ess):
 def _run(case, plate, d, setup, mean, sd, target, min_ess):
     posterior = sample(case, rng=SEED, setup=setup, progress=False, min_ess=min_ess)
     mve = setup.run_estimator("MVE")
-    return Run(plate, d, mean, sd, np.asarray(target, dtype=float), setup.estimate, mve,
-               posterior)  # fmt: skip
+    return Run(plate, d, mean, sd, np.asarray(target, dtype=float), setup.estimate, mve, posterior)
 
 
 def compute(quick=False):
@@ -132,8 +137,7 @@ def compute(quick=False):
     if not quick:
         more, fast = _frederiksen_runs(list(DEVIATIONS), min_ess)
         runs += more
-    return {"runs": runs, "fast": fast, "seconds": time.perf_counter() - started,
-            "quick": quick}  # fmt: skip
+    return {"runs": runs, "fast": fast, "seconds": time.perf_counter() - started, "quick": quick}
 
 
 # ----------------------------------------------------------------------------- report
@@ -160,16 +164,30 @@ def _run_lines(r):
         inside = p.hdi[0, i] <= r.target[i] <= p.hdi[1, i]
         paper = "" if not isinstance(r.paper_b, list) else f"{r.paper_b[i]:#.4g}"
         paper_mve = "" if not isinstance(r.paper_mve, list) else f"{r.paper_mve[i]:#.4g}"
-        rows.append([
-            f"{n} ({u})", _fmt(r.prior_mean[i], i), _fmt(r.target[i], i),
-            f"{_fmt(r.b.constants[i], i)} ({_rel(r.b.constants[i], r.target, i)} %)",
-            f"{_fmt(p.mean[i], i)} ({_rel(p.mean[i], r.target, i)} %)",
-            f"{_fmt(p.hdi[0, i], i)} to {_fmt(p.hdi[1, i], i)}" + ("" if inside else " **"),
-            f"{_fmt(r.mve.constants[i], i)} ({_rel(r.mve.constants[i], r.target, i)} %)",
-            paper, paper_mve,
-        ])  # fmt: skip
-    head = ["constant", "initial", "target", "B (MAP)", "posterior mean", "94 % HDI", "MVE",
-            "paper B", "paper MVE"]  # fmt: skip
+        rows.append(
+            [
+                f"{n} ({u})",
+                _fmt(r.prior_mean[i], i),
+                _fmt(r.target[i], i),
+                f"{_fmt(r.b.constants[i], i)} ({_rel(r.b.constants[i], r.target, i)} %)",
+                f"{_fmt(p.mean[i], i)} ({_rel(p.mean[i], r.target, i)} %)",
+                f"{_fmt(p.hdi[0, i], i)} to {_fmt(p.hdi[1, i], i)}" + ("" if inside else " **"),
+                f"{_fmt(r.mve.constants[i], i)} ({_rel(r.mve.constants[i], r.target, i)} %)",
+                paper,
+                paper_mve,
+            ]
+        )
+    head = [
+        "constant",
+        "initial",
+        "target",
+        "B (MAP)",
+        "posterior mean",
+        "94 % HDI",
+        "MVE",
+        "paper B",
+        "paper MVE",
+    ]
     if r.paper_b is None:
         head, rows = head[:-2], [row[:-2] for row in rows]
     title = "Plate 1, test 2" if r.plate == "plate1" else "Frederiksen plate"
@@ -204,8 +222,15 @@ def _summary_rows(runs):
 
         inside = np.sum((p.hdi[0] <= r.target) & (r.target <= p.hdi[1]))
         title = "Plate 1 test 2" if r.plate == "plate1" else "Frederiksen"
-        rows.append([f"{title}, d = {r.d}", worst(r.b.constants), worst(p.mean),
-                     f"{inside} of 6", worst(r.mve.constants)])  # fmt: skip
+        rows.append(
+            [
+                f"{title}, d = {r.d}",
+                worst(r.b.constants),
+                worst(p.mean),
+                f"{inside} of 6",
+                worst(r.mve.constants),
+            ]
+        )
     return rows
 
 
@@ -231,14 +256,17 @@ def write_report(results, out_dir):
         *_table(
             ["run", "B (MAP)", "posterior mean", "target inside the 94 % HDI", "MVE"],
             _summary_rows(runs),
-        ),  # fmt: skip
+        ),
         "",
         *_reading(runs),
         "",
     ]
     if fast is not None:
-        lines += [f"Frederiksen runs share one fast model over the union of their posterior "
-                  f"boxes: {fast.certificate}.", ""]  # fmt: skip
+        lines += [
+            f"Frederiksen runs share one fast model over the union of their posterior "
+            f"boxes: {fast.certificate}.",
+            "",
+        ]
     lines += ["## Runs", ""]
     for r in runs:
         lines += _run_lines(r)
@@ -272,8 +300,9 @@ def plot(results):
             f"\nprior deviations d = {r.d} of the {base}"
         )
         label = "target" if r.plate == "plate1" else "target (Frederiksen's constants)"
-        f = sampling_figures(r.posterior, {"B": r.b, "MVE": r.mve}, r.target, title=title,
-                             reference_label=label)  # fmt: skip
+        f = sampling_figures(
+            r.posterior, {"B": r.b, "MVE": r.mve}, r.target, title=title, reference_label=label
+        )
         figs[FIGURE.format(r.plate, DEVIATIONS[r.d])] = f["corner"]
     return figs
 

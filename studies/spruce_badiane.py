@@ -60,13 +60,19 @@ def run(quick=False):
         for method in ("B",) if quick else METHODS:
             started = time.perf_counter()
             r = estimate(case, method, model=model, pairing=pairing)
-            rows.append({
-                "what": f"{method} ({pairing})", "status": r.status, "iterations": r.iterations,
-                "constants": r.constants, "sd": r.sd, "seconds": time.perf_counter() - started,
-                "message": r.message,
-                "unobserved": r.settings.get("unobserved_modes"),
-                "spurious": r.settings.get("spurious_peaks"),
-            })  # fmt: skip
+            rows.append(
+                {
+                    "what": f"{method} ({pairing})",
+                    "status": r.status,
+                    "iterations": r.iterations,
+                    "constants": r.constants,
+                    "sd": r.sd,
+                    "seconds": time.perf_counter() - started,
+                    "message": r.message,
+                    "unobserved": r.settings.get("unobserved_modes"),
+                    "spurious": r.settings.get("spurious_peaks"),
+                }
+            )
             print(rows[-1]["what"], r.status, to_case_units(r.constants)[[0, 1, 3]], flush=True)
     posterior = diagnosis = None
     if not quick:
@@ -74,14 +80,28 @@ def run(quick=False):
         from bayesplate.sampling import sample
 
         started = time.perf_counter()
-        posterior = sample(case, rng=SEED, model=model, pairing="likelihood", progress=False,
-                           max_steps=1000, min_ess=1000.0)  # fmt: skip
-        rows.append({
-            "what": "posterior (likelihood)", "status": "converged" if posterior.converged
-            else "not converged", "iterations": None, "constants": posterior.mean,
-            "sd": posterior.sd, "seconds": time.perf_counter() - started, "message": "",
-            "unobserved": None, "spurious": None,
-        })  # fmt: skip
+        posterior = sample(
+            case,
+            rng=SEED,
+            model=model,
+            pairing="likelihood",
+            progress=False,
+            max_steps=1000,
+            min_ess=1000.0,
+        )
+        rows.append(
+            {
+                "what": "posterior (likelihood)",
+                "status": "converged" if posterior.converged else "not converged",
+                "iterations": None,
+                "constants": posterior.mean,
+                "sd": posterior.sd,
+                "seconds": time.perf_counter() - started,
+                "message": "",
+                "unobserved": None,
+                "spurious": None,
+            }
+        )
         started = time.perf_counter()
         diagnosis = diagnose(case, model=model, rng=SEED, pairing="order")
         diagnosis_seconds = time.perf_counter() - started
@@ -105,13 +125,16 @@ def report(case, model, rows, diagnosed, quick):
         f"constants are rescaled by {factor:.3f} (E and G; nu12 as it is) to this case's "
         "thickness and density (see the case file's comments).",
         "",
-        "| estimate | status | iterations | " + " | ".join(
+        "| estimate | status | iterations | "
+        + " | ".join(
             f"{n} ({u})" for n, u in zip(ENGINEERING_NAMES, ENGINEERING_UNITS, strict=True)
-        ) + " | E1, E2, G12 vs source | time (s) |",
+        )
+        + " | E1, E2, G12 vs source | time (s) |",
         "|---|---|---|" + "---|" * 6 + "---|---|",
-        "| source, rescaled | - | - | " + " | ".join(
-            f"{v:.4g}" for v in to_case_units(reference)) + " | - | - |",
-    ]  # fmt: skip
+        "| source, rescaled | - | - | "
+        + " | ".join(f"{v:.4g}" for v in to_case_units(reference))
+        + " | - | - |",
+    ]
     for row in rows:
         e, sd = to_case_units(row["constants"]), to_case_units(row["sd"])
         dev = 100 * (row["constants"] - reference) / reference
@@ -128,8 +151,11 @@ def report(case, model, rows, diagnosed, quick):
             lines.append(f"- {row['what']}: {row['message']}")
     diagnosis, seconds = diagnosed
     if diagnosis is not None:
-        lines += ["", f"**diagnose** (pairing by order, {seconds:.0f} s): verdict "
-                  f"**{diagnosis.verdict}**, nominal p = {diagnosis.p_value:.3g}."]  # fmt: skip
+        lines += [
+            "",
+            f"**diagnose** (pairing by order, {seconds:.0f} s): verdict "
+            f"**{diagnosis.verdict}**, nominal p = {diagnosis.p_value:.3g}.",
+        ]
         for note in diagnosis.notes:
             lines.append(f"- {note}")
     return "\n".join(lines) + "\n"

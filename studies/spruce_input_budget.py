@@ -61,10 +61,21 @@ def uncertain_case():
     """The bundled case with the sheet's deviations (density independent, 2.3 %)."""
     case = load_case(bundled_case_path(CASE))
     p = case.plate
-    rel = np.hypot.reduce([SD_H_MM * 1e-3 / p.thickness, SD_A_MM * 1e-3 / p.length,
-                           SD_B_MM * 1e-3 / p.width, SD_MASS_G / MASS_G])  # fmt: skip
-    plate = dataclasses.replace(p, thickness_sd=SD_H_MM * 1e-3, length_sd=SD_A_MM * 1e-3,
-                                width_sd=SD_B_MM * 1e-3, density_sd=rel * p.density)  # fmt: skip
+    rel = np.hypot.reduce(
+        [
+            SD_H_MM * 1e-3 / p.thickness,
+            SD_A_MM * 1e-3 / p.length,
+            SD_B_MM * 1e-3 / p.width,
+            SD_MASS_G / MASS_G,
+        ]
+    )
+    plate = dataclasses.replace(
+        p,
+        thickness_sd=SD_H_MM * 1e-3,
+        length_sd=SD_A_MM * 1e-3,
+        width_sd=SD_B_MM * 1e-3,
+        density_sd=rel * p.density,
+    )
     return dataclasses.replace(case, plate=plate)
 
 
@@ -93,19 +104,29 @@ def run(quick=False):
     rows = []
     for method in ("B",) if quick else ("B", "MVE"):
         result = estimate(case, method, model=model)
-        J = input_jacobian(case, result.b, np.asarray(result.modes) - 1,
-                           mesh=(model.mesh.nx, model.mesh.ny))  # fmt: skip
+        J = input_jacobian(
+            case, result.b, np.asarray(result.modes) - 1, mesh=(model.mesh.nx, model.mesh.ny)
+        )
         independent = estimate_budget(case, result, model, jacobian=J)
-        rows.append((result, independent, estimate_budget(mass_case(case), result, model,
-                                                          jacobian=J)))  # fmt: skip
+        rows.append(
+            (result, independent, estimate_budget(mass_case(case), result, model, jacobian=J))
+        )
     posteriors = {}
     if not quick:
         from bayesplate.sampling import sample
 
         for inputs in ("exact", "marginal"):
             started = time.perf_counter()
-            r = sample(mass_case(case), rng=SEED, model=model, pairing="likelihood",
-                       progress=False, max_steps=1000, min_ess=1000.0, inputs=inputs)  # fmt: skip
+            r = sample(
+                mass_case(case),
+                rng=SEED,
+                model=model,
+                pairing="likelihood",
+                progress=False,
+                max_steps=1000,
+                min_ess=1000.0,
+                inputs=inputs,
+            )
             posteriors[inputs] = (r, time.perf_counter() - started)
     return case, rows, posteriors
 
@@ -114,36 +135,52 @@ def _posterior_lines(posteriors, mass_budget):
     """The sampled posterior of E1, E2, G12 with the inputs exact and marginal."""
     if not posteriors:
         return []
-    out = ["", "## Posterior (sampler), density from the mass", "",
-           "emcee on the certified fast model, pairing by likelihood, seed "
-           f"{SEED}; `marginal`: the inputs' deviations in V_Y (`bayesplate sample` with the "
-           "mass keys does this by default). The last column is B's linearised sd with the "
-           "inputs (the budget above), for comparison.", "",
-           "| inputs | constant | posterior mean | posterior sd | 94 % HDI | B sd with inputs |",
-           "|---|---|---|---|---|---|"]  # fmt: skip
+    out = [
+        "",
+        "## Posterior (sampler), density from the mass",
+        "",
+        "emcee on the certified fast model, pairing by likelihood, seed "
+        f"{SEED}; `marginal`: the inputs' deviations in V_Y (`bayesplate sample` with the "
+        "mass keys does this by default). The last column is B's linearised sd with the "
+        "inputs (the budget above), for comparison.",
+        "",
+        "| inputs | constant | posterior mean | posterior sd | 94 % HDI | B sd with inputs |",
+        "|---|---|---|---|---|---|",
+    ]
     budget_sd = to_case_units(mass_budget.sd)
     for inputs, (r, _) in posteriors.items():
         mean, sd, hdi = (to_case_units(v) for v in (r.mean, r.sd, r.hdi))
         for j in SHOWN:
-            out.append(f"| {inputs} | {ENGINEERING_KEYS[j]} | {mean[j]:.4g} | {sd[j]:.3g} "
-                       f"({100 * sd[j] / abs(mean[j]):.1f} %) | {hdi[0, j]:.4g} to "
-                       f"{hdi[1, j]:.4g} | {budget_sd[j]:.3g} |")  # fmt: skip
+            out.append(
+                f"| {inputs} | {ENGINEERING_KEYS[j]} | {mean[j]:.4g} | {sd[j]:.3g} "
+                f"({100 * sd[j] / abs(mean[j]):.1f} %) | {hdi[0, j]:.4g} to "
+                f"{hdi[1, j]:.4g} | {budget_sd[j]:.3g} |"
+            )
     if "marginal" in posteriors:
         out += _sampled_inputs_lines(posteriors, mass_budget)
     if len(posteriors) == 2:
         shift = posteriors["marginal"][0].mean / posteriors["exact"][0].mean - 1
-        out += ["", "The marginal posterior's means lie "
-                + ", ".join(f"{100 * shift[j]:+.1f} %" for j in SHOWN)
-                + " (E1, E2, G12) from the exact one's. Not a defect: a thickness error "
-                "scales E1, E2 and G12 together (by 3 sd_h / h = 6.7 % here), so the data no "
-                "longer fix their common scale and the prior does too; its means for E2 and "
-                "G12 are 39 % and 34 % below the data's (Hearmon's nominal spruce), and its "
-                "information on the common scale (about 10 % sd from E1, E2 and G12 together) "
-                "against the inputs' (6.7 %) pulls it by about -31 % x 0.31 = -10 %. B's "
-                "budget is the spread of the plug-in estimate and does not move it."]  # fmt: skip
-    out += ["", "; ".join(f"{k}: {'converged' if r.converged else 'not converged'}, "
-                          f"{r.n_full} full solves while sampling, {s:.0f} s"
-                          for k, (r, s) in posteriors.items()) + "."]  # fmt: skip
+        out += [
+            "",
+            "The marginal posterior's means lie "
+            + ", ".join(f"{100 * shift[j]:+.1f} %" for j in SHOWN)
+            + " (E1, E2, G12) from the exact one's. Not a defect: a thickness error "
+            "scales E1, E2 and G12 together (by 3 sd_h / h = 6.7 % here), so the data no "
+            "longer fix their common scale and the prior does too; its means for E2 and "
+            "G12 are 39 % and 34 % below the data's (Hearmon's nominal spruce), and its "
+            "information on the common scale (about 10 % sd from E1, E2 and G12 together) "
+            "against the inputs' (6.7 %) pulls it by about -31 % x 0.31 = -10 %. B's "
+            "budget is the spread of the plug-in estimate and does not move it.",
+        ]
+    out += [
+        "",
+        "; ".join(
+            f"{k}: {'converged' if r.converged else 'not converged'}, "
+            f"{r.n_full} full solves while sampling, {s:.0f} s"
+            for k, (r, s) in posteriors.items()
+        )
+        + ".",
+    ]
     return out
 
 
@@ -157,8 +194,12 @@ def input_shares(result):
     """
     post = result.input_posterior
     e = engineering_from_stiffness(result.samples_b[post.rows])
-    return np.array([[np.corrcoef(post.draws[:, k], e[:, j])[0, 1] ** 2 for j in range(6)]
-                     for k in range(len(post.names))])  # fmt: skip
+    return np.array(
+        [
+            [np.corrcoef(post.draws[:, k], e[:, j])[0, 1] ** 2 for j in range(6)]
+            for k in range(len(post.names))
+        ]
+    )
 
 
 def _sampled_inputs_lines(posteriors, mass_budget):
@@ -175,24 +216,32 @@ def _sampled_inputs_lines(posteriors, mass_budget):
         "|---|---|---|---|",
     ]
     for key, row in post.table().items():
-        lines.append(f"| {key} | {row['declared']:.4g} ± {row['declared_sd']:.2g} | "
-                     f"{row['mean']:.4g} ± {row['sd']:.2g} | {row['hdi_3%']:.4g} to "
-                     f"{row['hdi_97%']:.4g} |")  # fmt: skip
+        lines.append(
+            f"| {key} | {row['declared']:.4g} ± {row['declared_sd']:.2g} | "
+            f"{row['mean']:.4g} ± {row['sd']:.2g} | {row['hdi_3%']:.4g} to "
+            f"{row['hdi_97%']:.4g} |"
+        )
     shares = input_shares(r)
-    lines += ["", "Share of each constant's posterior variance: all inputs together, 1 - "
-              "(sd exact / sd marginal)^2 from the two chains; each input alone, its squared "
-              "correlation with the constant over the joint draws (`input_shares`); beside "
-              "B's linearised share of the same input (budget above, mass reading).", "",
-              "| constant | all inputs (sampled) | "
-              + " | ".join(f"{n} (sampled / B)" for n in post.names) + " |",
-              "|---|---|" + "---|" * len(post.names)]  # fmt: skip
+    lines += [
+        "",
+        "Share of each constant's posterior variance: all inputs together, 1 - "
+        "(sd exact / sd marginal)^2 from the two chains; each input alone, its squared "
+        "correlation with the constant over the joint draws (`input_shares`); beside "
+        "B's linearised share of the same input (budget above, mass reading).",
+        "",
+        "| constant | all inputs (sampled) | "
+        + " | ".join(f"{n} (sampled / B)" for n in post.names)
+        + " |",
+        "|---|---|" + "---|" * len(post.names),
+    ]
     sources = list(mass_budget.sources)
     exact = posteriors.get("exact")
     for j in SHOWN:
         total = "-" if exact is None else f"{100 * (1 - (exact[0].sd[j] / r.sd[j]) ** 2):.0f} %"
-        cells = [f"{100 * shares[k, j]:.0f} % / "
-                 f"{100 * mass_budget.share[sources.index(n), j]:.0f} %"
-                 for k, n in enumerate(post.names)]  # fmt: skip
+        cells = [
+            f"{100 * shares[k, j]:.0f} % / {100 * mass_budget.share[sources.index(n), j]:.0f} %"
+            for k, n in enumerate(post.names)
+        ]
         lines.append(f"| {ENGINEERING_KEYS[j]} | {total} | " + " | ".join(cells) + " |")
     lines += ["", f"{cert}."]
     return lines
@@ -206,9 +255,12 @@ def _table(result, budget):
     own = to_case_units(np.sqrt(np.diag(budget.estimator_covariance)))
     total = to_case_units(budget.sd)
     for j in range(6):
-        cells = [ENGINEERING_KEYS[j], f"{estimate_[j]:.4g}", f"{own[j]:.3g} "
-                 f"({100 * own[j] / abs(estimate_[j]):.1f} %)",
-                 f"{total[j]:.3g} ({100 * total[j] / abs(estimate_[j]):.1f} %)"]  # fmt: skip
+        cells = [
+            ENGINEERING_KEYS[j],
+            f"{estimate_[j]:.4g}",
+            f"{own[j]:.3g} ({100 * own[j] / abs(estimate_[j]):.1f} %)",
+            f"{total[j]:.3g} ({100 * total[j] / abs(estimate_[j]):.1f} %)",
+        ]
         cells += [f"{100 * s:.0f} %" for s in budget.share[:, j]]
         lines.append("| " + " | ".join(cells) + " |")
     return lines
@@ -236,8 +288,12 @@ def report(case, rows, seconds, posteriors=None):
             "",
         ]
         out += _table(result, independent)
-        out += ["", "Density from the mass (case keys `mass_g`, `mass_sd_g`), rho = m / (a b h)"
-                f" (budget status {mass.status}):", ""]  # fmt: skip
+        out += [
+            "",
+            "Density from the mass (case keys `mass_g`, `mass_sd_g`), rho = m / (a b h)"
+            f" (budget status {mass.status}):",
+            "",
+        ]
         out += _table(result, mass)
     out += _posterior_lines(posteriors or {}, rows[0][2])
     return "\n".join(out) + "\n"

@@ -150,17 +150,19 @@ def test_low_modes_unobserved_and_a_spurious_fundamental_are_flagged():
     e = np.array([150e9, 10e9, 0.25, 3e9, 3e9, 2e9])
     f = np.arange(1.0, 11.0) * 100
     base = {"constants": e, "prior_mean": e, "prior_sd": e / 6, "measured_Hz": f}
-    none = plausibility_warnings(**base, settings={"unobserved_modes": [4], "spurious_peaks": []},
-                                 modes=np.arange(1, 11))  # fmt: skip
+    none = plausibility_warnings(
+        **base, settings={"unobserved_modes": [4], "spurious_peaks": []}, modes=np.arange(1, 11)
+    )
     assert none == ()
     fundamental = plausibility_warnings(
         **base, settings={"unobserved_modes": [1], "spurious_peaks": []}, modes=np.arange(2, 12)
     )
     assert len(fundamental) == 1 and "fundamental" in fundamental[0]
     many = plausibility_warnings(
-        **base, settings={"unobserved_modes": [2, 3, 5, 7], "spurious_peaks": []},
+        **base,
+        settings={"unobserved_modes": [2, 3, 5, 7], "spurious_peaks": []},
         modes=np.array([1, 4, 6, 8, 9, 10]),
-    )  # fmt: skip
+    )
     assert len(many) == 1 and "4 of the 9 computed modes below" in many[0]
     spurious = plausibility_warnings(
         **base, settings={"unobserved_modes": [], "spurious_peaks": [1]}, modes=np.arange(1, 10)

@@ -7,9 +7,27 @@ from bayesplate.assignment import MAC_SCALE, assign, assign_with_shapes, predict
 
 # A plate-like spectrum: 14 modes, two of them close (modes 4 and 5, 1.5 % apart).
 COMPUTED = np.array(
-    [611.2, 2002.7, 2171.2, 2338.5, 2373.0, 3810.3, 5165.3, 5406.2, 6121.1, 6389.0, 6520.0,
-     7357.6, 8343.2, 8809.4, 9311.0, 9920.0, 10450.0, 11020.0]
-)  # fmt: skip
+    [
+        611.2,
+        2002.7,
+        2171.2,
+        2338.5,
+        2373.0,
+        3810.3,
+        5165.3,
+        5406.2,
+        6121.1,
+        6389.0,
+        6520.0,
+        7357.6,
+        8343.2,
+        8809.4,
+        9311.0,
+        9920.0,
+        10450.0,
+        11020.0,
+    ]
+)
 SIGMA = 0.002  # 0.2 % measurement deviation
 
 
@@ -371,9 +389,10 @@ def test_every_bundled_case_with_a_mode_removed_or_a_peak_added(name):
     extra = np.sqrt(f[k] * f[k + 1])
     added = np.insert(f, k + 1, extra)
     r = estimate(
-        case.with_measured(frequency_Hz=added, sigma_Hz=np.insert(s, k + 1, s[k])), "B",
+        case.with_measured(frequency_Hz=added, sigma_Hz=np.insert(s, k + 1, s[k])),
+        "B",
         model=model,
-    )  # fmt: skip
+    )
     assert r.settings["spurious_peaks"] == [k + 2], r.message
     assert r.settings["unobserved_modes"] == []
     assert np.all(np.abs(r.constants - complete.constants) < complete.sd), r.message

@@ -232,8 +232,9 @@ def test_sample_and_diagnose_in_a_batch_are_the_commands(tmp_path, capsys):
 def test_a_case_with_an_error_scale_gets_it_in_the_summary():
     """The estimate step widens its sd as `bayesplate estimate` does and reports s."""
     text = bundled_case_path("plate1").read_text()
-    scaled = text.replace("sigma_rel = 0.01\n",
-                          "sigma_rel = 0.01\nerror_scale = { median = 1.0, upper95 = 3.0 }\n")
+    scaled = text.replace(
+        "sigma_rel = 0.01\n", "sigma_rel = 0.01\nerror_scale = { median = 1.0, upper95 = 3.0 }\n"
+    )
     assert scaled != text
     options = BatchOptions().for_step("estimate")
     plain = run_step("p", "p.toml", text.encode(), "estimate", options)["row"]

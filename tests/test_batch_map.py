@@ -43,10 +43,15 @@ def client():
     from bayesplate.batch.run import _ONE_THREAD
 
     with (
-        LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                     dashboard_address=None, env=_ONE_THREAD) as cluster,
+        LocalCluster(
+            n_workers=2,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            env=_ONE_THREAD,
+        ) as cluster,
         Client(cluster) as given,
-    ):  # fmt: skip
+    ):
         yield given
 
 
@@ -62,8 +67,7 @@ def test_the_same_rows_with_one_and_two_workers():
         serial = [_study_row(i) for i in items]
         one = map_tasks(_study_row, items, workers=1, progress=False)
     seen, lines = {}, []
-    two = map_tasks(_study_row, items, workers=2, progress=lines.append,
-                    on_result=seen.__setitem__)  # fmt: skip
+    two = map_tasks(_study_row, items, workers=2, progress=lines.append, on_result=seen.__setitem__)
     assert one == serial
     assert two == serial  # bit for bit, in the order of the items
     assert seen == dict(enumerate(serial))  # each row handed over once, as it came
@@ -107,8 +111,15 @@ def test_task_pool_is_a_map_for_the_sampler(client):
     pairing = Pairing(np.arange(8), extra=0)
     problem = GaussianProblem(Y, V_Y, mu, V_b, lambda b, n: Linear(b), pairing)
     P = np.linalg.inv(A.T @ np.linalg.solve(V_Y, A) + np.linalg.inv(V_b))
-    kwargs = {"progress": False, "max_steps": 40, "min_ess": np.inf, "rng": 4,
-              "tune_rounds": 1, "tune_steps": 10, "check_every": 20}  # fmt: skip
+    kwargs = {
+        "progress": False,
+        "max_steps": 40,
+        "min_ess": np.inf,
+        "rng": 4,
+        "tune_rounds": 1,
+        "tune_steps": 10,
+        "check_every": 20,
+    }
     plain = sample_problem(problem, mu, P, **kwargs)
     with TaskPool(scheduler=client) as pool:
         assert pool.map(abs, [-1, 2, -3]) == [1, 2, 3]
@@ -126,8 +137,20 @@ def test_sample_command_on_dask_workers_gives_the_same_chain(client, tmp_path, c
 
     from bayesplate.cli.main import main
 
-    chain = ["plate1", "--mesh", "6", "4", "--seed", "5", "--walkers", "12",
-             "--max-steps", "200", "--min-ess", "1e9"]  # fmt: skip
+    chain = [
+        "plate1",
+        "--mesh",
+        "6",
+        "4",
+        "--seed",
+        "5",
+        "--walkers",
+        "12",
+        "--max-steps",
+        "200",
+        "--min-ess",
+        "1e9",
+    ]
     plain, pooled = tmp_path / "plain.json", tmp_path / "pooled.json"
     with threadpool_limits(limits=1):  # as on the workers
         main(["sample", *chain, "--json", str(plain)])

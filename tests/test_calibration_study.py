@@ -63,9 +63,11 @@ def test_a_name_counts_when_explained_or_among_the_two_ambiguous_ones():
 
 
 def test_coverage_is_judged_at_the_mirror_image_nearest_the_truth():
-    row = {"recovered": {"mass_g": [0.31, 0.02], "x_mm": [77.0, 2.0], "y_mm": [14.5, 1.0]},
-           "truth": {"mass_g": 0.3, "x_mm": 23.0, "y_mm": 14.0},
-           "images": [{"mass_g": 0.31, "x_mm": 23.1, "y_mm": 14.5}]}  # fmt: skip
+    row = {
+        "recovered": {"mass_g": [0.31, 0.02], "x_mm": [77.0, 2.0], "y_mm": [14.5, 1.0]},
+        "truth": {"mass_g": 0.3, "x_mm": 23.0, "y_mm": 14.0},
+        "images": [{"mass_g": 0.31, "x_mm": 23.1, "y_mm": 14.5}],
+    }
     assert cal.covered(row) == {"mass_g": True, "x_mm": True, "y_mm": True}
     row["recovered"]["mass_g"] = [0.5, 0.02]  # 10 sd off, at every image
     row["images"][0]["mass_g"] = 0.5
@@ -93,8 +95,9 @@ def test_quick_study_runs_and_clean_plates_are_consistent(tmp_path, monkeypatch)
     # chi-square's at that noncentrality (closed form), to the Monte Carlo's error
     (drawn,) = cal.absorbed(stored["sizes"], quick=True, power=True)["point_mass"][:1]
     assert drawn == pytest.approx(cal.ideal_power(left, 14 - 6), abs=0.004)
-    widened = cal.absorbed(stored["sizes"], quick=True, widen=cal.widening(quick=True),
-                           power=True)["point_mass"][0]  # fmt: skip
+    widened = cal.absorbed(stored["sizes"], quick=True, widen=cal.widening(quick=True), power=True)[
+        "point_mass"
+    ][0]
     assert widened < drawn  # the widened test is the weaker
     assert (tmp_path / "calibration-quick.png").exists()
     monkeypatch.setattr(cal, "run_task", None)  # everything must come from the cache now
@@ -158,17 +161,36 @@ def test_fitted_size_of_a_linear_effect_is_known_in_closed_form():
 def _table():
     """A size table as ``sizes`` makes it, for two effects and the current ``SIZES``."""
     n = len(cal.SIZES)
-    return {"point_mass": {"grid": [0.01, 3.0], "lambda": [0.1, 1e4], "fitted_lambda": [0.05, 5e3],
-                           "sizes": [0.17, 0.42, 0.14, 0.11][:n]},
-            "cutout": {"grid": [0.5, 17.0], "lambda": [1e-3, 1e4], "fitted_lambda": [1e-4, 3e3],
-                       "sizes": [6.2, 13.0, 4.3, 3.7][:n]}}  # fmt: skip
+    return {
+        "point_mass": {
+            "grid": [0.01, 3.0],
+            "lambda": [0.1, 1e4],
+            "fitted_lambda": [0.05, 5e3],
+            "sizes": [0.17, 0.42, 0.14, 0.11][:n],
+        },
+        "cutout": {
+            "grid": [0.5, 17.0],
+            "lambda": [1e-3, 1e4],
+            "fitted_lambda": [1e-4, 3e3],
+            "sizes": [6.2, 13.0, 4.3, 3.7][:n],
+        },
+    }
 
 
 def _row(kind, effect, size_index, size, rep, **extra):
-    return {"key": f"{kind}/frederiksen_t300/{effect}/{size_index}/{rep}", "kind": kind,
-            "family": "frederiksen_t300", "effect": effect, "size_index": size_index,
-            "size": size, "rep": rep, "verdict": "consistent", "chosen": None, "rival": None,
-            **extra}  # fmt: skip
+    return {
+        "key": f"{kind}/frederiksen_t300/{effect}/{size_index}/{rep}",
+        "kind": kind,
+        "family": "frederiksen_t300",
+        "effect": effect,
+        "size_index": size_index,
+        "size": size,
+        "rep": rep,
+        "verdict": "consistent",
+        "chosen": None,
+        "rival": None,
+        **extra,
+    }
 
 
 def test_the_cache_keeps_the_rows_of_sizes_still_run_keyed_by_value():
@@ -184,9 +206,11 @@ def test_the_cache_keeps_the_rows_of_sizes_still_run_keyed_by_value():
     ]
     stored = {"sizes": _table(), "rows": {r["key"]: r for r in rows}, "seconds": 60.0}
     cal.migrate(stored)
-    assert set(stored["rows"]) == {"power/frederiksen_t300/point_mass/0.42/0",
-                                   "power/frederiksen_t300/point_mass/0.14/3",
-                                   "clean/frederiksen_t300/5"}  # fmt: skip
+    assert set(stored["rows"]) == {
+        "power/frederiksen_t300/point_mass/0.42/0",
+        "power/frederiksen_t300/point_mass/0.14/3",
+        "clean/frederiksen_t300/5",
+    }
     assert stored["rows"]["power/frederiksen_t300/point_mass/0.14/3"]["size_label"] == "ideal 0.9"
     assert stored["rows"]["power/frederiksen_t300/point_mass/0.42/0"]["size_label"] == (
         "3 x ideal 0.9"
@@ -207,35 +231,42 @@ def test_rows_stored_without_a_code_are_the_retired_legacy_rows():
     stored = {"sizes": _table(), "rows": {r["key"]: r for r in legacy}, "seconds": 2770.0}
     cal.migrate(stored)
     assert stored["rows"] == {} and len(stored["retired"]) == 2
-    assert all(r["code"] == cal.LEGACY_CODE and r["retired"] == cal.RETIRED[cal.LEGACY_CODE]
-               for r in stored["retired"].values())  # fmt: skip
+    assert all(
+        r["code"] == cal.LEGACY_CODE and r["retired"] == cal.RETIRED[cal.LEGACY_CODE]
+        for r in stored["retired"].values()
+    )
     assert stored["seconds"] == 0.0 and stored["retired_seconds"] == {cal.LEGACY_CODE: 2770.0}
 
 
-@pytest.mark.parametrize("effect, codes, why", [
-    (effect, codes, why) for effect, pairs in cal.RETIRED_EFFECT.items() for codes, why in pairs
-])  # fmt: skip
-def test_one_candidates_rows_of_a_retired_code_are_set_aside_with_their_reason(effect, codes,
-                                                                               why):  # fmt: skip
+@pytest.mark.parametrize(
+    "effect, codes, why",
+    [(effect, codes, why) for effect, pairs in cal.RETIRED_EFFECT.items() for codes, why in pairs],
+)
+def test_one_candidates_rows_of_a_retired_code_are_set_aside_with_their_reason(effect, codes, why):
     # ``effect`` is a candidate (its power rows) or "clean" (the clean plates' rows); a row
     # of the same kind made by a code no rule sets aside is kept
     kept = "0000000"
     assert not any(kept in c for pairs in cal.RETIRED_EFFECT.values() for c, _ in pairs)
     table = _table()
     if effect == "clean":
-        rows = [_row("clean", None, None, None, 0, code=codes[0]),
-                _row("clean", None, None, None, 1, code=kept)]  # fmt: skip
+        rows = [
+            _row("clean", None, None, None, 0, code=codes[0]),
+            _row("clean", None, None, None, 1, code=kept),
+        ]
     else:
-        rows = [_row("power", effect, 0, 48000.0, 0, code=codes[0]),
-                _row("power", effect, 0, 48000.0, 1, code=kept)]  # fmt: skip
+        rows = [
+            _row("power", effect, 0, 48000.0, 0, code=codes[0]),
+            _row("power", effect, 0, 48000.0, 1, code=kept),
+        ]
         table = {**table, effect: {"sizes": [48000.0, None, None, None]}}
     stored = {"sizes": table, "rows": {r["key"]: r for r in rows}, "seconds": 60.0}
     cal.migrate(stored)
     assert [r["code"] for r in stored["rows"].values()] == [kept]
     (gone,) = stored["retired"].values()
     assert gone["retired"] == why and gone["code"] == codes[0]
-    assert (gone["kind"], gone["effect"]) == (("clean", None) if effect == "clean"
-                                              else ("power", effect))  # fmt: skip
+    assert (gone["kind"], gone["effect"]) == (
+        ("clean", None) if effect == "clean" else ("power", effect)
+    )
     todo = [t for t in cal.tasks(stored["sizes"]) if cal.task_key(t) not in stored["rows"]]
     assert (gone["kind"], gone["effect"]) in {(t[0], t[2]) for t in todo}  # run again
 
@@ -243,12 +274,14 @@ def test_one_candidates_rows_of_a_retired_code_are_set_aside_with_their_reason(e
 def test_a_single_row_set_aside_is_the_only_one_of_its_code_run_again(monkeypatch):
     # the study's own entry under a code no other rule sets aside (the point support's rows
     # of its code are all set aside since, by RETIRED_EFFECT)
-    ((_, key), why), = cal.RETIRED_ROWS.items()
+    (((_, key), why),) = cal.RETIRED_ROWS.items()
     code = "0000000"
     monkeypatch.setattr(cal, "RETIRED_ROWS", {(code, key): why})
     effect, size, rep = key.split("/")[2], float(key.split("/")[3]), int(key.split("/")[4])
-    rows = [_row("power", effect, 0, size, rep, code=code),
-            _row("power", effect, 0, size, rep + 1, code=code)]  # fmt: skip
+    rows = [
+        _row("power", effect, 0, size, rep, code=code),
+        _row("power", effect, 0, size, rep + 1, code=code),
+    ]
     table = {**_table(), effect: {"sizes": [size, None, None, None]}}
     stored = {"sizes": table, "rows": {r["key"]: r for r in rows}, "seconds": 60.0}
     cal.migrate(stored)

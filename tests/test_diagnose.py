@@ -130,8 +130,13 @@ def test_a_second_optimum_that_fits_as_well_makes_its_constants_unidentified():
 
     def fit_with(objective_gap):
         b_other = laminate.stiffness_from_engineering(other)
-        return SimpleNamespace(constants=e, constants_sd=sd, chi2=2.0, chi2_prior=10.0,
-                               alternatives=((b_other, 12.0 + objective_gap),))  # fmt: skip
+        return SimpleNamespace(
+            constants=e,
+            constants_sd=sd,
+            chi2=2.0,
+            chi2_prior=10.0,
+            alternatives=((b_other, 12.0 + objective_gap),),
+        )
 
     assert unidentified(fit_with(1.0), V_b, 0.7, margin=2.0) == ["E1", "E2", "G13", "G23"]
     assert "G23 2.9 GPa vs 1.45 GPa" in basins_note(fit_with(1.0), 2.0)
@@ -158,8 +163,14 @@ class LocalStiffnessGain(LocalStiffnessLoss):
         # a gain alpha raises lambda_i by alpha a_i^T K^e a_i: physical when alpha > 0
         energy = element_energies(model, paired, np.asarray(b) * np.array([0, 1, 1, 1, 1, 1]))
         mesh = model.mesh
-        return effect_map(energy, sigma_lambda, residual_whitened, projector,
-                          1e3 * mesh.centroids, (mesh.ny, mesh.nx))  # fmt: skip
+        return effect_map(
+            energy,
+            sigma_lambda,
+            residual_whitened,
+            projector,
+            1e3 * mesh.centroids,
+            (mesh.ny, mesh.nx),
+        )
 
 
 def test_a_located_candidate_defined_outside_the_package_is_mapped_scanned_and_fitted(model):
@@ -226,8 +237,9 @@ def test_global_stage_reaches_the_basin_of_the_published_constants():
     mu_b, V_b = prior_in_stiffness(case.prior.mean, case.prior.sd, "full")
     modes = np.arange(Y.size)
     problem = JointProblem(model, Y, sigma, mu_b, V_b, modes)
-    published = fit(problem, [problem.pack(stiffness_from_engineering(case.reference))],
-                    max_nfev=100)  # fmt: skip
+    published = fit(
+        problem, [problem.pack(stiffness_from_engineering(case.reference))], max_nfev=100
+    )
     coarse = coarse_model(model)
     rng = np.random.default_rng(0)
     scale = model.solve(mu_b, 14).eigenvalues / coarse.solve(mu_b, 14).eigenvalues

@@ -25,20 +25,30 @@ def test_the_assignment_terms_are_those_of_the_assignment_model():
     # modes 2 and 4 (150, 330 Hz) unseen, 260 Hz spurious; mode 5 (401 Hz) is paired but
     # above the band (the highest peak), where a mode is neither observed nor unobserved
     np.testing.assert_array_equal(a.modes, [0, 2, -1, 4])
-    gauss = sum(-0.5 * ((f[i] - c[j]) ** 2 / s[i] ** 2 + np.log(2 * np.pi * s[i] ** 2))
-                for i, j in enumerate(a.modes) if j >= 0)  # fmt: skip
+    gauss = sum(
+        -0.5 * ((f[i] - c[j]) ** 2 / s[i] ** 2 + np.log(2 * np.pi * s[i] ** 2))
+        for i, j in enumerate(a.modes)
+        if j >= 0
+    )
     here = assignment_log_prior(a.modes, c, a.band_Hz, measured_Hz=f)
     spurious = np.log(P_SPURIOUS) - np.log(eigenvalue_from_hz(a.band_Hz))  # one, over [0, B]
-    by_hand = (3 * np.log(1 - P_SPURIOUS) + spurious
-               + 2 * np.log(1 - P_UNOBSERVED) + 2 * np.log(P_UNOBSERVED))  # fmt: skip
+    by_hand = (
+        3 * np.log(1 - P_SPURIOUS)
+        + spurious
+        + 2 * np.log(1 - P_UNOBSERVED)
+        + 2 * np.log(P_UNOBSERVED)
+    )
     assert here == pytest.approx(by_hand, rel=1e-12)
     in_hz = np.log(a.band_Hz) - np.log(eigenvalue_from_hz(a.band_Hz))  # the one Hz term
     assert a.log_probability == pytest.approx(gauss + here - in_hz, rel=1e-12)
 
 
 def test_full_modes_and_pairing_of_are_inverse():
-    a = assign(np.array([100.0, 210.0, 400.0]), np.array([1.0, 2.1, 4.0]),
-               np.array([99.0, 150.0, 209.0, 330.0, 401.0]))  # fmt: skip
+    a = assign(
+        np.array([100.0, 210.0, 400.0]),
+        np.array([1.0, 2.1, 4.0]),
+        np.array([99.0, 150.0, 209.0, 330.0, 401.0]),
+    )
     p = pairing_of(a, "likelihood")
     np.testing.assert_array_equal(full_modes(p, 3), a.modes)
     assert p.assignment is a and p.how == "likelihood"
@@ -74,9 +84,15 @@ def test_a_wrong_assignment_is_made_again_and_the_second_pass_kept():
     )  # every peak on "its" mode, in order
     np.testing.assert_array_equal(wrong.modes, np.arange(m))
     said = []
-    d = diagnose(case, model=model, rng=0, n_starts=2, physics=[PointMass()],
-                 pairing=Pairing(np.arange(m), how="likelihood", assignment=wrong),
-                 progress=said.append)  # fmt: skip
+    d = diagnose(
+        case,
+        model=model,
+        rng=0,
+        n_starts=2,
+        physics=[PointMass()],
+        pairing=Pairing(np.arange(m), how="likelihood", assignment=wrong),
+        progress=said.append,
+    )
     truth = np.array([0, 1, *range(3, m + 1)])  # peak 3 is computed mode 4, and so on
     np.testing.assert_array_equal(d.peak_modes, truth)
     assert d.verdict == "consistent"
@@ -95,16 +111,16 @@ def test_by_default_a_missed_mode_sets_the_order_aside_and_is_found_by_likelihoo
     case = _missing_mode_case()
     model = PlateModel.from_case(case, mesh=MESH)
     said = []
-    d = diagnose(case, model=model, rng=0, n_starts=1, physics=[PointMass()],
-                 progress=said.append)  # fmt: skip
+    d = diagnose(case, model=model, rng=0, n_starts=1, physics=[PointMass()], progress=said.append)
     np.testing.assert_array_equal(d.peak_modes, [0, 1, *range(3, case.measured.size + 1)])
     assert d.verdict == "consistent"
     note = next(n for n in d.notes if n.startswith("pairing by order set aside"))
     assert "peak 4: mode 4 -> mode 5" in note and "2 passes in all" in note and d.passes == 2
     assert "pass 1 (unexplained)" in note and "pass 2 kept" in note
     assert any(line.endswith("diagnosing again by likelihood") for line in said)
-    by_likelihood = diagnose(case, model=model, rng=0, n_starts=1, physics=[PointMass()],
-                             pairing="likelihood")  # fmt: skip
+    by_likelihood = diagnose(
+        case, model=model, rng=0, n_starts=1, physics=[PointMass()], pairing="likelihood"
+    )
     assert d.nominal.chi2 == by_likelihood.nominal.chi2
 
 
@@ -113,8 +129,10 @@ def test_by_default_a_complete_test_on_a_coarse_mesh_keeps_its_order_in_one_pass
     # 0.2 % deviations: assigned with the raw deviations the upper peaks would look spurious;
     # with the deviations the pass fitted (widened by the mesh's error) the order stands
     truth = load_case(bundled_case_path("plate1"))
-    case = truth.with_prior(truth.reference * np.array([1.1, 0.9, 1.1, 1.1, 0.9, 1.1]),
-                            truth.reference * np.array([0.15, 0.15, 0.2, 0.15, 0.3, 0.3]))
+    case = truth.with_prior(
+        truth.reference * np.array([1.1, 0.9, 1.1, 1.1, 0.9, 1.1]),
+        truth.reference * np.array([0.15, 0.15, 0.2, 0.15, 0.3, 0.3]),
+    )
     fine = PlateModel.from_case(case, mesh=(2 * MESH[0], 2 * MESH[1]))
     f = fine.solve(stiffness_from_engineering(case.reference), 14).frequency_Hz
     f = f * (1 + NOISE * np.random.default_rng(1).standard_normal(f.size))

@@ -46,9 +46,17 @@ def setting():
 
 def _run(setting, store=None, workers=1, rng=0, say=None):
     case, model = setting
-    d = diagnose(case, model=model, physics=_physics(), rng=rng, n_starts=4, workers=workers,
-                 mesh_error_ratio=np.inf, store=store,
-                 progress=say or (lambda message: None))  # fmt: skip
+    d = diagnose(
+        case,
+        model=model,
+        physics=_physics(),
+        rng=rng,
+        n_starts=4,
+        workers=workers,
+        mesh_error_ratio=np.inf,
+        store=store,
+        progress=say or (lambda message: None),
+    )
     return json.dumps(diagnosis_to_dict(d), default=jsonable, sort_keys=True), d
 
 
@@ -105,11 +113,13 @@ def test_corrupt_or_foreign_files_are_ignored(tmp_path):
 def test_keys_cover_exact_values_variants_and_state():
     base = digest(np.array([1.0, 2.0]), {"b": 1, "a": 2.5}, ThicknessTaper("x"))
     assert base == digest(np.array([1.0, 2.0]), {"a": 2.5, "b": 1}, ThicknessTaper("x"))
-    assert base != digest(np.array([1.0, np.nextafter(2.0, 3.0)]), {"b": 1, "a": 2.5},
-                          ThicknessTaper("x"))  # fmt: skip
+    assert base != digest(
+        np.array([1.0, np.nextafter(2.0, 3.0)]), {"b": 1, "a": 2.5}, ThicknessTaper("x")
+    )
     assert base != digest(np.array([1.0, 2.0]), {"b": 1, "a": 2.5}, ThicknessTaper("y"))
-    assert base != digest(np.array([1.0, 2.0], dtype=np.float32), {"b": 1, "a": 2.5},
-                          ThicknessTaper("x"))  # fmt: skip
+    assert base != digest(
+        np.array([1.0, 2.0], dtype=np.float32), {"b": 1, "a": 2.5}, ThicknessTaper("x")
+    )
     # what has no stable content is never taken for something else
     assert digest(lambda: 1) != digest(lambda: 2)
     one, two = np.random.default_rng(1), np.random.default_rng(1)
@@ -139,8 +149,7 @@ def test_a_store_changes_no_number_and_a_full_store_computes_nothing(setting, re
     assert sum(line.count("taken from the store") for line in said) == stages
 
 
-def test_workers_with_a_directory_store_and_a_resume_from_part_of_it(setting, reference,
-                                                                      tmp_path):  # fmt: skip
+def test_workers_with_a_directory_store_and_a_resume_from_part_of_it(setting, reference, tmp_path):
     # two forked workers store the candidates' fits themselves: the parent sees them all
     store = DirectoryStore(tmp_path / "all")
     uninterrupted = np.random.default_rng(0)

@@ -65,8 +65,10 @@ def _quad_marginal(Y, g, V, prior):
     peak = (prior.scale + 0.5 * (Y - g) @ np.linalg.solve(V, Y - g)) / (
         prior.shape + Y.size / 2 + 1
     )
-    parts = [integrate.quad(integrand, lo, hi, epsabs=0, epsrel=1e-11, limit=200)[0]
-             for lo, hi in ((0, peak), (peak, 10 * peak), (10 * peak, np.inf))]  # fmt: skip
+    parts = [
+        integrate.quad(integrand, lo, hi, epsabs=0, epsrel=1e-11, limit=200)[0]
+        for lo, hi in ((0, peak), (peak, 10 * peak), (10 * peak, np.inf))
+    ]
     return np.log(sum(parts))
 
 
@@ -131,8 +133,11 @@ def test_the_sampler_density_uses_the_marginal(rng):
     b = density.to_b(z)
     r = problem.Y - S @ b
     chi2 = r @ np.linalg.solve(problem.V_Y, r)
-    expected = (problem.log_prior(b) + density.log_jacobian(z)
-                + log_marginal(chi2, r.size, np.linalg.slogdet(problem.V_Y)[1], prior))  # fmt: skip
+    expected = (
+        problem.log_prior(b)
+        + density.log_jacobian(z)
+        + log_marginal(chi2, r.size, np.linalg.slogdet(problem.V_Y)[1], prior)
+    )
     assert lp == pytest.approx(expected, rel=1e-13)
     assert lp != problem.with_error_scale(None).log_posterior(b) + density.log_jacobian(z)
 
@@ -157,8 +162,9 @@ def test_draws_over_the_exact_posterior_recover_the_scale(rng):
     theta = rng.standard_normal(p)
     Y = S @ theta + true_s * rng.standard_normal(m)
     pairing = Pairing(np.arange(m), "order", extra=0)
-    problem = GaussianProblem(Y, np.eye(m), np.zeros(p), 1e12 * np.eye(p), _Linear(S),
-                              pairing, prior)  # fmt: skip
+    problem = GaussianProblem(
+        Y, np.eye(m), np.zeros(p), 1e12 * np.eye(p), _Linear(S), pairing, prior
+    )
     info = S.T @ S
     th = np.linalg.solve(info, S.T @ Y)
     a1 = prior.shape + (m - p) / 2
@@ -248,13 +254,25 @@ def test_a_bad_error_scale_is_refused_in_one_line(value, key, words):
 #: Plate 1 (bundled, 8 x 4 mesh), B on the full model and the sampler's density at the B
 #: estimate, computed by the code before the error scale existed (commit cebd2de).
 _BEFORE = {
-    "b": [145441767859.00232, 10446170558.178078, 2176418134.879641, 3008595011.1246014,
-          1403179626.5690658, 3556339451.1296678],
-    "sd": [2958433274.551834, 183680614.97938648, 0.05220879856641745, 35688192.75325976,
-           351407265.2516468, 120604021.44550261],
+    "b": [
+        145441767859.00232,
+        10446170558.178078,
+        2176418134.879641,
+        3008595011.1246014,
+        1403179626.5690658,
+        3556339451.1296678,
+    ],
+    "sd": [
+        2958433274.551834,
+        183680614.97938648,
+        0.05220879856641745,
+        35688192.75325976,
+        351407265.2516468,
+        120604021.44550261,
+    ],
     "lp": [-272.6104048528854, -272.88289673265393],
     "pointwise0": [-13.516127070390105, -16.22919074774388, -16.50823125983154],
-}  # fmt: skip
+}
 
 
 def test_without_the_key_the_numbers_are_those_of_before():
@@ -273,8 +291,9 @@ def test_without_the_key_the_numbers_are_those_of_before():
     same = {"rel": 1e-9, "abs": 0.0}
     assert result.b.tolist() == pytest.approx(_BEFORE["b"], **same)
     assert result.sd.tolist() == pytest.approx(_BEFORE["sd"], **same)
-    density = WhitenedLogPosterior(GaussianProblem.from_case(case, model), result.b,
-                                   result.covariance_b)  # fmt: skip
+    density = WhitenedLogPosterior(
+        GaussianProblem.from_case(case, model), result.b, result.covariance_b
+    )
     lps = [density(z) for z in (np.zeros(6), 0.3 * np.ones(6))]
     assert [float(lp) for lp, _ in lps] == pytest.approx(_BEFORE["lp"], **same)
     assert lps[0][1][:3].tolist() == pytest.approx(_BEFORE["pointwise0"], **same)
@@ -423,8 +442,9 @@ def test_the_report_widens_the_estimates_with_the_scale(tmp_path):
     from bayesplate.run.budget import scale_estimate
 
     text = bundled_case_path("plate1").read_text()
-    text = text.replace("sigma_rel = 0.01\n",
-                        "sigma_rel = 0.01\nerror_scale = { median = 1.0, upper95 = 3.0 }\n")
+    text = text.replace(
+        "sigma_rel = 0.01\n", "sigma_rel = 0.01\nerror_scale = { median = 1.0, upper95 = 3.0 }\n"
+    )
     path = tmp_path / "plate1_scaled.toml"
     path.write_text(text)
     options = ReportOptions(diagnose=False, sample=False)
@@ -472,7 +492,8 @@ def test_the_reports_posterior_gives_the_scale_from_its_draws():
     lo, hi = scale["interval"]
     assert 0 < lo < scale["median"] < hi
     assert any("error scale s: median" in line for line in _sample_lines(data))
-    plain = sample_step(case.with_measured(error_scale=None), model, "order",
-                        ReportOptions(quick=True, seed=4))  # fmt: skip
+    plain = sample_step(
+        case.with_measured(error_scale=None), model, "order", ReportOptions(quick=True, seed=4)
+    )
     assert plain["error_scale"] is None
     assert not any("error scale" in line for line in _sample_lines(plain))

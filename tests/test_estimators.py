@@ -341,7 +341,6 @@ def test_a_run_without_progress_is_called_oscillating():
     assert _oscillation(converging, 1e-3) == ""
 
 
-
 def _crossing_problem():
     """Seven linear modes, sorted by frequency (pairing by order); six peaks, mode 5 unseen.
 

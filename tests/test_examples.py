@@ -74,8 +74,11 @@ def test_examples_use_public_names_only(path):
 def test_an_example_runs_as_a_script():
     out = subprocess.run(
         [sys.executable, str(EXAMPLES / "ex01_navier_plate.py")],
-        capture_output=True, text=True, check=True, timeout=120,
-    )  # fmt: skip
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=120,
+    )
     assert "Navier" in out.stdout and "Hz" in out.stdout
 
 

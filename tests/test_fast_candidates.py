@@ -52,8 +52,9 @@ def _snapshots_and_probe(physics, model, b):
     return snaps, np.clip(mean + 1.7 * sd, lo, hi)
 
 
-@pytest.mark.parametrize("physics", candidates(), ids=lambda p: p.name + "".join(
-    p.settings().values()))  # fmt: skip
+@pytest.mark.parametrize(
+    "physics", candidates(), ids=lambda p: p.name + "".join(p.settings().values())
+)
 def test_reduced_candidate_matches_full_solve(plate, physics):
     model, b = plate
     snapshots, probe = _snapshots_and_probe(physics, model, b)
@@ -88,8 +89,10 @@ def test_reduced_candidate_matches_full_solve(plate, physics):
         up, down = probe.copy(), probe.copy()
         up[i] += h[i]
         down[i] -= h[i]
-        fd = (physics.apply(model, up).solve(b, N_MODES).eigenvalues
-              - physics.apply(model, down).solve(b, N_MODES).eigenvalues) / (2 * h[i])  # fmt: skip
+        fd = (
+            physics.apply(model, up).solve(b, N_MODES).eigenvalues
+            - physics.apply(model, down).solve(b, N_MODES).eigenvalues
+        ) / (2 * h[i])
         scale = np.abs(fd).max()
         if scale > 0:
             assert np.max(np.abs(d_theta[:, i] - fd)) < 1e-2 * scale
@@ -108,8 +111,12 @@ def test_region_projection_is_the_projected_assembled_region(plate):
     region = RegionProjection(model, V, element)
     nx = model.mesh.nx
     assert 10 >= RUN_MIN
-    for inside in ([3, 4, 5, nx + 3, nx + 4, 2 * nx + 7], [11], [],
-                   [*range(nx + 2, nx + 12), 3 * nx + 1, 3 * nx + 2]):  # fmt: skip
+    for inside in (
+        [3, 4, 5, nx + 3, nx + 4, 2 * nx + 7],
+        [11],
+        [],
+        [*range(nx + 2, nx + 12), 3 * nx + 1, 3 * nx + 2],
+    ):
         inside = np.array(inside, dtype=int)
         weights = np.zeros(model.mesh.n_elements)
         weights[inside] = np.linspace(0.3, 1.0, len(inside))
@@ -134,9 +141,26 @@ def test_region_sum_by_whole_elements_kept_is_the_weighted_sum(plate):
     V = np.random.default_rng(5).standard_normal((mesh.n_dofs, 7))
     region = pencil.RegionProjection(model, V, model.element_stiffness_terms()[:2])
     size = np.array([0.45 * mesh.a, 0.5 * mesh.b])
-    centres = [(0.5 + s) * np.array([mesh.a, mesh.b])
-               for s in (0.0, 1e-4, 0.01, 0.01, 0.07, -0.03, 0.11, 0.15, -0.1, 0.19, -0.07,
-                         -0.15, 0.23, 0.0, 1e-4)]  # fmt: skip
+    centres = [
+        (0.5 + s) * np.array([mesh.a, mesh.b])
+        for s in (
+            0.0,
+            1e-4,
+            0.01,
+            0.01,
+            0.07,
+            -0.03,
+            0.11,
+            0.15,
+            -0.1,
+            0.19,
+            -0.07,
+            -0.15,
+            0.23,
+            0.0,
+            1e-4,
+        )
+    ]
     sets = set()
     for centre in centres:
         fractions = area_fractions(mesh, centre, size)
@@ -146,7 +170,8 @@ def test_region_sum_by_whole_elements_kept_is_the_weighted_sum(plate):
         got, want = region.inside(fractions), region(fractions)
         assert np.allclose(got, want, rtol=1e-13, atol=1e-13 * np.abs(want).max())
         got[:] = 0.0  # the caller's copy: the kept result is not changed
-        assert np.allclose(region.inside(fractions), want, rtol=1e-13,
-                           atol=1e-13 * np.abs(want).max())  # fmt: skip
+        assert np.allclose(
+            region.inside(fractions), want, rtol=1e-13, atol=1e-13 * np.abs(want).max()
+        )
     assert len(sets) > pencil.WHOLE_KEPT  # the first set was let go, and is summed again
     assert len(region._whole) == pencil.WHOLE_KEPT

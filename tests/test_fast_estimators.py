@@ -37,9 +37,12 @@ def plate1():
 RUNS = {
     "B": {"prior_mean": [120e9, 8e9, 0.25, 3.6e9, 3.6e9, 2.4e9], "d": 1 / 3},
     "MVE": {"prior_mean": [120e9, 8e9, 0.25, 3.6e9, 3.6e9, 2.4e9], "d": 1 / 3},
-    "MVE-mod": {"prior_mean": [180e9, 12e9, 0.3, 2.4e9, 2.4e9, 1.6e9], "d": 1 / 6,
-                "stage2_factor": 2.0},
-}  # fmt: skip
+    "MVE-mod": {
+        "prior_mean": [180e9, 12e9, 0.3, 2.4e9, 2.4e9, 1.6e9],
+        "d": 1 / 6,
+        "stage2_factor": 2.0,
+    },
+}
 
 
 def _run(case, model, method, **kwargs):
@@ -82,15 +85,30 @@ def test_the_same_seed_gives_the_same_numbers_and_a_shared_model_is_reused(plate
 def _poor_fast_model(case, model):
     """A fast model of two snapshots (the prior mean and one more) over the prior box."""
     mean = np.array(RUNS["B"]["prior_mean"])
-    return case_fast_model(case, model, case.measured.size + 2, prior_mean=mean,
-                           prior_sd=RUNS["B"]["d"] * mean, n_snapshots=1, n_test=2,
-                           n_probe=0, max_rounds=1)  # fmt: skip
+    return case_fast_model(
+        case,
+        model,
+        case.measured.size + 2,
+        prior_mean=mean,
+        prior_sd=RUNS["B"]["d"] * mean,
+        n_snapshots=1,
+        n_test=2,
+        n_probe=0,
+        max_rounds=1,
+    )
 
 
 def _run_on(case, model, fast, method="B"):
     mean = np.array(RUNS[method]["prior_mean"])
-    return estimate_on_fast(case, method, model, fast, prior_mean=mean,
-                            prior_sd=RUNS[method]["d"] * mean, pairing="order")  # fmt: skip
+    return estimate_on_fast(
+        case,
+        method,
+        model,
+        fast,
+        prior_mean=mean,
+        prior_sd=RUNS[method]["d"] * mean,
+        pairing="order",
+    )
 
 
 def test_an_answer_the_full_model_corrects_is_enriched_and_confirmed(plate1):

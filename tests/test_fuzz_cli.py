@@ -31,9 +31,12 @@ def fuzz_settings(n):
         derandomize=True,
         database=None,
         deadline=None,
-        suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow,
-                               HealthCheck.filter_too_much],
-    )  # fmt: skip
+        suppress_health_check=[
+            HealthCheck.function_scoped_fixture,
+            HealthCheck.too_slow,
+            HealthCheck.filter_too_much,
+        ],
+    )
 
 
 def _sha(path):
@@ -101,19 +104,38 @@ BAD_CHOICE = ["X", "", "b", "mve", "paper ", "ALL", "ü"]
 #: subcommand -> option -> values it must refuse (the case is a valid bundled one).
 OPTIONS = {
     "modes": {"--count": BAD_INT, "--mesh": BAD_MESH, "--constants": BAD_CHOICE},
-    "estimate": {"--tol": BAD_POSITIVE_FLOAT, "--max-iter": BAD_INT, "--mesh": BAD_MESH,
-                 "--method": BAD_CHOICE, "--convention": BAD_CHOICE, "--pairing": BAD_CHOICE,
-                 "--forward": BAD_CHOICE},
-    "sample": {"--seed": BAD_SEED, "--walkers": BAD_INT + ["11", "2"],
-               "--max-steps": BAD_INT + ["60", "109"],
-               "--min-ess": BAD_POSITIVE_FLOAT, "--mesh": BAD_MESH, "--pairing": BAD_CHOICE,
-               "--workers": BAD_INT},
-    "diagnose": {"--seed": BAD_SEED, "--workers": BAD_INT, "--mesh": BAD_MESH,
-                 "--pairing": BAD_CHOICE},
+    "estimate": {
+        "--tol": BAD_POSITIVE_FLOAT,
+        "--max-iter": BAD_INT,
+        "--mesh": BAD_MESH,
+        "--method": BAD_CHOICE,
+        "--convention": BAD_CHOICE,
+        "--pairing": BAD_CHOICE,
+        "--forward": BAD_CHOICE,
+    },
+    "sample": {
+        "--seed": BAD_SEED,
+        "--walkers": BAD_INT + ["11", "2"],
+        "--max-steps": BAD_INT + ["60", "109"],
+        "--min-ess": BAD_POSITIVE_FLOAT,
+        "--mesh": BAD_MESH,
+        "--pairing": BAD_CHOICE,
+        "--workers": BAD_INT,
+    },
+    "diagnose": {
+        "--seed": BAD_SEED,
+        "--workers": BAD_INT,
+        "--mesh": BAD_MESH,
+        "--pairing": BAD_CHOICE,
+    },
     "report": {"--seed": BAD_SEED, "--mesh": BAD_MESH, "--pairing": BAD_CHOICE},
-    "import": {"--sigma-rel": BAD_FLOAT + ["0", "1", "1.5", "-0.1", "0.7", "1e-9"],
-               "--order": BAD_INT, "--band": BAD_FLOAT, "--window": BAD_CHOICE},
-}  # fmt: skip
+    "import": {
+        "--sigma-rel": BAD_FLOAT + ["0", "1", "1.5", "-0.1", "0.7", "1e-9"],
+        "--order": BAD_INT,
+        "--band": BAD_FLOAT,
+        "--window": BAD_CHOICE,
+    },
+}
 
 
 def _base_argv(command, tmp):
@@ -169,16 +191,18 @@ def test_a_malformed_command_line_is_refused_in_one_line(fuzz_ledger, kind):
 @fuzz_settings(40)
 @given(
     command=st.sampled_from(["modes", "estimate", "sample", "diagnose", "report"]),
-    name=st.text(st.characters(codec="utf-8", exclude_characters="\0/\\"), min_size=1,
-                 max_size=12).filter(lambda s: s.strip() not in ("", ".", "..")),
-)  # fmt: skip
+    name=st.text(
+        st.characters(codec="utf-8", exclude_characters="\0/\\"), min_size=1, max_size=12
+    ).filter(lambda s: s.strip() not in ("", ".", "..")),
+)
 def test_a_case_that_is_neither_a_file_nor_a_bundled_name_is_refused(fuzz_ledger, command, name):
     with tempfile.TemporaryDirectory() as tmp:
         missing = Path(tmp, name)
         out = Path(tmp, "out")
         extra = ["-o", out] if command == "report" else ["--json", out]
-        assert_refused_cleanly(fuzz_ledger, [command, missing, *extra], [], [out],
-                               ["cannot read", "error:"])  # fmt: skip
+        assert_refused_cleanly(
+            fuzz_ledger, [command, missing, *extra], [], [out], ["cannot read", "error:"]
+        )
 
 
 def test_a_directory_as_case_is_refused(fuzz_ledger, tmp_path):

@@ -402,8 +402,9 @@ def _daq_csv(data):
 def _daq_damage(data, text, separator, options):
     """One damage of a DAQ CSV: a cell, a header name, an option, the lines, the bytes."""
     lines = text.splitlines()
-    kind = data.draw(st.sampled_from(["cell", "header", "option", "axis", "bytes", "lines",
-                                      "body"]))  # fmt: skip
+    kind = data.draw(
+        st.sampled_from(["cell", "header", "option", "axis", "bytes", "lines", "body"])
+    )
     if kind == "cell":
         i = data.draw(st.integers(1, len(lines) - 1))
         cells = lines[i].split(separator)

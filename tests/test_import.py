@@ -49,8 +49,22 @@ PROPERTY = settings(
     deadline=None,
     suppress_health_check=[HealthCheck.function_scoped_fixture],
 )
-FREDERIKSEN_HZ = [1121.4, 2795.4, 2971.5, 3590.6, 3633.1, 5947.5, 7655.1,
-                  7671.4, 8073.0, 8431.8, 10212, 10281, 14007, 14048]  # fmt: skip
+FREDERIKSEN_HZ = [
+    1121.4,
+    2795.4,
+    2971.5,
+    3590.6,
+    3633.1,
+    5947.5,
+    7655.1,
+    7671.4,
+    8073.0,
+    8431.8,
+    10212,
+    10281,
+    14007,
+    14048,
+]
 PLATE_SHEET = bundled_plate_path("frederiksen_plate")
 
 
@@ -125,23 +139,54 @@ def write_uff(
         )
     )
     for number, i in enumerate(order, start=1):
-        common = dict(model_type=1, id1="NONE", id2="NONE", id3="NONE", id4="NONE",
-                      id5="NONE", data_ch=2, spec_data_type=8, n_data_per_node=3,
-                      node_nums=labels, load_case=1, mode_n=number)  # fmt: skip
+        common = dict(
+            model_type=1,
+            id1="NONE",
+            id2="NONE",
+            id3="NONE",
+            id4="NONE",
+            id5="NONE",
+            data_ch=2,
+            spec_data_type=8,
+            n_data_per_node=3,
+            node_nums=labels,
+            load_case=1,
+            mode_n=number,
+        )
         zeros = np.zeros(p)
         if complex_modes:
             omega, zeta = 2 * np.pi * frequency_Hz[i], 0.02
             eig = complex(-zeta * omega, omega * np.sqrt(1 - zeta**2))
             phase = np.exp(1j * (0.3 + 0.7 * number))
             z = shapes[:, i] * phase
-            sets.append(pyuff.prepare_55(analysis_type=3, data_type=5, r1=zeros + 0j,
-                                         r2=zeros + 0j, r3=z, eig=eig, modal_a=0j, modal_b=0j,
-                                         **common))  # fmt: skip
+            sets.append(
+                pyuff.prepare_55(
+                    analysis_type=3,
+                    data_type=5,
+                    r1=zeros + 0j,
+                    r2=zeros + 0j,
+                    r3=z,
+                    eig=eig,
+                    modal_a=0j,
+                    modal_b=0j,
+                    **common,
+                )
+            )
         else:
-            sets.append(pyuff.prepare_55(analysis_type=2, data_type=2, r1=zeros, r2=zeros,
-                                         r3=shapes[:, i], freq=float(frequency_Hz[i]),
-                                         modal_m=1.0, modal_damp_vis=0.01, modal_damp_his=0.0,
-                                         **common))  # fmt: skip
+            sets.append(
+                pyuff.prepare_55(
+                    analysis_type=2,
+                    data_type=2,
+                    r1=zeros,
+                    r2=zeros,
+                    r3=shapes[:, i],
+                    freq=float(frequency_Hz[i]),
+                    modal_m=1.0,
+                    modal_damp_vis=0.01,
+                    modal_damp_his=0.0,
+                    **common,
+                )
+            )
     pyuff.UFF(str(path)).write_sets(sets, mode="overwrite")
     return path
 
@@ -173,8 +218,9 @@ def test_uff_round_trip(tmp_path, capsys, plate1_modes, variant, rng):
     frequency, points_mm, w = plate1_modes
     order = rng.permutation(len(frequency))  # modal software need not sort its modes
     labels = 1000 + 7 * rng.permutation(len(points_mm))  # node labels are labels, not indices
-    uff = write_uff(tmp_path / "test.uff", points_mm, w, frequency, order=order, labels=labels,
-                    **variant)  # fmt: skip
+    uff = write_uff(
+        tmp_path / "test.uff", points_mm, w, frequency, order=order, labels=labels, **variant
+    )
     sheet = tmp_path / "plate1_sheet.toml"
     sheet.write_text(plate_sheet_text("plate1"))
     out = tmp_path / "case.toml"
@@ -225,8 +271,15 @@ def test_uff_nodes_left_out_of_a_mode_are_zero(tmp_path):
     mode = sets[1]
     for key in ("node_nums", "r1", "r2", "r3"):
         mode[key] = np.asarray(mode[key])[:2]  # node 3 left out (all-zero record)
-    second = dict(sets[1], mode_n=2, freq=60.0, node_nums=np.array([3]), r1=np.zeros(1),
-                  r2=np.zeros(1), r3=np.array([4.0]))  # fmt: skip
+    second = dict(
+        sets[1],
+        mode_n=2,
+        freq=60.0,
+        node_nums=np.array([3]),
+        r1=np.zeros(1),
+        r2=np.zeros(1),
+        r3=np.array([4.0]),
+    )
     pyuff.UFF(str(tmp_path / "u.uff")).write_sets([sets[0], mode, second], mode="overwrite")
     modal = read_uff_modes(tmp_path / "u.uff")
     np.testing.assert_array_equal(modal.shapes, [[1.0, 2.0, 0.0], [0.0, 0.0, 4.0]])
@@ -277,8 +330,9 @@ def malformed_uff(tmp_path, kind):
     elif kind == "outside the plate":
         text = text.replace("  5.00000E+01  2.50000E+01", "  5.00000E+03  2.50000E+01")
     elif kind == "not planar":
-        text = text.replace("  5.00000E+01  2.50000E+01  0.00000E+00",
-                            "  5.00000E+01  2.50000E+01  2.00000E+01")  # fmt: skip
+        text = text.replace(
+            "  5.00000E+01  2.50000E+01  0.00000E+00", "  5.00000E+01  2.50000E+01  2.00000E+01"
+        )
     assert kind in ("empty", "valid") or text != path.read_text(), kind
     path.write_text(text)
     return path
@@ -369,8 +423,9 @@ def test_csv_sigma_and_mode_columns(tmp_path, capsys):
     np.testing.assert_array_equal(case.measured.sigma_Hz, [2.5, 1, 3])
     np.testing.assert_array_equal(case.measured.mode, [1, 3, 2])
     # a per-frequency sigma and --sigma-rel contradict each other
-    status, _, err = run_import(capsys, csv_path, PLATE_SHEET, tmp_path / "d.toml",
-                                "--sigma-rel", "0.02")  # fmt: skip
+    status, _, err = run_import(
+        capsys, csv_path, PLATE_SHEET, tmp_path / "d.toml", "--sigma-rel", "0.02"
+    )
     assert_refused(status, err, tmp_path / "d.toml", "sigma_rel")
 
 
@@ -383,8 +438,9 @@ def test_csv_sigma_rel_column_and_option(tmp_path, capsys):
     out = tmp_path / "c.toml"
     assert run_import(capsys, plain, PLATE_SHEET, out, "--sigma-rel", "0.03")[0] == 0
     np.testing.assert_allclose(load_case(out).measured.sigma_Hz, [3.0, 6.0])
-    status, _, err = run_import(capsys, plain, PLATE_SHEET, tmp_path / "d.toml",
-                                "--sigma-rel", "1.5")  # fmt: skip
+    status, _, err = run_import(
+        capsys, plain, PLATE_SHEET, tmp_path / "d.toml", "--sigma-rel", "1.5"
+    )
     assert_refused(status, err, tmp_path / "d.toml", "--sigma-rel")
 
 
@@ -458,8 +514,16 @@ def test_valid_csv_imports_exactly(capsys, table):
         np.testing.assert_array_equal(load_case(out).measured.frequency_Hz, f)
 
 
-CSV_CORRUPTIONS = ["missing column", "non-numeric", "nan", "negative", "descending", "empty",
-                   "delimiter", "cell count"]  # fmt: skip
+CSV_CORRUPTIONS = [
+    "missing column",
+    "non-numeric",
+    "nan",
+    "negative",
+    "descending",
+    "empty",
+    "delimiter",
+    "cell count",
+]
 
 
 @PROPERTY
@@ -553,8 +617,9 @@ def key_of(n):
 def corrupted_sheet(draw):
     """(sheet text, words the error must contain)."""
     lines = list(SHEET_LINES)
-    kind = draw(st.sampled_from(["missing", "wrong type", "negative", "nan", "material",
-                                 "unknown key"]))  # fmt: skip
+    kind = draw(
+        st.sampled_from(["missing", "wrong type", "negative", "nan", "material", "unknown key"])
+    )
     if kind == "missing":
         n = draw(st.sampled_from([n for n in ASSIGNMENTS if key_of(n)[0] not in OPTIONAL]))
         del lines[n]
@@ -572,8 +637,11 @@ def corrupted_sheet(draw):
         lines[n] = f"{key.split('.')[-1]} = -{key_of(n)[1]}"
         return lines, [key, "positive"]
     if kind == "nan":
-        numeric = [n for n in ASSIGNMENTS if key_of(n)[0] not in ("name", "source", "model.mesh",
-                                                                  "plate.layup_deg")]  # fmt: skip
+        numeric = [
+            n
+            for n in ASSIGNMENTS
+            if key_of(n)[0] not in ("name", "source", "model.mesh", "plate.layup_deg")
+        ]
         n = draw(st.sampled_from(numeric))
         key, value = key_of(n)
         nan = draw(st.sampled_from(["nan", "-nan", "inf", "-inf"]))

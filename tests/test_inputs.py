@@ -24,12 +24,20 @@ MESH = (12, 8)
 #: four modes are within 4.2e-3 of 2, at 48 x 32 within 2.5e-3 (converging to it).
 THIN_MESH = (36, 24)
 E_ISO, NU = 70e9, 0.3
-ISOTROPIC = np.array([E_ISO, E_ISO, NU, E_ISO / (2 * (1 + NU)), E_ISO / (2 * (1 + NU)),
-                      E_ISO / (2 * (1 + NU))])  # fmt: skip
+ISOTROPIC = np.array(
+    [E_ISO, E_ISO, NU, E_ISO / (2 * (1 + NU)), E_ISO / (2 * (1 + NU)), E_ISO / (2 * (1 + NU))]
+)
 
 
-def _case(thickness=0.001, layup=(0,), constants=ISOTROPIC, frequency=None, sigma_rel=0.01,
-          prior_rel=0.25, **sds):  # fmt: skip
+def _case(
+    thickness=0.001,
+    layup=(0,),
+    constants=ISOTROPIC,
+    frequency=None,
+    sigma_rel=0.01,
+    prior_rel=0.25,
+    **sds,
+):
     plate = Plate(0.3, 0.2, thickness, 2700.0, layup, **sds)
     frequency = np.linspace(10.0, 100.0, 8) if frequency is None else frequency
     measured = Measurement(frequency, sigma_rel * np.asarray(frequency))
@@ -49,7 +57,7 @@ def _plate_table(**extra):
             "density_kg_m3": 435.7,
             "layup_deg": [0],
             **extra,
-        },  # fmt: skip
+        },
         "measured": {"frequency_Hz": [50.0, 80.0], "sigma_rel": 0.01},
         "prior": {
             k: {"mean": m, "sd": m / 4}
@@ -58,13 +66,14 @@ def _plate_table(**extra):
                 (10.9, 0.64, 0.39, 0.58, 0.59, 0.026),
                 strict=True,
             )
-        },  # fmt: skip
+        },
     }
 
 
 def test_input_sd_keys_read_in_si():
-    case = parse_case(_plate_table(thickness_sd_mm=0.11, density_sd_kg_m3=4.4,
-                                   length_sd_mm=0.8, width_sd_mm=0.5))  # fmt: skip
+    case = parse_case(
+        _plate_table(thickness_sd_mm=0.11, density_sd_kg_m3=4.4, length_sd_mm=0.8, width_sd_mm=0.5)
+    )
     np.testing.assert_allclose(input_sd(case.plate), [0.11e-3, 4.4, 0.8e-3, 0.5e-3], rtol=1e-15)
 
 
@@ -72,8 +81,9 @@ def test_input_sd_default_zero():
     assert np.array_equal(input_sd(parse_case(_plate_table()).plate), np.zeros(4))
 
 
-@pytest.mark.parametrize("key", ["thickness_sd_mm", "density_sd_kg_m3", "length_sd_mm",
-                                 "width_sd_mm"])  # fmt: skip
+@pytest.mark.parametrize(
+    "key", ["thickness_sd_mm", "density_sd_kg_m3", "length_sd_mm", "width_sd_mm"]
+)
 @pytest.mark.parametrize("value", [-0.1, math.nan, math.inf, "0.1", True])
 def test_bad_input_sd_refused_in_one_line(key, value):
     with pytest.raises(CaseError) as info:
@@ -102,8 +112,9 @@ def thin_jacobian():
 def test_density_derivative_is_exact(thin_jacobian):
     jac, case, b = thin_jacobian
     # lambda ~ 1/rho for a uniform plate: a solve at another density, 1e-12 is round-off
-    other = Case(case.name, "", Plate(0.3, 0.2, 0.001, 2 * 2700.0, (0,)), case.measured,
-                 case.prior, MESH)  # fmt: skip
+    other = Case(
+        case.name, "", Plate(0.3, 0.2, 0.001, 2 * 2700.0, (0,)), case.measured, case.prior, MESH
+    )
     halved = PlateModel.from_case(other, mesh=THIN_MESH).solve(b, 4).eigenvalues
     np.testing.assert_allclose(halved, jac.eigenvalues / 2, rtol=1e-9)
     np.testing.assert_allclose(jac.relative[:, 1], -1.0, rtol=1e-15)  # -lambda/rho * rho/lambda
@@ -164,8 +175,9 @@ def _synthetic(rng, thickness=0.004, sigma_rel=1e-3, prior_rel=0.25, **sds):
 @pytest.fixture(scope="module")
 def estimates():
     rng = np.random.default_rng(20070461)
-    case, model = _synthetic(rng, thickness_sd=0.02 * 0.004, density_sd=27.0,
-                             length_sd=3e-4, width_sd=2e-4)  # fmt: skip
+    case, model = _synthetic(
+        rng, thickness_sd=0.02 * 0.004, density_sd=27.0, length_sd=3e-4, width_sd=2e-4
+    )
     runs = {m: estimate(case, m, model=model, forward="full") for m in ("B", "MVE")}
     return case, model, runs
 
@@ -178,8 +190,7 @@ def test_budget_sums_to_the_total(estimates, method):
     budget = estimate_budget(case, result, model)
     assert budget.status == "ok"
     assert budget.closure < 1e-9  # P = G V_Y G^T + P V_b^-1 P is an identity: round-off
-    np.testing.assert_allclose(budget.variance.sum(axis=0), np.diag(budget.covariance),
-                               rtol=1e-9)  # fmt: skip
+    np.testing.assert_allclose(budget.variance.sum(axis=0), np.diag(budget.covariance), rtol=1e-9)
     np.testing.assert_allclose(budget.share.sum(axis=0), 1.0, rtol=1e-9)
     assert budget.sources == ("frequencies", *INPUT_NAMES, "prior")
 
@@ -187,8 +198,9 @@ def test_budget_sums_to_the_total(estimates, method):
 @pytest.mark.parametrize("method", ["B", "MVE"])
 def test_budget_without_input_sds_is_todays_covariance(estimates, method):
     case, model, runs = estimates
-    exact = case.__class__(case.name, "", Plate(0.3, 0.2, 0.004, 2700.0, (0,)), case.measured,
-                           case.prior, MESH)  # fmt: skip
+    exact = case.__class__(
+        case.name, "", Plate(0.3, 0.2, 0.004, 2700.0, (0,)), case.measured, case.prior, MESH
+    )
     budget = estimate_budget(exact, runs[method], model)
     assert np.array_equal(budget.covariance, runs[method].covariance)
     assert np.array_equal(budget.variance[1:5], np.zeros((4, 6)))
@@ -287,15 +299,17 @@ def test_marginal_inputs_widen_the_posterior_as_h_squared(rng):
     # an independent route to the same covariance: the inputs as nuisance parameters of a
     # joint linear Gaussian in (b, p); its b-block is the marginal's (Woodbury vs Schur)
     S = marginal.predict(r1.b).S
-    mu_p = np.array([case.plate.thickness, case.plate.density, case.plate.length,
-                     case.plate.width])  # fmt: skip
+    mu_p = np.array([case.plate.thickness, case.plate.density, case.plate.length, case.plate.width])
     J = input_jacobian(case, marginal.mu_b, pairing.modes, mesh=MESH).J
     sd_p = input_sd(case.plate)
     keep = sd_p > 0
     W = np.linalg.inv(exact.V_Y)
-    A = np.block([[S.T @ W @ S + np.linalg.inv(exact.V_b), S.T @ W @ J[:, keep]],
-                  [J[:, keep].T @ W @ S,
-                   J[:, keep].T @ W @ J[:, keep] + np.diag(1 / sd_p[keep] ** 2)]])  # fmt: skip
+    A = np.block(
+        [
+            [S.T @ W @ S + np.linalg.inv(exact.V_b), S.T @ W @ J[:, keep]],
+            [J[:, keep].T @ W @ S, J[:, keep].T @ W @ J[:, keep] + np.diag(1 / sd_p[keep] ** 2)],
+        ]
+    )
     scale = np.concatenate([np.abs(r1.b), mu_p[keep]])
     joint = np.linalg.inv(A * np.outer(scale, scale)) * np.outer(scale, scale)
     np.testing.assert_allclose(joint[:6, :6], r1.covariance_b, rtol=1e-7)

@@ -50,8 +50,10 @@ def test_given_density_checked_against_the_mass():
     ok = parse_case(_plate_table(mass_g=M_G, density_kg_m3=rho + 4.0, density_sd_kg_m3=4.4))
     assert ok.plate.density == pytest.approx(rho, rel=1e-14)
     with pytest.raises(CaseError) as info:
-        parse_case(_plate_table(mass_g=M_G, density_kg_m3=rho + 5.0, density_sd_kg_m3=4.4),
-                   path="plate.toml")  # fmt: skip
+        parse_case(
+            _plate_table(mass_g=M_G, density_kg_m3=rho + 5.0, density_sd_kg_m3=4.4),
+            path="plate.toml",
+        )
     text = str(info.value)
     assert "\n" not in text and text.startswith("plate.toml: plate.density_kg_m3 = 440.7")
     assert "plate.mass_g" in text and "435.7" in text and "4.4" in text
@@ -62,12 +64,15 @@ def test_given_density_checked_against_the_mass():
         parse_case(_plate_table(mass_g=M_G, density_kg_m3=rho * 1.002))
 
 
-@pytest.mark.parametrize(("table", "key"), [
-    (_mass_table(mass_g=-1.0), "plate.mass_g"),
-    (_mass_table(mass_g=math.nan), "plate.mass_g"),
-    (_mass_table(mass_g=M_G, mass_sd_g=-0.1), "plate.mass_sd_g"),
-    (_plate_table(mass_sd_g=0.1), "plate.mass_sd_g"),  # a mass sd without a mass
-])  # fmt: skip
+@pytest.mark.parametrize(
+    ("table", "key"),
+    [
+        (_mass_table(mass_g=-1.0), "plate.mass_g"),
+        (_mass_table(mass_g=math.nan), "plate.mass_g"),
+        (_mass_table(mass_g=M_G, mass_sd_g=-0.1), "plate.mass_sd_g"),
+        (_plate_table(mass_sd_g=0.1), "plate.mass_sd_g"),  # a mass sd without a mass
+    ],
+)
 def test_bad_mass_refused_in_one_line(table, key):
     with pytest.raises(CaseError) as info:
         parse_case(table, path="plate.toml")
@@ -134,8 +139,7 @@ def test_mass_budget_equals_the_full_covariance_of_h_and_rho(rng):
     assert budget.status == "ok"
     # by hand: the estimate's gain G = P S^T V_Y^-1 applied to J C J^T, C of (h, rho, a, b)
     conv = result.settings["conventions"]
-    problem = GaussianProblem.from_case(case, model, result.pairing, conv.observation,
-                                        conv.prior)  # fmt: skip
+    problem = GaussianProblem.from_case(case, model, result.pairing, conv.observation, conv.prior)
     modes = np.asarray(result.modes) - 1
     S = problem.predict(result.b, modes).S
     G = result.covariance_b @ S.T @ np.linalg.inv(problem.V_Y)
@@ -149,8 +153,9 @@ def test_mass_budget_equals_the_full_covariance_of_h_and_rho(rng):
     # the inputs matter here (not a vacuous equality): E1's variance grows by > 50 %
     assert budget.covariance[0, 0] > 1.5 * result.covariance[0, 0]
     # and the marginal problem's added covariance is J C J^T
-    np.testing.assert_allclose(input_covariance(case, result.b, modes, mesh=MESH),
-                               J @ C @ J.T, rtol=1e-9)  # fmt: skip
+    np.testing.assert_allclose(
+        input_covariance(case, result.b, modes, mesh=MESH), J @ C @ J.T, rtol=1e-9
+    )
 
 
 def test_thickness_weighs_three_times_with_the_mass():
@@ -159,8 +164,9 @@ def test_thickness_weighs_three_times_with_the_mass():
     # bending moduli by 3 sd_h / h (2 with an independent density). The band: TSDT at a/h =
     # 300 on the 36 x 24 mesh departs from h^2 by 4.2e-3 in d ln lambda / d ln h
     # (tests/test_inputs.py THIN_MESH), and the prior's pull (~1e-3).
-    case, model = _synthetic_mass(np.random.default_rng(2), thickness=0.001, sigma_rel=1e-4,
-                                  prior_rel=1.0, mesh=(36, 24), n=8)  # fmt: skip
+    case, model = _synthetic_mass(
+        np.random.default_rng(2), thickness=0.001, sigma_rel=1e-4, prior_rel=1.0, mesh=(36, 24), n=8
+    )
     result = estimate(case, "B", model=model, forward="full")
     assert result.converged
     budget = estimate_budget(case, result, model)

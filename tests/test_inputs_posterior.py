@@ -106,8 +106,9 @@ def test_collapsed_draws_are_draws_of_the_joint_posterior(rng):
     problem, conditional, mean, cov, (m_b, P) = _linear_inputs_problem(rng)
     n = 20_000
     samples_b = rng.multivariate_normal(m_b, P, size=n)
-    post = inputs_from_chain(problem, samples_b, problem.forward, conditional,
-                             np.random.default_rng(SEED), max_draws=n)  # fmt: skip
+    post = inputs_from_chain(
+        problem, samples_b, problem.forward, conditional, np.random.default_rng(SEED), max_draws=n
+    )
     assert post.names == ("thickness", "density", "length")
     assert post.keys == ("thickness_mm", "density_kg_m3", "length_mm")
     assert np.array_equal(post.rows, np.arange(n))
@@ -132,9 +133,17 @@ def test_collapsed_draws_are_draws_of_the_joint_posterior(rng):
 def test_same_seed_same_draws(rng):
     problem, conditional, _, _, (m_b, P) = _linear_inputs_problem(rng)
     samples_b = rng.multivariate_normal(m_b, P, size=500)
-    runs = [inputs_from_chain(problem, samples_b, problem.forward, conditional,
-                              np.random.default_rng(seed), max_draws=200)
-            for seed in (5, 5, 6)]  # fmt: skip
+    runs = [
+        inputs_from_chain(
+            problem,
+            samples_b,
+            problem.forward,
+            conditional,
+            np.random.default_rng(seed),
+            max_draws=200,
+        )
+        for seed in (5, 5, 6)
+    ]
     assert np.array_equal(runs[0].draws, runs[1].draws)
     assert np.array_equal(runs[0].rows, runs[1].rows) and len(runs[0].rows) == 200
     assert not np.array_equal(runs[0].draws, runs[2].draws)
@@ -224,9 +233,17 @@ def test_no_input_sd_gives_todays_chain_and_no_rows():
     _, build, walk = streams(SEED)
     setup = prepare(case, rng=build)
     est = setup.estimate
-    chain = sample_problem(setup.problem, est.b, est.covariance_b, rng=walk, progress=False,
-                           forward=setup.sampling_forward(), box=setup.box,
-                           min_ess=300, max_steps=400)  # fmt: skip
+    chain = sample_problem(
+        setup.problem,
+        est.b,
+        est.covariance_b,
+        rng=walk,
+        progress=False,
+        forward=setup.sampling_forward(),
+        box=setup.box,
+        min_ess=300,
+        max_steps=400,
+    )
     assert np.array_equal(a.samples_b, chain.samples_b)
     assert "input" not in sample_text(case, a).splitlines()[-1]
     doc = sampling_to_dict(a, case)
@@ -245,8 +262,20 @@ def test_cli_sample_shows_the_inputs(tmp_path, capsys):
     path = tmp_path / "plate1_inputs.toml"
     path.write_text(text)
     js = tmp_path / "posterior.json"
-    status = main(["sample", str(path), "--seed", "3", "--min-ess", "400", "--max-steps",
-                   "2000", "--json", str(js)])  # fmt: skip
+    status = main(
+        [
+            "sample",
+            str(path),
+            "--seed",
+            "3",
+            "--min-ess",
+            "400",
+            "--max-steps",
+            "2000",
+            "--json",
+            str(js),
+        ]
+    )
     assert status == 0
     out = capsys.readouterr().out
     rows = {line.split()[0]: line.split() for line in out.splitlines() if line.strip()}
@@ -266,13 +295,31 @@ def test_cli_sample_shows_the_inputs(tmp_path, capsys):
 def test_report_posterior_section_shows_the_inputs():
     from bayesplate.report.markdown import _sample_lines
 
-    result = {"hdi": np.ones((2, 6)) * 1e9, "mean": np.ones(6) * 1e9, "sd": np.ones(6) * 1e8,
-              "ess_bulk": np.ones(6) * 500, "rhat": np.ones(6), "timings": {"total": 1.0},
-              "n_walkers": 32, "n_steps": 400, "n_burn": 100, "acceptance": 0.5,
-              "message": "converged", "certificate": None, "n_full": 0, "inputs": "marginal",
-              "inputs_given": "thickness 0.132 mm"}  # fmt: skip
-    row = {"declared": 6.6, "declared_sd": 0.132, "mean": 6.65, "sd": 0.065, "hdi_3%": 6.53,
-           "hdi_97%": 6.77}  # fmt: skip
+    result = {
+        "hdi": np.ones((2, 6)) * 1e9,
+        "mean": np.ones(6) * 1e9,
+        "sd": np.ones(6) * 1e8,
+        "ess_bulk": np.ones(6) * 500,
+        "rhat": np.ones(6),
+        "timings": {"total": 1.0},
+        "n_walkers": 32,
+        "n_steps": 400,
+        "n_burn": 100,
+        "acceptance": 0.5,
+        "message": "converged",
+        "certificate": None,
+        "n_full": 0,
+        "inputs": "marginal",
+        "inputs_given": "thickness 0.132 mm",
+    }
+    row = {
+        "declared": 6.6,
+        "declared_sd": 0.132,
+        "mean": 6.65,
+        "sd": 0.065,
+        "hdi_3%": 6.53,
+        "hdi_97%": 6.77,
+    }
     result["inputs_posterior"] = {"thickness_mm": row}
     result["input_certificate"] = {"text": "linear input model ... ok", "passed": True}
     lines = _sample_lines(result)

@@ -56,8 +56,9 @@ def test_sampler_with_correlated_errors_gives_the_closed_form_posterior(rng):
 
     problem, mean, P = _correlated_problem(rng)
     sd = np.sqrt(np.diag(P))
-    result = sample_problem(problem, mean + 0.5 * sd, np.diag(2 * sd**2), rng=3,
-                            progress=False, min_ess=1500)  # fmt: skip
+    result = sample_problem(
+        problem, mean + 0.5 * sd, np.diag(2 * sd**2), rng=3, progress=False, min_ess=1500
+    )
     assert result.converged
     az = load_arviz()
     draws = result.samples_b.reshape(-1, result.n_walkers, 6)
@@ -133,8 +134,9 @@ def test_prepare_marginalises_the_inputs_the_case_gives(plate1_thickness):
     assert np.linalg.norm(at - marginal.estimate.b) < 1e-3 * np.linalg.norm(at)
     expected = input_covariance(case, at, modes, mesh=(8, 4))
     # (the subtraction leaves round-off of the largest V_Y entry, ~1e-16 relative)
-    np.testing.assert_allclose(added, expected, rtol=1e-12,
-                               atol=1e-14 * np.abs(marginal.problem.V_Y).max())  # fmt: skip
+    np.testing.assert_allclose(
+        added, expected, rtol=1e-12, atol=1e-14 * np.abs(marginal.problem.V_Y).max()
+    )
     # rank one (thickness only): J_h J_h^T sd_h^2 with d ln lambda / d ln h about 2 in
     # bending (1.5-1.95 on this thick plate's modes)
     rel = input_jacobian(case, at, modes, mesh=(8, 4)).relative[:, 0]

@@ -76,10 +76,14 @@ def _interrupt(args, cwd, sig, delay, after=None, done=(0,)):
     command ignores SIGINT once its work is done and its files closed).
     """
     proc = subprocess.Popen(
-        _command(args), cwd=cwd, env=_env(), stderr=subprocess.PIPE, text=True,
+        _command(args),
+        cwd=cwd,
+        env=_env(),
+        stderr=subprocess.PIPE,
+        text=True,
         stdout=subprocess.DEVNULL if after is None else subprocess.PIPE,
         preexec_fn=_default_sigint,
-    )  # fmt: skip
+    )
     if after is not None:
         for line in proc.stdout:
             if after in line:
@@ -137,8 +141,21 @@ def _whole_json(path, reference):
 
 # ----------------------------------------------------------------------------- sample
 
-_SAMPLE = ["sample", CASE, "--mesh", 6, 4, "--seed", 3, "--walkers", 12, "--max-steps", 190,
-           "--min-ess", 400]  # fmt: skip
+_SAMPLE = [
+    "sample",
+    CASE,
+    "--mesh",
+    6,
+    4,
+    "--seed",
+    3,
+    "--walkers",
+    12,
+    "--max-steps",
+    190,
+    "--min-ess",
+    400,
+]
 _SAMPLE_DONE = (0, 1)  # 1: the step cap came first (a short chain on purpose)
 
 
@@ -297,8 +314,9 @@ def _run_marked(args, cwd, mark):
     started = time.perf_counter()
     marked = None
     with tempfile.TemporaryFile("w+") as err:
-        proc = subprocess.Popen(_command(args), cwd=cwd, env=_env(), stdout=subprocess.PIPE,
-                                stderr=err, text=True)  # fmt: skip
+        proc = subprocess.Popen(
+            _command(args), cwd=cwd, env=_env(), stdout=subprocess.PIPE, stderr=err, text=True
+        )
         for line in proc.stdout:
             if marked is None and mark in line:
                 marked = time.perf_counter()

@@ -36,11 +36,26 @@ def test_case_unit_documents_keep_their_last_bits():
             assert doc[key]["mean"] == float(e[i] * factor)
             assert doc[key]["sd"] == float(sd[i] * factor)
         result = SimpleNamespace(
-            settings={}, method="B", converged=True, iterations=1, message="", n_solves=1,
-            wall_time=0.0, constants=e, sd=sd, b=e, frequency_Hz=[], measured_Hz=[],
-            residual=[], modes=[], mode_swaps=[], stages=(), status="converged", fit=None,
+            settings={},
+            method="B",
+            converged=True,
+            iterations=1,
+            message="",
+            n_solves=1,
+            wall_time=0.0,
+            constants=e,
+            sd=sd,
+            b=e,
+            frequency_Hz=[],
+            measured_Hz=[],
+            residual=[],
+            modes=[],
+            mode_swaps=[],
+            stages=(),
+            status="converged",
+            fit=None,
             warnings=(),
-        )  # fmt: skip
+        )
         mesh = SimpleNamespace(mesh=SimpleNamespace(nx=1, ny=1))
         doc = estimate_to_dict(result, SimpleNamespace(name="x"), mesh)["constants"]
         for i, key in enumerate(keys):

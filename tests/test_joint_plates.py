@@ -262,8 +262,18 @@ def test_cli_several_plates_flags_the_fourth(case_files, tmp_path, capsys):
     from bayesplate.cli.main import main
 
     out = tmp_path / "j.json"
-    argv = ["sample", *map(str, case_files), "--seed", "1", "--min-ess", "300", "-o",
-            str(tmp_path), "--json", str(out)]  # fmt: skip
+    argv = [
+        "sample",
+        *map(str, case_files),
+        "--seed",
+        "1",
+        "--min-ess",
+        "300",
+        "-o",
+        str(tmp_path),
+        "--json",
+        str(out),
+    ]
     assert main(argv) == 0
     text = capsys.readouterr().out
     assert "4 plates of one material" in text and text.count("FLAGGED") == 1
@@ -286,8 +296,9 @@ def test_hierarchical_density_without_spread_has_the_shared_forms_gradient(two_p
     b_star = setup.estimate.b
     problems = [s.problem.with_forward(s.forward_with_sensitivities()) for s in setup.setups]
     p = setup.setups[0].problem
-    density = PopulationDensity([linearise(q, b_star) for q in problems], p.mu_b, p.V_b,
-                                outlier_prior=0.0)  # fmt: skip
+    density = PopulationDensity(
+        [linearise(q, b_star) for q in problems], p.mu_b, p.V_b, outlier_prior=0.0
+    )
     shared = joint_problem(problems)
     z_star = np.log(laminate.engineering_from_stiffness(b_star))
 

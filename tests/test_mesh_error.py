@@ -59,8 +59,9 @@ def test_the_unabsorbed_part_widens_the_deviations_less_and_is_said():
     blind = case.with_measured(frequency_Hz=f, sigma_Hz=0.002 * f)
     model = PlateModel.from_case(case, mesh=(12, 6))
     whole = diagnose(blind, model=model, rng=0, n_starts=1, pairing="order")
-    left = diagnose(blind, model=model, rng=0, n_starts=1, pairing="order",
-                    mesh_error_part="unabsorbed")  # fmt: skip
+    left = diagnose(
+        blind, model=model, rng=0, n_starts=1, pairing="order", mesh_error_part="unabsorbed"
+    )
     sigma = blind.measured.sigma_Hz
     assert np.max(whole.sigma_Hz / sigma) > 1.5  # the whole error: well above the deviations
     np.testing.assert_allclose(left.mesh_error_Hz, whole.mesh_error_Hz)  # the same estimate
@@ -95,8 +96,7 @@ def test_the_diagnose_command_passes_the_part_on(monkeypatch, capsys):
 
     monkeypatch.setattr(module, "diagnose", stand_in)
     with pytest.raises(_Stop):
-        main(["diagnose", "plate1", "--mesh", "6", "3", "--mesh-error", "unabsorbed",
-              "--no-cache"])  # fmt: skip
+        main(["diagnose", "plate1", "--mesh", "6", "3", "--mesh-error", "unabsorbed", "--no-cache"])
     assert seen["mesh_error_part"] == "unabsorbed"
     with pytest.raises(SystemExit) as exit_:
         main(["diagnose", "plate1", "--mesh-error", "most"])
@@ -129,9 +129,15 @@ def test_a_concealed_point_support_reaches_its_best_basin_and_is_named():
     image = [theta[0], model.mesh.a * 1e3 - theta[1], model.mesh.b * 1e3 - theta[2]]
     reference = fit(problem, [problem.pack(stiffness_from_engineering(blind.reference), image)])
 
-    d = diagnose(blind, model=model, physics=[PointSupport(), ElasticFoundation()],
-                 rng=concealment.SEED, pairing="order", mesh_error_part="unabsorbed",
-                 workers=2)  # fmt: skip
+    d = diagnose(
+        blind,
+        model=model,
+        physics=[PointSupport(), ElasticFoundation()],
+        rng=concealment.SEED,
+        pairing="order",
+        mesh_error_part="unabsorbed",
+        workers=2,
+    )
     got = next(c.fit for c in d.candidates if c.name == "point_support")
     assert np.all(d.sigma_Hz == blind.measured.sigma_Hz)  # nothing was added
     assert got.chi2 + got.chi2_prior <= reference.chi2 + reference.chi2_prior + 0.1

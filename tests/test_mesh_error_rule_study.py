@@ -6,9 +6,19 @@ mer = load_study("mesh_error_rule", "mesh_error_rule_study")
 
 
 def _row(key, kind, family, effect, verdict, chosen=None, p=0.5, widening=(1.0, 1.2)):
-    return {"key": key, "kind": kind, "family": family, "effect": effect, "size": 0.17,
-            "verdict": verdict, "chosen": chosen, "rival": None, "also": [], "p_value": p,
-            "widening": list(widening)}  # fmt: skip
+    return {
+        "key": key,
+        "kind": kind,
+        "family": family,
+        "effect": effect,
+        "size": 0.17,
+        "verdict": verdict,
+        "chosen": chosen,
+        "rival": None,
+        "also": [],
+        "p_value": p,
+        "widening": list(widening),
+    }
 
 
 def test_every_clean_replicate_and_the_fitted_size_of_every_candidate_are_run_again():
@@ -27,18 +37,25 @@ def test_every_clean_replicate_and_the_fitted_size_of_every_candidate_are_run_ag
 
 def test_rows_are_paired_by_replicate_and_counted_on_both_sides():
     rule = {
-        "clean/crossply/0": _row("clean/crossply/0", "clean", "crossply", None, "explained",
-                                 "cutout", p=0.004),
+        "clean/crossply/0": _row(
+            "clean/crossply/0", "clean", "crossply", None, "explained", "cutout", p=0.004
+        ),
         "clean/crossply/1": _row("clean/crossply/1", "clean", "crossply", None, "consistent"),
-        "power/f/point_mass/0.17/0": _row("power/f/point_mass/0.17/0", "power", "f",
-                                          "point_mass", "explained", "point_mass"),
-        "power/f/point_mass/0.17/1": _row("power/f/point_mass/0.17/1", "power", "f",
-                                          "point_mass", "explained", "cutout"),
-        "power/f/point_mass/0.17/2": _row("power/f/point_mass/0.17/2", "power", "f",
-                                          "point_mass", "explained", "point_mass"),
-    }  # fmt: skip
-    base = {k: {**r, "verdict": "consistent", "chosen": None, "widening": [1.3, 1.5]}
-            for k, r in rule.items() if not k.endswith("/2")}  # fmt: skip
+        "power/f/point_mass/0.17/0": _row(
+            "power/f/point_mass/0.17/0", "power", "f", "point_mass", "explained", "point_mass"
+        ),
+        "power/f/point_mass/0.17/1": _row(
+            "power/f/point_mass/0.17/1", "power", "f", "point_mass", "explained", "cutout"
+        ),
+        "power/f/point_mass/0.17/2": _row(
+            "power/f/point_mass/0.17/2", "power", "f", "point_mass", "explained", "point_mass"
+        ),
+    }
+    base = {
+        k: {**r, "verdict": "consistent", "chosen": None, "widening": [1.3, 1.5]}
+        for k, r in rule.items()
+        if not k.endswith("/2")
+    }
     table = mer.summary(rule, base)
     assert set(table) == {"clean/crossply", "power/point_mass"}
     clean, power = table["clean/crossply"], table["power/point_mass"]

@@ -55,8 +55,9 @@ def test_the_same_plate_on_another_mesh_keeps_its_boundary_and_element():
     other = plate.on_mesh((4, 2))
     built = _model(boundary="simply_supported", layup=[0, 90, 0], mesh=(4, 2))
     assert other.boundary == "simply_supported" and (other.mesh.nx, other.mesh.ny) == (4, 2)
-    np.testing.assert_array_equal(other.solve(B_REF, 5).eigenvalues,
-                                  built.solve(B_REF, 5).eigenvalues)  # fmt: skip
+    np.testing.assert_array_equal(
+        other.solve(B_REF, 5).eigenvalues, built.solve(B_REF, 5).eigenvalues
+    )
 
 
 def test_rotating_the_plate_by_ninety_degrees_changes_nothing():
@@ -190,11 +191,14 @@ def test_lowest_eigenvalue_bound_of_a_free_square_isotropic_plate():
     assert bound / leissa == pytest.approx(576 * (1 - nu) / 2 / 13.468**2, rel=1e-3)
 
 
-@pytest.mark.parametrize(("a", "b", "layup", "mesh"), [
-    (0.1, 0.06, LAYUP, (10, 6)),  # unsymmetric: D - B A^-1 B
-    (0.3, 0.05, [0, 90, 90, 0], (24, 4)),  # a beam: the beam shape along x
-    (0.2, 0.2, [45, -45, -45, 45], (12, 12)),  # D12 near D11: the saddle x^2 - y^2
-])  # fmt: skip
+@pytest.mark.parametrize(
+    ("a", "b", "layup", "mesh"),
+    [
+        (0.1, 0.06, LAYUP, (10, 6)),  # unsymmetric: D - B A^-1 B
+        (0.3, 0.05, [0, 90, 90, 0], (24, 4)),  # a beam: the beam shape along x
+        (0.2, 0.2, [45, -45, -45, 45], (12, 12)),  # D12 near D11: the saddle x^2 - y^2
+    ],
+)
 def test_lowest_eigenvalue_bound_lies_just_above_the_computed_one(a, b, layup, mesh):
     # a Rayleigh quotient bounds the lowest eigenvalue from above; shear deformation and the
     # shapes' distance from the true mode keep it within about 30 % on plates of any aspect
@@ -211,8 +215,10 @@ def test_assembled_matrices_leave_out_exact_zeros_and_multiply_bit_for_bit():
     x = np.random.default_rng(5).standard_normal((model.mesh.n_dofs, 3))
     foundation = model.modified(extra_stiffness_data=0.5 * model.mass_data)
     pairs = [(model.stiffness_term(j), model.stiffness_terms[j]) for j in range(6)]
-    pairs += [(model.mass, model.mass_data),
-              (foundation.extra_stiffness, foundation.extra_stiffness_data)]  # fmt: skip
+    pairs += [
+        (model.mass, model.mass_data),
+        (foundation.extra_stiffness, foundation.extra_stiffness_data),
+    ]
     for A, data in pairs:
         full = model.assembler.matrix(data)
         assert A.nnz == np.count_nonzero(data) < full.nnz

@@ -51,10 +51,12 @@ def test_disc_fractions_add_up_to_the_disc_area(rng):
         assert frac.min() >= 0.0 and frac.max() <= 1.0
     # a quarter of the disc at a corner, half of it on an edge
     # (round-off: each element's share is a difference of four areas of order d^2)
-    np.testing.assert_allclose(disc_fractions(mesh, (0.0, 0.0), 0.02).sum() * cell,
-                               np.pi * 0.02**2 / 16, rtol=1e-10)  # fmt: skip
-    np.testing.assert_allclose(disc_fractions(mesh, (0.05, B), 0.02).sum() * cell,
-                               np.pi * 0.02**2 / 8, rtol=1e-10)  # fmt: skip
+    np.testing.assert_allclose(
+        disc_fractions(mesh, (0.0, 0.0), 0.02).sum() * cell, np.pi * 0.02**2 / 16, rtol=1e-10
+    )
+    np.testing.assert_allclose(
+        disc_fractions(mesh, (0.05, B), 0.02).sum() * cell, np.pi * 0.02**2 / 8, rtol=1e-10
+    )
     # a disc holding an element whole (10 mm x 8.8 mm, centred): all of it
     e = 3 * mesh.nx + 4
     assert disc_fractions(mesh, mesh.centroids[e], 0.0135)[e] == pytest.approx(1.0, abs=1e-14)
@@ -90,8 +92,7 @@ def test_cutout_removes_the_mass_of_the_disc():
         removed = w @ (model.mass @ w) - w @ (holed.mass @ w)
         d = 1e-3 * theta[2]
         # the disc's mass rho h pi d^2 / 4, less the ersatz share RESIDUAL kept
-        np.testing.assert_allclose(removed, (1 - RESIDUAL) * RHO * H * np.pi * d**2 / 4,
-                                   rtol=1e-12)  # fmt: skip
+        np.testing.assert_allclose(removed, (1 - RESIDUAL) * RHO * H * np.pi * d**2 / 4, rtol=1e-12)
         # rigid motions stay free: the hole removes stiffness, it adds none
         np.testing.assert_allclose(holed.solve(B_REF, 4).n_rigid, 6)
 
@@ -102,10 +103,15 @@ def test_removing_the_same_share_everywhere_keeps_the_eigenvalues():
     # and the inertia go together)
     model = _model(layup=(0, 90, 0))
     everything = Cutout().apply(model, np.array([50.0, 26.5, 1000.0]))
-    np.testing.assert_allclose(everything.mass_data, RESIDUAL * model.mass_data, rtol=1e-9,
-                               atol=1e-12 * np.abs(model.mass_data).max())  # fmt: skip
-    np.testing.assert_allclose(everything.solve(B_REF, 8).eigenvalues,
-                               model.solve(B_REF, 8).eigenvalues, rtol=1e-8)  # fmt: skip
+    np.testing.assert_allclose(
+        everything.mass_data,
+        RESIDUAL * model.mass_data,
+        rtol=1e-9,
+        atol=1e-12 * np.abs(model.mass_data).max(),
+    )
+    np.testing.assert_allclose(
+        everything.solve(B_REF, 8).eigenvalues, model.solve(B_REF, 8).eigenvalues, rtol=1e-8
+    )
 
 
 def test_cutout_mirror_images_have_equal_frequencies():
@@ -116,8 +122,9 @@ def test_cutout_mirror_images_have_equal_frequencies():
     images = cut.mirror_images(model, theta)
     assert len(images) == 3
     for image in images:
-        np.testing.assert_allclose(cut.apply(model, image).solve(B_REF, 8).eigenvalues, f0,
-                                   rtol=1e-8)  # fmt: skip
+        np.testing.assert_allclose(
+            cut.apply(model, image).solve(B_REF, 8).eigenvalues, f0, rtol=1e-8
+        )
     # a hole at the centre is its own mirror image, and keeps every mode symmetric or
     # antisymmetric about the plate's mid-lines
     centre = np.array([50.0, 26.5, 14.0])
@@ -140,8 +147,10 @@ def test_cutout_first_order_is_the_rayleigh_quotient_of_the_map():
     r = model.solve(B_REF, 6)
     e = 2 * model.mesh.nx + 3
     centre_mm = 1e3 * model.mesh.centroids[e]
-    column = (r.eigenvalues[:, None] * _mass_energy(model, r)[:, [e]]
-              - _stiffness_energy(model, r)[:, [e]])[:, 0]  # fmt: skip
+    column = (
+        r.eigenvalues[:, None] * _mass_energy(model, r)[:, [e]]
+        - _stiffness_energy(model, r)[:, [e]]
+    )[:, 0]
     # the location map's column at e is that derivative: residuals equal to it are
     # explained by removing all of element e (amplitude 1)
     mapped = cutout_map(model, r, B_REF, column, np.ones(6), np.eye(6))
@@ -177,8 +186,9 @@ def _mass_energy(model, r):
 def test_zero_spring_is_the_nominal_plate():
     model = _model()
     sprung = PointSupport().apply(model, np.array([-np.inf, 31.0, 17.0]))
-    np.testing.assert_array_equal(sprung.stiffness(B_REF).toarray(),
-                                  model.stiffness(B_REF).toarray())  # fmt: skip
+    np.testing.assert_array_equal(
+        sprung.stiffness(B_REF).toarray(), model.stiffness(B_REF).toarray()
+    )
 
 
 def test_spring_at_a_node_adds_k_to_its_w_unknown_only():
@@ -275,8 +285,9 @@ def test_point_support_mirror_images_have_equal_frequencies():
     images = ps.mirror_images(model, theta)
     assert len(images) == 3
     for image in images:
-        np.testing.assert_allclose(ps.apply(model, image).solve(B_REF, 8).eigenvalues, f0,
-                                   rtol=1e-8)  # fmt: skip
+        np.testing.assert_allclose(
+            ps.apply(model, image).solve(B_REF, 8).eigenvalues, f0, rtol=1e-8
+        )
 
 
 # --- end to end -----------------------------------------------------------------------
@@ -345,12 +356,16 @@ def test_a_strong_misalignment_is_named_once_its_rejected_refit_is_searched_agai
     f = study.recordings(case, fine, physics, theta, rng)
     blind = case.with_measured(frequency_Hz=f, sigma_Hz=study.NOISE * f)
     said = []
-    d = diagnose(blind, model=model, rng=study.SEED, pairing="order", workers=2,
-                 progress=said.append)  # fmt: skip
+    d = diagnose(
+        blind, model=model, rng=study.SEED, pairing="order", workers=2, progress=said.append
+    )
     assert any("constants searched again" in line for line in said), said
     assert d.verdict == "explained" and d.chosen.name == "ply_misalignment"
     delta, sd = d.chosen.parameters["delta_deg"], d.chosen.parameters_sd["delta_deg"]
     assert abs(abs(delta) - 8.0) < 2.0 * sd + 0.1  # the sign is a mirror image (0/90 layup)
     in_plane = [0, 1, 3]  # E1, E2, G12: what bending frequencies determine well
-    np.testing.assert_allclose(np.asarray(d.chosen.fit.constants)[in_plane],
-                               np.asarray(case.reference)[in_plane], rtol=0.02)  # fmt: skip
+    np.testing.assert_allclose(
+        np.asarray(d.chosen.fit.constants)[in_plane],
+        np.asarray(case.reference)[in_plane],
+        rtol=0.02,
+    )

@@ -64,8 +64,9 @@ def test_recorded_noise_power_is_the_noncentral_chi_square_without_widening(chi2
     # w = 1, no prior: the fitted test's chi-square is ncx2(m - 6, chi2) (closed form)
     m = 14
     fit = _a_fit(m, chi2, 1)
-    got = cal.recorded_noise_power(fit.residual, fit.jacobian, np.ones(m), m - 6,
-                                   np.random.default_rng(2))  # fmt: skip
+    got = cal.recorded_noise_power(
+        fit.residual, fit.jacobian, np.ones(m), m - 6, np.random.default_rng(2)
+    )
     want = cal.ideal_power(chi2, m - 6) if chi2 > 0 else cal.ALPHA
     assert got == pytest.approx(want, abs=0.004)  # 3.5 standard errors of 200 000 draws
 
@@ -78,8 +79,9 @@ def test_recorded_noise_power_under_a_uniform_widening_is_the_scaled_noncentral_
 
     m, w, chi2 = 14, 1.33, 12.0
     fit = _a_fit(m, chi2, 3)
-    got = cal.recorded_noise_power(fit.residual, fit.jacobian, np.full(m, w), m - 6,
-                                   np.random.default_rng(4))  # fmt: skip
+    got = cal.recorded_noise_power(
+        fit.residual, fit.jacobian, np.full(m, w), m - 6, np.random.default_rng(4)
+    )
     crit = chi2_dist.ppf(1 - cal.ALPHA, m - 6)
     want = ncx2.sf(w**2 * crit, m - 6, w**2 * chi2)
     assert got == pytest.approx(want, abs=0.004)
@@ -99,11 +101,13 @@ def test_effective_dof_is_m_minus_6_without_a_prior_and_more_with_one():
 
 
 def test_diagnoses_read_per_size_median_widening_and_nominal_rejections():
-    rows = [{"effect": "cutout", "size": 6.2, "widening": [1.0, 2.0], "p_value": 0.001},
-            {"effect": "cutout", "size": 6.2, "widening": [1.2, 3.0], "p_value": 0.2},
-            {"effect": "cutout", "size": 6.2, "widening": [1.4, 1.0], "p_value": 0.005},
-            {"effect": "cutout", "size": 13.0, "widening": [9.0, 9.0], "p_value": 0.0},
-            {"effect": "cutout", "size": 6.2, "p_value": 0.0}]  # no widening kept: not read
+    rows = [
+        {"effect": "cutout", "size": 6.2, "widening": [1.0, 2.0], "p_value": 0.001},
+        {"effect": "cutout", "size": 6.2, "widening": [1.2, 3.0], "p_value": 0.2},
+        {"effect": "cutout", "size": 6.2, "widening": [1.4, 1.0], "p_value": 0.005},
+        {"effect": "cutout", "size": 13.0, "widening": [9.0, 9.0], "p_value": 0.0},
+        {"effect": "cutout", "size": 6.2, "p_value": 0.0},  # no widening kept: not read
+    ]
     widening, rejected, n = na.diagnosed(rows, "cutout", 6.2)
     np.testing.assert_allclose(widening, [1.2, 2.0])
     assert (rejected, n) == (2, 3)
@@ -115,8 +119,10 @@ def test_quick_run_writes_its_report(tmp_path):
     # deviations are then those at the declared ones
     table = cal.sizes(quick=True)
     m = cal._case(cal.POWER_FAMILY).measured.size
-    rows = {f"r{j}": {"effect": "point_mass", "size": size, "widening": [1.0] * m,
-                      "p_value": 0.5} for j, size in enumerate(table["point_mass"]["sizes"])}
+    rows = {
+        f"r{j}": {"effect": "point_mass", "size": size, "widening": [1.0] * m, "p_value": 0.5}
+        for j, size in enumerate(table["point_mass"]["sizes"])
+    }
     cache = cal._cache_path(tmp_path, True)
     cache.parent.mkdir(parents=True)
     cache.write_text(json.dumps({"sizes": table, "rows": rows}))

@@ -43,12 +43,18 @@ def test_parameters_have_units_priors_and_bounds(physics):
 
 @pytest.mark.parametrize(
     "physics, theta",
-    [(PointMass(), [0.0, 30.0, 20.0]), (ThicknessTaper("x"), [0.0]), (ThicknessTaper("y"), [0.0]),
-     (PlyMisalignment(), [0.0]), (ElasticFoundation(), [0.0]),
-     (LocalStiffnessLoss(), [50.0, 26.5, 20.0, 10.0, 1.0]), (Cutout(), [31.0, 17.0, 0.0]),
-     (PointSupport(), [-np.inf, 30.0, 20.0])],
+    [
+        (PointMass(), [0.0, 30.0, 20.0]),
+        (ThicknessTaper("x"), [0.0]),
+        (ThicknessTaper("y"), [0.0]),
+        (PlyMisalignment(), [0.0]),
+        (ElasticFoundation(), [0.0]),
+        (LocalStiffnessLoss(), [50.0, 26.5, 20.0, 10.0, 1.0]),
+        (Cutout(), [31.0, 17.0, 0.0]),
+        (PointSupport(), [-np.inf, 30.0, 20.0]),
+    ],
     ids=lambda x: getattr(x, "name", ""),
-)  # fmt: skip
+)
 def test_zero_effect_is_the_nominal_plate(physics, theta):
     model = _model()
     np.testing.assert_allclose(_f(physics.apply(model, np.array(theta))), _f(model), rtol=1e-9)
@@ -181,14 +187,23 @@ def _generic_theta(physics, model):
     return np.array(theta)
 
 
-@pytest.mark.parametrize("layup, n_symmetries", [((0, 90, 90, 0), 3), ((30, -30, -30, 30), 1)],
-                         ids=["cross-ply", "angle-ply"])  # fmt: skip
+@pytest.mark.parametrize(
+    "layup, n_symmetries",
+    [((0, 90, 90, 0), 3), ((30, -30, -30, 30), 1)],
+    ids=["cross-ply", "angle-ply"],
+)
 # a point support first: its prior's scale needs a physical plate (a pair once split its
 # parameters at an unphysical b and raised deep inside numpy)
-@pytest.mark.parametrize("physics", [*candidates(), Pair(PointMass(), ThicknessTaper("x"), B_REF),
-                                     Pair(PlyMisalignment(), Cutout(), B_REF),
-                                     Pair(PointSupport(), PointMass(), B_REF)],
-                         ids=lambda c: c.name + "".join(f"-{v}" for v in c.settings().values()))
+@pytest.mark.parametrize(
+    "physics",
+    [
+        *candidates(),
+        Pair(PointMass(), ThicknessTaper("x"), B_REF),
+        Pair(PlyMisalignment(), Cutout(), B_REF),
+        Pair(PointSupport(), PointMass(), B_REF),
+    ],
+    ids=lambda c: c.name + "".join(f"-{v}" for v in c.settings().values()),
+)
 @pytest.mark.filterwarnings("error")  # numpy's warnings on a singular or absurd plate too
 def test_every_candidates_mirror_images_have_its_frequencies(physics, layup, n_symmetries):
     # an image under each of the plate's symmetries: the half-turn always (every ply is

@@ -38,11 +38,21 @@ def _compute(item):
 def test_a_failed_first_phase_leaves_the_candidate_out_and_says_so():
     physics = [_Physics("good"), _Physics("bad")]
     results, hits, said = [None, None], [[], []], []
-    _phase(None, "rough", _compute, [(0, physics[0], None), (1, physics[1], None)], results,
-           hits, 1, said.append)  # fmt: skip
+    _phase(
+        None,
+        "rough",
+        _compute,
+        [(0, physics[0], None), (1, physics[1], None)],
+        results,
+        hits,
+        1,
+        said.append,
+    )
     assert results[0].name == "good" and results[1] is None
-    assert said == ["bad: its rough fit failed (LinAlgError: the leading minor of order 89 of B "
-                    "is not positive definite); left out"]  # fmt: skip
+    assert said == [
+        "bad: its rough fit failed (LinAlgError: the leading minor of order 89 of B "
+        "is not positive definite); left out"
+    ]
 
 
 def test_a_failed_later_phase_keeps_the_phase_before_marked_failed():
@@ -69,8 +79,14 @@ def _refined_later(item):
 def _rough(item):
     if item.name == "bad":
         raise np.linalg.LinAlgError("the leading minor of order 89 of B is not positive definite")
-    return CandidateResult(item.name, _Fit(False, physics=_Physics("a worker's copy")),
-                           2.0 if item.name != "weak" else -1.0, {}, {}, [])  # fmt: skip
+    return CandidateResult(
+        item.name,
+        _Fit(False, physics=_Physics("a worker's copy")),
+        2.0 if item.name != "weak" else -1.0,
+        {},
+        {},
+        [],
+    )
 
 
 @pytest.mark.parametrize("workers", [1, 2])
@@ -81,8 +97,17 @@ def test_a_next_phase_in_the_same_task_is_the_two_phases_one_after_the_other(wor
     wanted = lambda r: r.log_evidence_gain > 0  # noqa: E731
     # the next phase chained in the task
     chained, chained_hits, chained_said = [None] * 4, [[] for _ in names], []
-    _phase(None, "rough", _rough, items, chained, chained_hits, workers, chained_said.append,
-           then=("settled", _refined_later, wanted))  # fmt: skip
+    _phase(
+        None,
+        "rough",
+        _rough,
+        items,
+        chained,
+        chained_hits,
+        workers,
+        chained_said.append,
+        then=("settled", _refined_later, wanted),
+    )
     # the two phases one after the other, the second on the items the first wanted
     apart, apart_hits, apart_said = [None] * 4, [[] for _ in names], []
     _phase(None, "rough", _rough, items, apart, apart_hits, workers, apart_said.append)
@@ -93,10 +118,14 @@ def test_a_next_phase_in_the_same_task_is_the_two_phases_one_after_the_other(wor
         ("strong", True, ""),
         ("weak", False, ""),  # not wanted: its rough fit stays
         None,  # its first phase failed: left out, no second phase
-        ("bad later", False, "its settled fit failed (LinAlgError: Matrix is singular); the "
-                             "phase before kept"),
-    ]  # fmt: skip
-    assert [r and (r.name, r.fit.refined, r.failed) for r in apart] == \
-        [r and (r.name, r.fit.refined, r.failed) for r in chained]  # fmt: skip
+        (
+            "bad later",
+            False,
+            "its settled fit failed (LinAlgError: Matrix is singular); the phase before kept",
+        ),
+    ]
+    assert [r and (r.name, r.fit.refined, r.failed) for r in apart] == [
+        r and (r.name, r.fit.refined, r.failed) for r in chained
+    ]
     assert all(r is None or r.fit.physics is p for r, p in zip(chained, physics, strict=True))
     assert sorted(chained_said) == sorted(apart_said) and len(chained_said) == 2

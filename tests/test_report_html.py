@@ -134,14 +134,31 @@ class Browser:
             os.dup2(to_child, 3)
             os.dup2(from_child, 4)
 
-        argv = [executable, "--headless", "--no-sandbox", "--disable-gpu",
-                "--remote-debugging-pipe", "--no-first-run", "--no-default-browser-check",
-                "--disable-extensions", "--disable-background-networking",
-                "--disable-component-update", "--disable-sync", "--hide-scrollbars",
-                "--mute-audio", f"--user-data-dir={self.profile}", "about:blank"]  # fmt: skip
-        self.proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                                     stderr=subprocess.DEVNULL, pass_fds=(3, 4),
-                                     preexec_fn=fds)  # fmt: skip
+        argv = [
+            executable,
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--remote-debugging-pipe",
+            "--no-first-run",
+            "--no-default-browser-check",
+            "--disable-extensions",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            "--hide-scrollbars",
+            "--mute-audio",
+            f"--user-data-dir={self.profile}",
+            "about:blank",
+        ]
+        self.proc = subprocess.Popen(
+            argv,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            pass_fds=(3, 4),
+            preexec_fn=fds,
+        )
         os.close(to_child)
         os.close(from_child)
         self._buffer, self._id, self.events = b"", 0, []
@@ -210,8 +227,9 @@ class Browser:
         except TimeoutError:
             return False
 
-    def look(self, path, width, height=900, mobile=False, screenshot=None, scale=1.0,
-             full_page=True):  # fmt: skip
+    def look(
+        self, path, width, height=900, mobile=False, screenshot=None, scale=1.0, full_page=True
+    ):
         """Open `path` in a `width` x `height` window; what a person would see of it.
 
         `screenshot`: a PNG of the whole page (`full_page`) or of the window, at `scale`.
@@ -231,8 +249,11 @@ class Browser:
         self.events = []
         for domain in ("Runtime", "Log", "Network", "Page"):
             self.send(f"{domain}.enable", session=session)
-        self.send("Emulation.setDeviceMetricsOverride", {"width": width, "height": height,
-                  "deviceScaleFactor": 1, "mobile": mobile}, session)  # fmt: skip
+        self.send(
+            "Emulation.setDeviceMetricsOverride",
+            {"width": width, "height": height, "deviceScaleFactor": 1, "mobile": mobile},
+            session,
+        )
         self.send("Page.navigate", {"url": url}, session)
         assert self.wait_for("Page.loadEventFired", self.timeout), "the page did not load"
         self.wait_for("never", 1.0)  # late console messages and requests
@@ -246,7 +267,7 @@ class Browser:
         seen = json.loads(
             self.send("Runtime.evaluate", {"expression": probe, "returnByValue": True}, session)[
                 "result"
-            ]["value"]  # fmt: skip
+            ]["value"]
         )
         errors, requests = [], []
         for event in self.events:
@@ -265,14 +286,25 @@ class Browser:
                 errors.append(f"loading failed: {p.get('errorText')}")
         if screenshot is not None:
             full = seen["height"] if full_page else height
-            shot = self.send("Page.captureScreenshot", {"format": "png",
-                             "captureBeyondViewport": True, "clip": {"x": 0, "y": 0,
-                             "width": width, "height": full, "scale": scale}}, session)  # fmt: skip
+            shot = self.send(
+                "Page.captureScreenshot",
+                {
+                    "format": "png",
+                    "captureBeyondViewport": True,
+                    "clip": {"x": 0, "y": 0, "width": width, "height": full, "scale": scale},
+                },
+                session,
+            )
             pathlib.Path(screenshot).write_bytes(base64.b64decode(shot["data"]))
         self.send("Target.closeTarget", {"targetId": target})
-        return {"errors": errors, "requests": requests, "scroll_width": seen["scroll"],
-                "inner_width": seen["inner"], "images": seen["images"],
-                "height": seen["height"]}  # fmt: skip
+        return {
+            "errors": errors,
+            "requests": requests,
+            "scroll_width": seen["scroll"],
+            "inner_width": seen["inner"],
+            "images": seen["images"],
+            "height": seen["height"],
+        }
 
 
 def check_in_browser(html_path, widths=((1280, False), (390, True)), screenshots=None):
@@ -372,12 +404,17 @@ def test_summary_of_a_sampled_and_diagnosed_report(small_report, monkeypatch):
     from bayesplate.report.html import render_html, report_summary, summary_lines
 
     options = ReportOptions(diagnose=False, sample=False)
-    data = compute_report(bundled_case_path("plate1"), options, small_report / ".cache",
-                          lambda line: None)  # fmt: skip
+    data = compute_report(
+        bundled_case_path("plate1"), options, small_report / ".cache", lambda line: None
+    )
     b = data.results["B"]
     data.results["sample"] = {"hdi": np.stack([0.9 * b["constants"], 1.1 * b["constants"]])}
-    diagnosis = {"verdict": "ambiguous", "chosen": "point_mass", "rival": {"physics": "cutout"},
-                 "also_tied": []}  # fmt: skip
+    diagnosis = {
+        "verdict": "ambiguous",
+        "chosen": "point_mass",
+        "rival": {"physics": "cutout"},
+        "also_tied": [],
+    }
     data.results["diagnose"] = {"diagnosis": diagnosis}
     summary = report_summary(data)
     assert summary["interval"].startswith("posterior 94 % highest-density interval")
@@ -406,9 +443,14 @@ def test_the_map_of_a_consistent_plate_says_nothing_was_found(small_report):
     drop = np.linspace(0.0, 0.03, points.shape[0])
     lm = LocationMap(points, drop, np.ones_like(drop), np.ones_like(drop, bool), (4, 8))
     for verdict, nothing in (("consistent", True), ("unexplained", False)):
-        d = SimpleNamespace(verdict=verdict, chosen=None, measured_Hz=np.arange(1.0, 5.0),
-                            nominal=SimpleNamespace(residual_sigma=np.array([0.3, -0.4, 0.2, 0.1])),
-                            mode_kinds=None, maps={"point_mass": lm})  # fmt: skip
+        d = SimpleNamespace(
+            verdict=verdict,
+            chosen=None,
+            measured_Hz=np.arange(1.0, 5.0),
+            nominal=SimpleNamespace(residual_sigma=np.array([0.3, -0.4, 0.2, 0.1])),
+            mode_kinds=None,
+            maps={"point_mass": lm},
+        )
         fig = diagnosis_figures(model, d)["map_point_mass"]
         ax = fig.axes[0]
         texts = " ".join(t.get_text().replace("\n", " ") for t in ax.texts)
@@ -467,14 +509,17 @@ def _main(argv):
     page = pathlib.Path(args.report_dir) / "report.html"
     seen = check_in_browser(page, widths=((args.width, args.width < 600), (390, True)))
     with Browser() as browser:
-        browser.look(page, args.width, mobile=args.width < 600, screenshot=args.screenshot,
-                     scale=args.scale)  # fmt: skip
+        browser.look(
+            page, args.width, mobile=args.width < 600, screenshot=args.screenshot, scale=args.scale
+        )
         if args.phone:
             browser.look(page, 390, 844, mobile=True, screenshot=args.phone, full_page=False)
     size = page.stat().st_size
-    print(f"{page}: {size / 1e6:.2f} MB, {len(seen[args.width]['images'])} figures shown; "
-          f"laid out {seen[args.width]['scroll_width']} px wide in {args.width} px and "
-          f"{seen[390]['scroll_width']} px in 390 px; no console error, no request")  # fmt: skip
+    print(
+        f"{page}: {size / 1e6:.2f} MB, {len(seen[args.width]['images'])} figures shown; "
+        f"laid out {seen[args.width]['scroll_width']} px wide in {args.width} px and "
+        f"{seen[390]['scroll_width']} px in 390 px; no console error, no request"
+    )
 
 
 if __name__ == "__main__":

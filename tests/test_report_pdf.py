@@ -27,8 +27,10 @@ def test_the_arguments_a_browser_gets_and_the_pdf_written_whole(tmp_path):
     page = tmp_path / "report.html"
     page.write_text(PAGE.format(more=""))
     log = tmp_path / "argv"
-    script = (f'echo "$@" > {log}\nfor a; do case $a in --print-to-pdf=*) '
-              'printf "%%PDF-1.4 fake" > "${a#--print-to-pdf=}";; esac; done\n')  # fmt: skip
+    script = (
+        f'echo "$@" > {log}\nfor a; do case $a in --print-to-pdf=*) '
+        'printf "%%PDF-1.4 fake" > "${a#--print-to-pdf=}";; esac; done\n'
+    )
     written = print_pdf(page, browser=_fake_browser(tmp_path, script))
     assert written == tmp_path / "report.pdf"
     assert written.read_bytes() == b"%PDF-1.4 fake"

@@ -73,8 +73,20 @@ def estimates(tmp_path_factory):
 @pytest.fixture(scope="module")
 def posteriors(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("sample")
-    argv = ["sample", CASE, "--mesh", *MESH, "--seed", SEED, "--walkers", CHAIN["walkers"],
-            "--max-steps", CHAIN["max_steps"], "--min-ess", CHAIN["min_ess"]]  # fmt: skip
+    argv = [
+        "sample",
+        CASE,
+        "--mesh",
+        *MESH,
+        "--seed",
+        SEED,
+        "--walkers",
+        CHAIN["walkers"],
+        "--max-steps",
+        CHAIN["max_steps"],
+        "--min-ess",
+        CHAIN["min_ess"],
+    ]
     cli = _cli(tmp, argv)["constants"]
     batch = _batch("sample", seed=SEED, **CHAIN)["constants"]
     case, model = _report_model()

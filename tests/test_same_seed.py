@@ -90,8 +90,7 @@ def test_sample_twice_gives_the_same_numbers(tmp_path):
 def test_report_twice_gives_the_same_numbers(tmp_path):
     from test_interrupt import _cache_numbers, _report_text
 
-    args = ["report", CASE, "--quick", "--mesh", 6, 4, "--seed", 2, "--no-diagnose",
-            "--no-sample"]  # fmt: skip
+    args = ["report", CASE, "--quick", "--mesh", 6, 4, "--seed", 2, "--no-diagnose", "--no-sample"]
     env = dict(os.environ, PYTHONPATH=str(ROOT), MPLBACKEND="Agg")
     folders = []
     for name in ("a", "b"):

@@ -106,8 +106,9 @@ def test_known_gaussian_posterior_within_monte_carlo_error(rng):
     # closed-form posterior.
     problem, mean, P = _linear_problem(rng)
     sd = np.sqrt(np.diag(P))
-    result = sample_problem(problem, mean + 0.7 * sd, np.diag(2 * sd**2), rng=1,
-                            progress=False, min_ess=2000)  # fmt: skip
+    result = sample_problem(
+        problem, mean + 0.7 * sd, np.diag(2 * sd**2), rng=1, progress=False, min_ess=2000
+    )
     assert result.converged and result.rhat_max < 1.01
     ess = _check_gaussian(result, mean, P)
     assert ess.min() > 1500  # the tolerances above are then below 10 % of a deviation
@@ -242,8 +243,9 @@ def test_log_density_is_the_problems_log_posterior(plate1):
         assert density.problem.log_posterior(b) == problem.log_posterior(b)
         assert value == problem.log_posterior(b) + density.log_jacobian(z)
         assert np.sum(pointwise) == pytest.approx(problem.log_likelihood(b), rel=1e-12)
-    z_bad = density.to_z(np.array([est.b[0], est.b[1], 1.01 * np.sqrt(est.b[0] * est.b[1]),
-                                   *est.b[3:]]))  # fmt: skip
+    z_bad = density.to_z(
+        np.array([est.b[0], est.b[1], 1.01 * np.sqrt(est.b[0] * est.b[1]), *est.b[3:]])
+    )
     value, pointwise = density(z_bad)
     assert value == -np.inf and np.all(np.isnan(pointwise))
 
@@ -255,8 +257,7 @@ def test_fast_model_density_within_its_certificate(plate1):
     case, model, setup, _ = plate1
     est = setup.estimate
     full = WhitenedLogPosterior(setup.problem, est.b, est.covariance_b)
-    fast = WhitenedLogPosterior(setup.problem, est.b, est.covariance_b,
-                                setup.sampling_forward())  # fmt: skip
+    fast = WhitenedLogPosterior(setup.problem, est.b, est.covariance_b, setup.sampling_forward())
     eps = setup.certificate.max_rel_error
     v = np.diag(setup.problem.V_Y)
     rng = np.random.default_rng(1)
@@ -276,8 +277,14 @@ def test_plate1_sampler_converges_without_full_solves(plate1):
     assert result.n_full == 0
     # the InferenceData: posterior in case units, pointwise log-likelihood per mode
     idata = result.idata
-    assert set(idata.posterior.data_vars) == {"E1_GPa", "E2_GPa", "nu12", "G12_GPa",
-                                              "G13_GPa", "G23_GPa"}  # fmt: skip
+    assert set(idata.posterior.data_vars) == {
+        "E1_GPa",
+        "E2_GPa",
+        "nu12",
+        "G12_GPa",
+        "G13_GPa",
+        "G23_GPa",
+    }
     ll = idata.log_likelihood["Y"]
     assert ll.shape[-1] == 14 and np.all(np.isfinite(ll))
     total = ll.sum("mode") + 0.0
@@ -303,9 +310,12 @@ def test_b_estimate_is_the_posterior_mode(plate1):
         return -problem.log_posterior(b_est.b + L @ y)
 
     simplex = np.vstack([np.zeros(6), 0.2 * np.eye(6)])
-    opt = minimize(f, np.zeros(6), method="Nelder-Mead",
-                   options={"initial_simplex": simplex, "xatol": 1e-3, "fatol": 1e-9,
-                            "maxfev": 3000})  # fmt: skip
+    opt = minimize(
+        f,
+        np.zeros(6),
+        method="Nelder-Mead",
+        options={"initial_simplex": simplex, "xatol": 1e-3, "fatol": 1e-9, "maxfev": 3000},
+    )
     assert np.max(np.abs(opt.x)) < 0.01
     assert f(np.zeros(6)) - opt.fun < 5e-5
     # the sampler's MAP (B on the fast model) is the same point within 0.01 deviations
@@ -362,8 +372,22 @@ def test_cli_sample_writes_json_netcdf_and_figures(tmp_path):
 
     out = tmp_path / "posterior.nc"
     js = tmp_path / "posterior.json"
-    status = main(["sample", "plate1", "--seed", "3", "--min-ess", "800", "--out", str(out),
-                   "--json", str(js), "--plots", str(tmp_path / "figs")])  # fmt: skip
+    status = main(
+        [
+            "sample",
+            "plate1",
+            "--seed",
+            "3",
+            "--min-ess",
+            "800",
+            "--out",
+            str(out),
+            "--json",
+            str(js),
+            "--plots",
+            str(tmp_path / "figs"),
+        ]
+    )
     assert status == 0
     doc = json.loads(js.read_text())
     assert doc["ess_min"] >= 800 and doc["rhat_max"] < 1.01

@@ -58,9 +58,13 @@ def test_settled_assignment_is_the_gaussian_likelihood_plus_its_prior_terms(
     mu, V_b = prior_in_stiffness(np.array([150e9, 10e9, 0.25, 3e9, 3e9, 2e9]), np.ones(6))
     g = {}
     problem = GaussianProblem(
-        _eig(f), observation_covariance(f, s, observation), mu, V_b,
-        lambda b, k: _Modal(g["now"][:k]), Pairing(modes, "likelihood", extra=0),
-    )  # fmt: skip
+        _eig(f),
+        observation_covariance(f, s, observation),
+        mu,
+        V_b,
+        lambda b, k: _Modal(g["now"][:k]),
+        Pairing(modes, "likelihood", extra=0),
+    )
     assigned = ReassignedLikelihood(f, s, n, observation)
     constant = m * np.log1p(-PS) + m * np.log1p(-PU) + (0 if skipped is None else np.log(PU))
     for _ in range(5):
@@ -269,8 +273,9 @@ def test_sampler_calls_a_peak_between_two_modes_spurious(complete):
     case = _plate1()
     f, s = case.measured.frequency_Hz, case.measured.sigma_Hz
     inserted = 0.5 * (f[5] + f[6])  # between modes 6 and 7, many deviations from both
-    extra = case.with_measured(frequency_Hz=np.insert(f, 6, inserted),
-                               sigma_Hz=np.insert(s, 6, s[6]))  # fmt: skip
+    extra = case.with_measured(
+        frequency_Hz=np.insert(f, 6, inserted), sigma_Hz=np.insert(s, 6, s[6])
+    )
     result = _sample(extra, "likelihood")
     assert result.converged, result.message
     record = result.assignment
@@ -294,8 +299,9 @@ def test_ritz_screen_bounds_the_reassigned_density_off_the_box(rng):
     )
     setup = prepare(missing, rng=SEED, pairing="likelihood")
     est = setup.estimate
-    density = WhitenedLogPosterior(setup.problem, est.b, est.covariance_b,
-                                   setup.sampling_forward(), setup.assigned)  # fmt: skip
+    density = WhitenedLogPosterior(
+        setup.problem, est.b, est.covariance_b, setup.sampling_forward(), setup.assigned
+    )
     screen = RitzScreen(density, setup.fast.reduced, setup.box)
     z = 6.0 * rng.standard_normal((40, 6))
     bounds = screen(z)
@@ -332,10 +338,22 @@ def test_pairing_by_order_gives_the_posterior_of_the_code_before(complete):
     # comparison is statistical: each mean within 0.15 posterior sd (the Monte Carlo error
     # of the difference of two chains of ESS 1000 is about 0.045 sd) and each sd within
     # 10 % (about 3 %). The pairing by order keeps no assignment and m numbers per draw.
-    mean = [1.4482420009424365e11, 1.0405858615143713e10, 2.0838899352796258e-01,
-            3.0087554111695290e09, 3.6117126729917293e09, 1.4115796849095161e09]  # fmt: skip
-    sd = [2.9628708702573137e09, 1.6926104358467540e08, 5.0428112545757804e-02,
-          3.5010809293891668e07, 3.6337471093437117e08, 1.0640617388715288e08]  # fmt: skip
+    mean = [
+        1.4482420009424365e11,
+        1.0405858615143713e10,
+        2.0838899352796258e-01,
+        3.0087554111695290e09,
+        3.6117126729917293e09,
+        1.4115796849095161e09,
+    ]
+    sd = [
+        2.9628708702573137e09,
+        1.6926104358467540e08,
+        5.0428112545757804e-02,
+        3.5010809293891668e07,
+        3.6337471093437117e08,
+        1.0640617388715288e08,
+    ]
     assert np.all(np.abs(complete.mean - mean) < 0.15 * np.asarray(sd))
     np.testing.assert_allclose(complete.sd, sd, rtol=0.10)
     assert complete.assignment is None and complete.settings["assignment"] is None

@@ -57,8 +57,9 @@ def test_stiffness_loss_scan_is_exact_in_a_complete_basis(small):
     dx, dy = 1e3 * model.mesh.dx, 1e3 * model.mesh.dy
     theta = [2.5 * dx, 1.5 * dy, 3 * dx, 3 * dy, 0.4]  # 3 x 3 elements around element (2, 1)
     data = LocalStiffnessLoss().apply(model, theta).solve(B_REF, N).eigenvalues
-    scan = stiffness_loss_scan(model, basis, B_REF, *_exact_misfit(data, basis),
-                               [(3 * dx, 3 * dy)], [0.4, 0.7], stride=1)  # fmt: skip
+    scan = stiffness_loss_scan(
+        model, basis, B_REF, *_exact_misfit(data, basis), [(3 * dx, 3 * dy)], [0.4, 0.7], stride=1
+    )
     i = _row(scan, theta)
     assert scan.chi2[i] < 1e-10 * np.sum(data**2)
     assert scan.chi2[i] == pytest.approx(scan.chi2.min(), abs=1e-10 * np.sum(data**2))
@@ -73,8 +74,9 @@ def test_scan_finds_a_large_mass_that_the_linear_map_places_poorly():
     sigma = 0.004 * data
     P = absorbable_projector(nominal.sensitivities[:N] * B_REF / sigma[:, None])
     basis = RitzBasis.from_modes(model, nominal)
-    scan = point_mass_scan(model, basis, data, sigma, np.arange(N), P,
-                           np.geomspace(0.1, 5.0, 12), stride=1)  # fmt: skip
+    scan = point_mass_scan(
+        model, basis, data, sigma, np.arange(N), P, np.geomspace(0.1, 5.0, 12), stride=1
+    )
     best = scan.best(model, 3)
     places = [truth[1:], *mirror_positions(model, *truth[1:])]
     x, y = best[0][1:]

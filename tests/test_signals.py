@@ -108,9 +108,14 @@ def _stop(args, cwd, sig, children, delay, after=None, timeout=600):
     """
     token = uuid.uuid4().hex
     with tempfile.TemporaryFile("w+b") as err:
-        proc = subprocess.Popen(_command(args), cwd=cwd, env=_env(token),
-                                stdout=subprocess.DEVNULL, stderr=err,
-                                preexec_fn=_default_sigint)  # fmt: skip
+        proc = subprocess.Popen(
+            _command(args),
+            cwd=cwd,
+            env=_env(token),
+            stdout=subprocess.DEVNULL,
+            stderr=err,
+            preexec_fn=_default_sigint,
+        )
         deadline = time.monotonic() + timeout
         while proc.poll() is None and time.monotonic() < deadline:
             said = after is None or after.encode() in os.pread(err.fileno(), 1 << 24, 0)
@@ -129,10 +134,10 @@ def _stop(args, cwd, sig, children, delay, after=None, timeout=600):
         for pid in left:  # not to disturb the other tests; the assertion says it
             os.kill(pid, signal.SIGKILL)
         text = os.pread(err.fileno(), 1 << 24, 0).decode(errors="replace")
-    got = {"status": status, "stderr": text, "at_signal": at_signal, "left": left,
-           "waited": waited}  # fmt: skip
-    MEASURED.append((args[0], signal.Signals(sig).name, len(at_signal), len(left),
-                     round(waited, 2), status))  # fmt: skip
+    got = {"status": status, "stderr": text, "at_signal": at_signal, "left": left, "waited": waited}
+    MEASURED.append(
+        (args[0], signal.Signals(sig).name, len(at_signal), len(left), round(waited, 2), status)
+    )
     return got
 
 
@@ -205,18 +210,25 @@ sys.exit(main())
 
 @pytest.mark.parametrize(
     "sig, status, ignore_sigint",
-    [("SIGTERM", 143, False), ("SIGHUP", 129, False), ("SIGINT", 130, False),
-     ("SIGTERM", 143, True)],
+    [
+        ("SIGTERM", 143, False),
+        ("SIGHUP", 129, False),
+        ("SIGINT", 130, False),
+        ("SIGTERM", 143, True),
+    ],
     ids=["SIGTERM", "SIGHUP", "SIGINT", "SIGTERM-with-SIGINT-ignored"],
-)  # fmt: skip
+)
 def test_a_stop_signal_is_one_line_its_status_and_no_child_left(sig, status, ignore_sigint):
     # SIGINT and SIGHUP as a terminal gives them (this process may run under nohup)
     token = uuid.uuid4().hex
     done = subprocess.run(
         [sys.executable, "-c", _PATCHED.format(sig=sig, ignore_sigint=ignore_sigint)],
-        env=_env(token), capture_output=True, text=True, timeout=60,
+        env=_env(token),
+        capture_output=True,
+        text=True,
+        timeout=60,
         preexec_fn=lambda: (_default_sigint(), signal.signal(signal.SIGHUP, signal.SIG_DFL)),
-    )  # fmt: skip
+    )
     child = int(done.stdout.split()[0])
     assert done.returncode == status, done.stderr
     by = "" if sig == "SIGINT" else f" ({sig})"
@@ -258,8 +270,9 @@ def test_forked_children_end_when_their_parent_is_killed(what):
     # the issue's orphan: the sampler forked beside diagnose, re-parented to init after the
     # parent's death, blocked for good writing its result into a pipe it held open itself
     token = uuid.uuid4().hex
-    proc = subprocess.Popen([sys.executable, "-c", _FORKED, what], env=_env(token),
-                            stdout=subprocess.PIPE, text=True)  # fmt: skip
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _FORKED, what], env=_env(token), stdout=subprocess.PIPE, text=True
+    )
     line = proc.stdout.readline().split()
     deadline = time.monotonic() + 30
     while len(_processes(token)) < (2 if what == "forked" else 3):
@@ -296,8 +309,9 @@ time.sleep(60)
 
 def test_a_child_watching_its_parent_ends_with_it():
     token = uuid.uuid4().hex
-    proc = subprocess.Popen([sys.executable, "-c", _WATCHED], env=_env(token),
-                            stdout=subprocess.PIPE, text=True)  # fmt: skip
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _WATCHED], env=_env(token), stdout=subprocess.PIPE, text=True
+    )
     child = int(proc.stdout.readline())
     assert child in _processes(token)
     proc.kill()
@@ -335,8 +349,15 @@ def full_report_reference(tmp_path_factory):
 def test_report_stopped_leaves_no_process_and_resumes(tmp_path, full_report_reference, sig):
     numbers, text = full_report_reference
     # while the sampler runs beside diagnose: after its line, a seeded moment
-    cwd, got = _stopped(_nothing, _REPORT_FULL, sig, 1, _delays(0.5, 4.0), tmp_path,
-                        after="posterior sampling: started beside diagnose")  # fmt: skip
+    cwd, got = _stopped(
+        _nothing,
+        _REPORT_FULL,
+        sig,
+        1,
+        _delays(0.5, 4.0),
+        tmp_path,
+        after="posterior sampling: started beside diagnose",
+    )
     status, err, _ = _run(_REPORT_FULL, cwd)
     assert status == 0, err
     _same_numbers(_cache_numbers(cwd / "rep"), numbers)
@@ -390,8 +411,21 @@ def test_sample_on_workers_stopped_leaves_no_process_and_resumes(
 
 
 # batch on a Dask local cluster of two workers
-_BATCH = ["batch", "cases", "-o", "out", "--workers", 2, "--steps", "estimate,diagnose",
-          "--mesh", 4, 2, "--seed", 1]  # fmt: skip
+_BATCH = [
+    "batch",
+    "cases",
+    "-o",
+    "out",
+    "--workers",
+    2,
+    "--steps",
+    "estimate,diagnose",
+    "--mesh",
+    4,
+    2,
+    "--seed",
+    1,
+]
 _BATCH_CASES = ("plate1", "frederiksen_t300")
 
 
@@ -422,8 +456,10 @@ def _batch_numbers(out):
         for step in ("estimate", "diagnose")
     }
     with open(out / "summary.csv", newline="") as handle:
-        rows = [{k: v for k, v in row.items() if k not in ("seconds", "worker")}
-                for row in csv.DictReader(handle)]  # fmt: skip
+        rows = [
+            {k: v for k, v in row.items() if k not in ("seconds", "worker")}
+            for row in csv.DictReader(handle)
+        ]
     return docs, rows
 
 

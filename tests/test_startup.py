@@ -37,57 +37,159 @@ HEAVY = (
 #: must still import from where it did.
 PUBLIC = {
     "bayesplate": [
-        "Case", "CaseError", "ModalResult", "PlateModel", "EstimateResult",
-        "bundled_case_path", "diagnose", "estimate", "engineering_from_stiffness",
-        "load_case", "stiffness_from_engineering", "__version__",
+        "Case",
+        "CaseError",
+        "ModalResult",
+        "PlateModel",
+        "EstimateResult",
+        "bundled_case_path",
+        "diagnose",
+        "estimate",
+        "engineering_from_stiffness",
+        "load_case",
+        "stiffness_from_engineering",
+        "__version__",
         # subpackages the eager __init__ left as attributes of the package
-        "assignment", "discrepancy", "estimators", "fem", "io", "laminate", "model",
-        "pairing", "posterior", "quantities",
+        "assignment",
+        "discrepancy",
+        "estimators",
+        "fem",
+        "io",
+        "laminate",
+        "model",
+        "pairing",
+        "posterior",
+        "quantities",
     ],
     "bayesplate.cli": ["main", "build_parser"],
     "bayesplate.discrepancy": [
-        "CANDIDATES", "ElasticFoundation", "LocalStiffnessLoss", "Parameter", "Physics",
-        "PlyMisalignment", "PointMass", "ThicknessTaper", "candidates",
+        "CANDIDATES",
+        "ElasticFoundation",
+        "LocalStiffnessLoss",
+        "Parameter",
+        "Physics",
+        "PlyMisalignment",
+        "PointMass",
+        "ThicknessTaper",
+        "candidates",
     ],
     "bayesplate.estimators": [
-        "METHODS", "STATUSES", "TRACKING", "DEFAULT_MAX_ITER", "Conventions", "CONVENTIONS",
-        "resolve_conventions", "EstimateResult", "estimate", "settle_pairing", "run",
-        "b_step", "mve_step",
+        "METHODS",
+        "STATUSES",
+        "TRACKING",
+        "DEFAULT_MAX_ITER",
+        "Conventions",
+        "CONVENTIONS",
+        "resolve_conventions",
+        "EstimateResult",
+        "estimate",
+        "settle_pairing",
+        "run",
+        "b_step",
+        "mve_step",
     ],
     "bayesplate.io": [
-        "FRFData", "PoleAnalysis", "extract_poles", "is_tap_test", "modal_data_from_poles",
-        "read_poles", "read_spectra", "write_chart", "write_poles", "MAX_MESH_ELEMENTS",
-        "DEFAULT_SIGMA_REL", "CaseError", "Plate", "Measurement", "Prior", "Case",
-        "load_case", "parse_case", "bundled_case_path", "bundled_case_names",
-        "check_engineering_constants", "engineering_to_si", "engineering_from_si",
-        "ModalData", "read_modal_data", "read_frequency_csv", "case_from_modal_data",
-        "write_case", "bundled_plate_names", "bundled_plate_path", "atomic_write",
-        "atomic_write_text", "save_figure", "write_netcdf", "jsonable", "write_json",
-        "constants_json", "estimate_to_dict", "sampling_to_dict", "diagnosis_to_dict",
+        "FRFData",
+        "PoleAnalysis",
+        "extract_poles",
+        "is_tap_test",
+        "modal_data_from_poles",
+        "read_poles",
+        "read_spectra",
+        "write_chart",
+        "write_poles",
+        "MAX_MESH_ELEMENTS",
+        "DEFAULT_SIGMA_REL",
+        "CaseError",
+        "Plate",
+        "Measurement",
+        "Prior",
+        "Case",
+        "load_case",
+        "parse_case",
+        "bundled_case_path",
+        "bundled_case_names",
+        "check_engineering_constants",
+        "engineering_to_si",
+        "engineering_from_si",
+        "ModalData",
+        "read_modal_data",
+        "read_frequency_csv",
+        "case_from_modal_data",
+        "write_case",
+        "bundled_plate_names",
+        "bundled_plate_path",
+        "atomic_write",
+        "atomic_write_text",
+        "save_figure",
+        "write_netcdf",
+        "jsonable",
+        "write_json",
+        "constants_json",
+        "estimate_to_dict",
+        "sampling_to_dict",
+        "diagnosis_to_dict",
     ],
     "bayesplate.plots": [
-        "CONSTANT_LABELS", "autocorrelation_plot", "corner_estimates", "diagnosis_figures",
-        "estimate_residuals", "frequency_comparison", "location_map", "mac_matrix_plot",
-        "mode_shapes", "posterior_corner", "residual_comparison", "sampling_figures",
-        "sensitivity_bars", "trace_plot",
+        "CONSTANT_LABELS",
+        "autocorrelation_plot",
+        "corner_estimates",
+        "diagnosis_figures",
+        "estimate_residuals",
+        "frequency_comparison",
+        "location_map",
+        "mac_matrix_plot",
+        "mode_shapes",
+        "posterior_corner",
+        "residual_comparison",
+        "sampling_figures",
+        "sensitivity_bars",
+        "trace_plot",
     ],
     "bayesplate.reduced": [
-        "DEFAULT_TOLERANCE", "Box", "Certificate", "CertifiedModel", "ReducedModalResult",
-        "ReducedModel", "ReducedModelWarning", "certify", "fast_model", "prior_stiffness",
+        "DEFAULT_TOLERANCE",
+        "Box",
+        "Certificate",
+        "CertifiedModel",
+        "ReducedModalResult",
+        "ReducedModel",
+        "ReducedModelWarning",
+        "certify",
+        "fast_model",
+        "prior_stiffness",
         "stiffness_box",
     ],
     "bayesplate.report": [
-        "ESTIMATORS", "ReportData", "ReportOptions", "StepCache", "compute_report",
-        "make_report", "render_markdown", "report_figures", "sampling_available",
+        "ESTIMATORS",
+        "ReportData",
+        "ReportOptions",
+        "StepCache",
+        "compute_report",
+        "make_report",
+        "render_markdown",
+        "report_figures",
+        "sampling_available",
         "write_report",
     ],
     "bayesplate.sampling": [
-        "CASE_UNITS", "HDI_PROB", "EigenvalueForward", "LaplaceMove", "SamplingResult",
-        "SamplingSetup", "ScreenedDEMove", "WhitenedLogPosterior", "covariance_agreement",
-        "curvature_covariance", "default_moves", "linearisation_band", "posterior_box",
-        "prepare", "sample", "sample_problem",
+        "CASE_UNITS",
+        "HDI_PROB",
+        "EigenvalueForward",
+        "LaplaceMove",
+        "SamplingResult",
+        "SamplingSetup",
+        "ScreenedDEMove",
+        "WhitenedLogPosterior",
+        "covariance_agreement",
+        "curvature_covariance",
+        "default_moves",
+        "linearisation_band",
+        "posterior_box",
+        "prepare",
+        "sample",
+        "sample_problem",
     ],
-}  # fmt: skip
+}
 
 #: After ``bayesplate ... --help``, print the loaded modules as JSON (stdout is the help).
 _PROBE = """
@@ -136,21 +238,28 @@ def _heavy(modules):
     """The loaded modules that ``--help`` should not need."""
     third_party = {m for m in modules if m.split(".")[0] in HEAVY}
     ours = {
-        m for m in modules
-        if m.startswith("bayesplate.") and not m.startswith("bayesplate.cli")
-    }  # fmt: skip
+        m for m in modules if m.startswith("bayesplate.") and not m.startswith("bayesplate.cli")
+    }
     return sorted(third_party | ours)
 
 
 def test_subcommands_are_the_known_ones():
     # a new subcommand is covered by the help test below through _subcommands()
     assert _subcommands() == [
-        "cases", "modes", "import", "diagnose", "estimate", "report", "sample", "batch"
-    ]  # fmt: skip
+        "cases",
+        "modes",
+        "import",
+        "diagnose",
+        "estimate",
+        "report",
+        "sample",
+        "batch",
+    ]
 
 
-@pytest.mark.parametrize("argv", [["--help"]] + [[c, "--help"] for c in _subcommands()],
-                         ids=lambda argv: " ".join(argv))  # fmt: skip
+@pytest.mark.parametrize(
+    "argv", [["--help"]] + [[c, "--help"] for c in _subcommands()], ids=lambda argv: " ".join(argv)
+)
 def test_help_loads_no_numerics(argv):
     code, out, modules = _loaded_after(argv)
     assert code == 0
@@ -170,8 +279,11 @@ def test_a_case_error_is_still_one_line_and_exit_2(tmp_path):
     missing = tmp_path / "missing.toml"
     proc = subprocess.run(
         [sys.executable, "-m", "bayesplate.cli", "modes", str(missing)],
-        capture_output=True, text=True, env=_env(), cwd=ROOT,
-    )  # fmt: skip
+        capture_output=True,
+        text=True,
+        env=_env(),
+        cwd=ROOT,
+    )
     assert proc.returncode == 2
     assert proc.stdout == ""
     lines = proc.stderr.splitlines()
@@ -197,8 +309,10 @@ def test_import_bayesplate_is_light_and_its_names_load_on_use():
 
 
 def test_star_import_gives_every_public_name():
-    proc = _run("from bayesplate import *\nimport bayesplate\n"
-                "print(all(n in globals() for n in bayesplate.__all__))")  # fmt: skip
+    proc = _run(
+        "from bayesplate import *\nimport bayesplate\n"
+        "print(all(n in globals() for n in bayesplate.__all__))"
+    )
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.strip() == "True"
 
@@ -249,8 +363,13 @@ def test_the_parser_band_defaults_match_the_import():
 def test_a_closed_standard_output_ends_in_one_line_without_traceback():
     # `bayesplate cases | head -0`: the reader is gone before the first line is written
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    proc = subprocess.Popen([sys.executable, "-m", "bayesplate.cli", "cases"], env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "bayesplate.cli", "cases"],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     proc.stdout.close()
     err = proc.stderr.read()
     assert proc.wait(timeout=60) == 1
@@ -272,8 +391,13 @@ def test_a_ctrl_c_after_the_work_is_done_keeps_the_commands_status():
         "sys.exit(status)\n"
     )
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    done = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True,
-                          text=True, timeout=60, preexec_fn=lambda: signal.signal(
-                              signal.SIGINT, signal.SIG_DFL))  # fmt: skip
+    done = subprocess.run(
+        [sys.executable, "-c", script],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     assert done.returncode == 0, done.stderr
     assert "Traceback" not in done.stderr, done.stderr

@@ -97,16 +97,31 @@ def test_benchmark_diagnose_pairs_table_gives_the_ratio_of_medians(tmp_path):
     # two runs of this code (100 and 120 s) and two of the base (400 and 500 s), made here:
     # the report's ratio is that of the medians, 450 / 110
     bench = load_study(ROOT / "benchmarks" / "bench_diagnose.py")
-    info = {"cpu": "test cpu", "nproc": 2, "platform": "p", "python": "3", "numpy": "2",
-            "scipy": "1"}  # fmt: skip
-    rows = [{"code": code, "seconds": t, "cpu": t, "load": [1.0, 1.0], "verdict": "explained",
-             "chosen": "point_mass+ply_misalignment",
-             "best_pair": ["point_mass+ply_misalignment", 12.5]}
-            for code, t in (("this", 100.0), ("/base", 400.0), ("this", 120.0),
-                            ("/base", 500.0))]  # fmt: skip
+    info = {
+        "cpu": "test cpu",
+        "nproc": 2,
+        "platform": "p",
+        "python": "3",
+        "numpy": "2",
+        "scipy": "1",
+    }
+    rows = [
+        {
+            "code": code,
+            "seconds": t,
+            "cpu": t,
+            "load": [1.0, 1.0],
+            "verdict": "explained",
+            "chosen": "point_mass+ply_misalignment",
+            "best_pair": ["point_mass+ply_misalignment", 12.5],
+        }
+        for code, t in (("this", 100.0), ("/base", 400.0), ("this", 120.0), ("/base", 500.0))
+    ]
     text = bench.write_pairs(rows, info, tmp_path, "/base", "2026-11-26 00:00 UTC").read_text()
-    assert "| this | 100 | 100 | 1.0 / 1.0 | explained point_mass+ply_misalignment | " \
-           "point_mass+ply_misalignment (+12.5) |" in text  # fmt: skip
+    assert (
+        "| this | 100 | 100 | 1.0 / 1.0 | explained point_mass+ply_misalignment | "
+        "point_mass+ply_misalignment (+12.5) |" in text
+    )
     assert f"median wall times in this run: {450 / 110:.1f}x" in text
 
 
@@ -128,15 +143,32 @@ def test_benchmark_diagnose_scaling_table_fits_the_growth(tmp_path):
     # rows whose wall time grows as unknowns**1.5 (made here, not measured): the report's
     # log-log slope is 1.5, and each row lands with its mesh, unknowns and verdict
     bench = load_study(ROOT / "benchmarks" / "bench_diagnose.py")
-    info = {"cpu": "test cpu", "nproc": 2, "platform": "p", "python": "3", "numpy": "2",
-            "scipy": "1"}  # fmt: skip
+    info = {
+        "cpu": "test cpu",
+        "nproc": 2,
+        "platform": "p",
+        "python": "3",
+        "numpy": "2",
+        "scipy": "1",
+    }
     rows = []
     for (nx, ny), k in (((24, 24), 14), ((36, 36), 14), ((50, 50), 14), ((50, 50), 8)):
         n = 8 * (nx + 1) * (ny + 1)
-        rows.append({"mesh": [nx, ny], "frequencies": k, "seconds": 1e-4 * n**1.5,
-                     "cpu": 1.0, "load": [1.0, 1.0], "verdict": "explained",
-                     "chosen": "point_mass", "refined": 3, "workers": 2,
-                     "effect": "point_mass", "size": "0.3 g"})  # fmt: skip
+        rows.append(
+            {
+                "mesh": [nx, ny],
+                "frequencies": k,
+                "seconds": 1e-4 * n**1.5,
+                "cpu": 1.0,
+                "load": [1.0, 1.0],
+                "verdict": "explained",
+                "chosen": "point_mass",
+                "refined": 3,
+                "workers": 2,
+                "effect": "point_mass",
+                "size": "0.3 g",
+            }
+        )
     path = bench.write_scaling(rows, info, tmp_path, "2026-11-26 00:00 UTC")
     text = path.read_text()
     assert path.name == bench.SCALING_REPORT
@@ -191,7 +223,7 @@ def test_concealment_quick(tmp_path):
 
 def test_concealment_runs_again_a_single_retired_row_and_no_other():
     study = load_study(ROOT / "studies" / "concealment.py")
-    ((code, key), why), = study.RETIRED_ROWS.items()
+    (((code, key), why),) = study.RETIRED_ROWS.items()
     assert study._retired(key, {"code": code}) == why
     assert study._retired(str(int(key) + 1), {"code": code}) is None  # its neighbour is kept
     old = next(c for c in study.RETIRED if c is not None)
@@ -212,8 +244,7 @@ def test_diagnose_frederiksen_quick(tmp_path):
         # diagnose's global stage reaches the basin of the fit from his published constants
         # (issue 12: at 0.2 % it once stopped at 18.4 against 14.1 on the case's mesh)
         nominal = results[key].nominal
-        assert (nominal.chi2 + nominal.chi2_prior
-                <= local.chi2 + local.chi2_prior + module.SAME)  # fmt: skip
+        assert nominal.chi2 + nominal.chi2_prior <= local.chi2 + local.chi2_prior + module.SAME
     text = (tmp_path / module.REPORT).read_text()
     assert text.count("**Verdict: consistent**") == 2
     assert text.count("Check of the global stage") == 2

@@ -5,7 +5,6 @@ the frequencies are those of the model solved here, and the artefacts are checke
 arrays (a second pulse, a flat top) or in the H1 and coherence of `bayesplate.io.taps`.
 """
 
-
 import numpy as np
 import pytest
 
@@ -50,8 +49,9 @@ def modes(plate1):
 def taps_of(frequency, amplitude, rng, n_taps=5, duration_s=0.5, **artefacts):
     """`n_taps` synthetic taps of plate1's modes at RATE_HZ with a hard tip."""
     art = TapArtefacts(**artefacts)
-    return synthetic_taps(frequency, amplitude, RATE_HZ, duration_s, n_taps, art, rng,
-                          pulse_s=PULSE_S)  # fmt: skip
+    return synthetic_taps(
+        frequency, amplitude, RATE_HZ, duration_s, n_taps, art, rng, pulse_s=PULSE_S
+    )
 
 
 def averaged(taps, window="auto"):
@@ -83,8 +83,11 @@ def test_h1_of_clean_taps_is_the_modal_frf_at_the_lines(modes, rng):
     omega, omega_k = 2 * np.pi * data.frequency_Hz, 2 * np.pi * frequency
     H = np.zeros(omega.size, dtype=complex)
     for k in range(frequency.size):  # accelerance: a = -w^2 x, term by term
-        H += amplitude[k] * -(omega**2) / (omega_k[k] ** 2 - omega**2
-                                           + 2j * zeta[k] * omega_k[k] * omega)  # fmt: skip
+        H += (
+            amplitude[k]
+            * -(omega**2)
+            / (omega_k[k] ** 2 - omega**2 + 2j * zeta[k] * omega_k[k] * omega)
+        )
     band = (data.frequency_Hz > 0) & (data.frequency_Hz < 10000)
     error = np.abs(data.frf[0] - H)[band].max() / np.abs(H[band]).max()
     print(f"clean H1 against the modal FRF: max error {error:.2e} of its peak")
@@ -111,8 +114,16 @@ def test_import_of_clean_taps_gives_the_model_frequencies(tmp_path, capsys, shee
     assert recording.force is not None and recording.responses.shape == (1, RATE_HZ // 2)
     out = tmp_path / "case.toml"
 
-    argv = ["import", *map(str, paths), "--plate", str(sheet), "-o", str(out), "--band",
-            *map(str, BAND_HZ)]  # fmt: skip
+    argv = [
+        "import",
+        *map(str, paths),
+        "--plate",
+        str(sheet),
+        "-o",
+        str(out),
+        "--band",
+        *map(str, BAND_HZ),
+    ]
     status = main(argv)
     captured = capsys.readouterr()
 
@@ -135,15 +146,26 @@ def test_several_sensors_give_the_model_shapes(tmp_path, capsys, sheet, plate1, 
     )
     out = tmp_path / "case.toml"
 
-    argv = ["import", *map(str, paths), "--plate", str(sheet), "-o", str(out), "--band",
-            *map(str, BAND_HZ), "--force-channel", "3", "--points", str(points)]  # fmt: skip
+    argv = [
+        "import",
+        *map(str, paths),
+        "--plate",
+        str(sheet),
+        "-o",
+        str(out),
+        "--band",
+        *map(str, BAND_HZ),
+        "--force-channel",
+        "3",
+        "--points",
+        str(points),
+    ]
     status = main(argv)
     captured = capsys.readouterr()
 
     assert status == 0, captured.err
     measured = load_case(out).measured
-    w = np.asarray(model.interpolation(points_mm * 1e-3, "w")
-                   @ model.solve(b, 10).vectors)  # fmt: skip
+    w = np.asarray(model.interpolation(points_mm * 1e-3, "w") @ model.solve(b, 10).vectors)
     shapes = measured.shapes.T  # (3, 10)
     mac = np.sum(shapes * w, 0) ** 2 / (np.sum(shapes**2, 0) * np.sum(w**2, 0))
     error = measured.frequency_Hz / frequency - 1
@@ -167,8 +189,10 @@ def test_rattle_is_a_coherence_dip_with_a_pole_in_it(modes, rng):
     low = axis[band & (coherence < 0.9)]
     at_rattle = coherence[np.argmin(np.abs(axis - rattle))]
     at_modes = [c for _, c in coherence_at_poles(data, [_pole(f) for f in frequency])]
-    print(f"rattle: coherence {at_rattle:.3f} at {rattle:g} Hz, below 0.9 from {low.min():g} to "
-          f"{low.max():g} Hz; at the modes min {min(at_modes):.5f}")  # fmt: skip
+    print(
+        f"rattle: coherence {at_rattle:.3f} at {rattle:g} Hz, below 0.9 from {low.min():g} to "
+        f"{low.max():g} Hz; at the modes min {min(at_modes):.5f}"
+    )
     assert at_rattle < 0.9
     assert np.all(np.abs(low / rattle - 1) < 0.05), low  # and nowhere else
     assert min(at_modes) > 0.99
@@ -216,8 +240,15 @@ def test_double_hit_and_clip_are_in_the_arrays(modes, rng):
     seed = int(rng.integers(2**32))
     clean = taps_of(frequency, amplitude, np.random.default_rng(seed), n_taps=3, noise=1e-3)
     hit, clip = (1, 3e-3, 0.4), (2, 0.3)
-    odd = taps_of(frequency, amplitude, np.random.default_rng(seed), n_taps=3, noise=1e-3,
-                  double_hit=hit, clip=clip)  # fmt: skip
+    odd = taps_of(
+        frequency,
+        amplitude,
+        np.random.default_rng(seed),
+        n_taps=3,
+        noise=1e-3,
+        double_hit=hit,
+        clip=clip,
+    )
 
     # the second hit: in the force of tap 1 only, 3 ms after the first, 0.4 times as strong
     for k, ((_, f0), (_, f1)) in enumerate(zip(clean, odd, strict=True)):
@@ -241,22 +272,27 @@ def test_double_hit_and_clip_are_in_the_arrays(modes, rng):
     inside = np.abs(y0) < top
     np.testing.assert_array_equal(y2[inside], y0[inside])
     np.testing.assert_array_equal(odd[0][0], clean[0][0])
-    print(f"double hit: {start[1] - start[0]} samples apart; clip: "
-          f"{np.sum(~inside)} samples at the rails")  # fmt: skip
+    print(
+        f"double hit: {start[1] - start[0]} samples apart; clip: "
+        f"{np.sum(~inside)} samples at the rails"
+    )
 
 
 def test_noise_has_the_level_asked_for(modes, rng):
     frequency, amplitude = modes
     seed = int(rng.integers(2**32))
     ((y0, f0),) = taps_of(frequency, amplitude, np.random.default_rng(seed), n_taps=1)
-    ((y, f),) = taps_of(frequency, amplitude, np.random.default_rng(seed), n_taps=1,
-                        noise=1e-3, force_noise=2e-3)  # fmt: skip
+    ((y, f),) = taps_of(
+        frequency, amplitude, np.random.default_rng(seed), n_taps=1, noise=1e-3, force_noise=2e-3
+    )
     # the same hammer (drawn first): the difference is the noise alone, white, zero mean
     ratio_y = np.std(y - y0) / (1e-3 * np.abs(y0).max())
     ratio_f = np.std(f - f0) / (2e-3 * np.abs(f0).max())
     lag1 = np.corrcoef((y - y0)[1:], (y - y0)[:-1])[0, 1]
-    print(f"noise: response {ratio_y:.4f}, force {ratio_f:.4f} of the level asked for; "
-          f"lag-1 correlation {lag1:.4f}")  # fmt: skip
+    print(
+        f"noise: response {ratio_y:.4f}, force {ratio_f:.4f} of the level asked for; "
+        f"lag-1 correlation {lag1:.4f}"
+    )
     assert 0.97 < ratio_y < 1.03 and 0.97 < ratio_f < 1.03 and abs(lag1) < 0.05
     assert np.abs(y0[-RATE_HZ // 10 :]).max() < 1e-3 * np.abs(y0).max()  # rung down, no noise
 
@@ -266,18 +302,27 @@ def test_noise_has_the_level_asked_for(modes, rng):
 
 def test_same_seed_gives_the_same_taps(modes):
     frequency, amplitude = modes
-    options = dict(noise=1e-3, force_noise=1e-3, rattle_Hz=(3000.0,), split=(0, 0.02, 0.5),
-                   double_hit=(0, 2e-3, 0.3), clip=(1, 0.8))  # fmt: skip
-    one, two, other = (taps_of(frequency, amplitude, np.random.default_rng(seed), n_taps=3,
-                               **options) for seed in (7, 7, 8))  # fmt: skip
+    options = dict(
+        noise=1e-3,
+        force_noise=1e-3,
+        rattle_Hz=(3000.0,),
+        split=(0, 0.02, 0.5),
+        double_hit=(0, 2e-3, 0.3),
+        clip=(1, 0.8),
+    )
+    one, two, other = (
+        taps_of(frequency, amplitude, np.random.default_rng(seed), n_taps=3, **options)
+        for seed in (7, 7, 8)
+    )
     for (y1, f1), (y2, f2) in zip(one, two, strict=True):
         np.testing.assert_array_equal(y1, y2)
         np.testing.assert_array_equal(f1, f2)
     assert not np.array_equal(one[0][1], other[0][1])
     # the hammer is drawn first: switching artefacts on leaves the forces alone
     plain = taps_of(frequency, amplitude, np.random.default_rng(7), n_taps=3)
-    quiet = taps_of(frequency, amplitude, np.random.default_rng(7), n_taps=3,
-                    **{**options, "force_noise": 0.0})  # fmt: skip
+    quiet = taps_of(
+        frequency, amplitude, np.random.default_rng(7), n_taps=3, **{**options, "force_noise": 0.0}
+    )
     np.testing.assert_array_equal(plain[2][1], quiet[2][1])
 
 

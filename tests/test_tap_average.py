@@ -5,7 +5,6 @@ plate's computed frequencies and shapes (w at the points), convolved with a hamm
 half-sine force pulse, seeded noise added to the responses.
 """
 
-
 import numpy as np
 import pytest
 from scipy.io import wavfile
@@ -123,10 +122,14 @@ def test_eight_noisy_taps_with_a_force_average_to_the_model(tmp_path, capsys, sh
     assert "warning" not in err  # clean enough: coherence above 0.9 at every pole
     assert chart.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     averaged = np.abs(load_case(out).measured.frequency_Hz / frequency - 1)
-    single = [rms(frequency_errors(average_taps([Recording(RATE_HZ, y, f, (0,), "")]),
-                                   frequency)) for f, y in taps[:4]]  # fmt: skip
-    print(f"8 taps: max error {100 * averaged.max():.4f} %, rms {100 * rms(averaged):.4f} %; "
-          f"single taps rms {100 * np.median(single):.4f} % (median of 4)")  # fmt: skip
+    single = [
+        rms(frequency_errors(average_taps([Recording(RATE_HZ, y, f, (0,), "")]), frequency))
+        for f, y in taps[:4]
+    ]
+    print(
+        f"8 taps: max error {100 * averaged.max():.4f} %, rms {100 * rms(averaged):.4f} %; "
+        f"single taps rms {100 * np.median(single):.4f} % (median of 4)"
+    )
     assert averaged.max() < FREQUENCY_RTOL, averaged
     # the noise is independent between taps: averaging 8 divides the scatter by ~sqrt(8)
     # (0.35); the ratio to the median single tap measured 0.18 to 0.29 over three seeds at
@@ -137,8 +140,10 @@ def test_eight_noisy_taps_with_a_force_average_to_the_model(tmp_path, capsys, sh
 def test_taps_without_a_force_are_aligned_and_averaged(tmp_path, capsys, sheet, plate1, rng):
     frequency, w = plate1
     # four taps of different strength and trigger time, the microphone alone recorded
-    paths = [write_wav(tmp_path / f"tap{k}.wav", tap(frequency, w, rng, noise=1e-3)[1][0])
-             for k in range(4)]  # fmt: skip
+    paths = [
+        write_wav(tmp_path / f"tap{k}.wav", tap(frequency, w, rng, noise=1e-3)[1][0])
+        for k in range(4)
+    ]
     out = tmp_path / "case.toml"
 
     status, stdout, err = run_import(capsys, paths, sheet, out)
@@ -154,10 +159,12 @@ def test_taps_without_a_force_are_aligned_and_averaged(tmp_path, capsys, sheet, 
 def test_coherence_is_one_for_clean_taps_and_lower_with_noise(plate1, rng):
     frequency, w = plate1
     poles = [Pole(float(f), 0.0) for f in frequency]
-    clean = average_taps([Recording(RATE_HZ, *reversed(tap(frequency, w, rng, 0.0)), (0,), "")
-                          for _ in range(4)])  # fmt: skip
-    noisy = average_taps([Recording(RATE_HZ, *reversed(tap(frequency, w, rng, 0.05)), (0,), "")
-                          for _ in range(4)])  # fmt: skip
+    clean = average_taps(
+        [Recording(RATE_HZ, *reversed(tap(frequency, w, rng, 0.0)), (0,), "") for _ in range(4)]
+    )
+    noisy = average_taps(
+        [Recording(RATE_HZ, *reversed(tap(frequency, w, rng, 0.05)), (0,), "") for _ in range(4)]
+    )
     at_clean = np.array([c for _, c in coherence_at_poles(clean, poles)])
     at_noisy = np.array([c for _, c in coherence_at_poles(noisy, poles)])
     print(f"coherence at the poles: clean min {at_clean.min():.6f}, noisy {at_noisy.round(3)}")
@@ -168,16 +175,16 @@ def test_coherence_is_one_for_clean_taps_and_lower_with_noise(plate1, rng):
     assert single.coherence is None  # one tap: coherence is 1 by construction, not measured
 
 
-def test_low_coherence_at_a_chosen_pole_is_warned_in_one_line(tmp_path, capsys, sheet, plate1,
-                                                              rng):  # fmt: skip
+def test_low_coherence_at_a_chosen_pole_is_warned_in_one_line(tmp_path, capsys, sheet, plate1, rng):
     frequency, w = plate1
     paths = []
     for k in range(4):
         force, y = tap(frequency, w, rng, noise=0.05)
         paths.append(write_wav(tmp_path / f"tap{k}.wav", y[0], force))
     poles = tmp_path / "poles.csv"
-    poles.write_text("keep,frequency_Hz,damping\n"
-                     + "".join(f"1,{f:.17g},0.005\n" for f in frequency))  # fmt: skip
+    poles.write_text(
+        "keep,frequency_Hz,damping\n" + "".join(f"1,{f:.17g},0.005\n" for f in frequency)
+    )
     out = tmp_path / "case.toml"
 
     status, _, err = run_import(capsys, paths, sheet, out, "--use-poles", poles)
@@ -191,17 +198,18 @@ def test_low_coherence_at_a_chosen_pole_is_warned_in_one_line(tmp_path, capsys, 
 # ------------------------------------------------------------- several channels, their points
 
 
-def test_four_channel_wav_with_points_gives_the_model_shapes(tmp_path, capsys, sheet, plate1,
-                                                             rng):  # fmt: skip
+def test_four_channel_wav_with_points_gives_the_model_shapes(tmp_path, capsys, sheet, plate1, rng):
     frequency, w = plate1
     force, y = tap(frequency, w, rng, noise=1e-3, points=(0, 1, 2))
     test = write_wav(tmp_path / "taps.wav", force, *y)  # force first, then 3 responses
-    points = write_points(tmp_path / "points.csv", [("a", POINTS_MM[0]), ("b", POINTS_MM[1]),
-                                                     ("c", POINTS_MM[2])])  # fmt: skip
+    points = write_points(
+        tmp_path / "points.csv", [("a", POINTS_MM[0]), ("b", POINTS_MM[1]), ("c", POINTS_MM[2])]
+    )
     out = tmp_path / "case.toml"
 
-    status, stdout, err = run_import(capsys, [test], sheet, out, "--force-channel", 0,
-                                     "--points", points)  # fmt: skip
+    status, stdout, err = run_import(
+        capsys, [test], sheet, out, "--force-channel", 0, "--points", points
+    )
 
     assert status == 0, err
     assert stdout.splitlines()[-1] == f"10 modes, 3 points from {test} -> {out}"
@@ -225,8 +233,10 @@ def test_frf_csv_with_points_matched_by_name_gives_shapes(tmp_path, plate1, rng)
     frf += rng.normal(0, 1e-4 * np.abs(frf).max(), frf.shape) * (1 + 1j)
     names = ["c1", "c2", "c3", "m"]  # columns in this order; the points file in another
     header = "frequency_Hz," + ",".join(f"H{n}_re,H{n}_im" for n in names)
-    rows = [",".join([f"{f:.17g}"] + [f"{v.real:.17g},{v.imag:.17g}" for v in frf[:, i]])
-            for i, f in enumerate(axis)]  # fmt: skip
+    rows = [
+        ",".join([f"{f:.17g}"] + [f"{v.real:.17g},{v.imag:.17g}" for v in frf[:, i]])
+        for i, f in enumerate(axis)
+    ]
     test = tmp_path / "frf.csv"
     test.write_text(header + "\n" + "\n".join(rows) + "\n")
     order = [3, 1, 0, 2]
@@ -238,8 +248,7 @@ def test_frf_csv_with_points_matched_by_name_gives_shapes(tmp_path, plate1, rng)
     data = read_frf_csv(test, points=points)
     np.testing.assert_array_equal(data.points_mm, POINTS_MM)
     modal = modal_data_from_poles(data, extract_poles(data).kept)
-    mac = np.sum(modal.shapes.T * w, 0) ** 2 / (
-        np.sum(modal.shapes.T**2, 0) * np.sum(w**2, 0))  # fmt: skip
+    mac = np.sum(modal.shapes.T * w, 0) ** 2 / (np.sum(modal.shapes.T**2, 0) * np.sum(w**2, 0))
     print(f"FRF CSV with points: min MAC {mac.min():.6f}")
     assert modal.size == 10 and np.all(mac > 0.99), mac
     np.testing.assert_allclose(modal.frequency_Hz, frequency, rtol=FREQUENCY_RTOL)
@@ -281,8 +290,10 @@ def refused_case(tmp_path, kind, plate1, rng):
         return [multi], extra, ["points.csv", "line 3, column x_mm", "number"]
     if kind == "frf-points-name":
         test = tmp_path / "frf.csv"
-        test.write_text("frequency_Hz,H1_re,H1_im,H2_re,H2_im\n"
-                        + "".join(f"{4 * i},1.0,0.5,1.0,0.5\n" for i in range(100)))  # fmt: skip
+        test.write_text(
+            "frequency_Hz,H1_re,H1_im,H2_re,H2_im\n"
+            + "".join(f"{4 * i},1.0,0.5,1.0,0.5\n" for i in range(100))
+        )
         points = write_points(tmp_path / "points.csv", [("1", (0, 0)), ("3", (1, 1))])
         return [test], ["--points", points], ["points.csv", 'column point = "2"', "no row"]
     if kind == "frf-several":
@@ -301,14 +312,26 @@ def refused_case(tmp_path, kind, plate1, rng):
     raise AssertionError(kind)
 
 
-REFUSED = ["rate", "length", "channels", "points-rows", "channel-range", "force-range",
-           "no-points", "points-bad", "frf-points-name", "frf-several", "uff-points",
-           "frf-channel"]  # fmt: skip
+REFUSED = [
+    "rate",
+    "length",
+    "channels",
+    "points-rows",
+    "channel-range",
+    "force-range",
+    "no-points",
+    "points-bad",
+    "frf-points-name",
+    "frf-several",
+    "uff-points",
+    "frf-channel",
+]
 
 
 @pytest.mark.parametrize("kind", REFUSED)
-def test_inconsistent_taps_and_points_are_refused_in_one_line(tmp_path, capsys, sheet, plate1,
-                                                              rng, kind):  # fmt: skip
+def test_inconsistent_taps_and_points_are_refused_in_one_line(
+    tmp_path, capsys, sheet, plate1, rng, kind
+):
     tests, extra, names = refused_case(tmp_path, kind, plate1, rng)
     out = tmp_path / "case.toml"
     out.write_text("# an earlier case, not to be lost\n")

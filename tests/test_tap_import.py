@@ -162,14 +162,28 @@ def write_uff58(path, points_mm, frf, axis_Hz):
             x=[float(v) for v in points_mm[:, 0]],
             y=[float(v) for v in points_mm[:, 1]],
             z=[0.0] * p,
-        )  # fmt: skip
+        )
     ]
     for j in range(p):
-        sets.append(pyuff.prepare_58(
-            func_type=4, rsp_node=j + 1, rsp_dir=3, ref_node=1, ref_dir=3, ord_data_type=6,
-            abscissa_spacing=1, abscissa_spec_data_type=18, ordinate_spec_data_type=8,
-            orddenom_spec_data_type=13, data=frf[j], x=axis_Hz, id1="FRF", rsp_ent_name="pt",
-            ref_ent_name="pt"))  # fmt: skip
+        sets.append(
+            pyuff.prepare_58(
+                func_type=4,
+                rsp_node=j + 1,
+                rsp_dir=3,
+                ref_node=1,
+                ref_dir=3,
+                ord_data_type=6,
+                abscissa_spacing=1,
+                abscissa_spec_data_type=18,
+                ordinate_spec_data_type=8,
+                orddenom_spec_data_type=13,
+                data=frf[j],
+                x=axis_Hz,
+                id1="FRF",
+                rsp_ent_name="pt",
+                ref_ent_name="pt",
+            )
+        )
     pyuff.UFF(str(path)).write_sets(sets, mode="overwrite")
     return path
 
@@ -290,15 +304,32 @@ def corrupted(tmp_path, kind, rng):
     if kind == "uff-without-58":
         path = tmp_path / "modes.uff"
         p = 3
-        pyuff.UFF(str(path)).write_sets([pyuff.prepare_15(
-            node_nums=[1, 2, 3], def_cs=[0] * p, disp_cs=[0] * p, color=[0] * p,
-            x=[0.0, 1.0, 2.0], y=[0.0] * p, z=[0.0] * p)], mode="overwrite")  # fmt: skip
+        pyuff.UFF(str(path)).write_sets(
+            [
+                pyuff.prepare_15(
+                    node_nums=[1, 2, 3],
+                    def_cs=[0] * p,
+                    disp_cs=[0] * p,
+                    color=[0] * p,
+                    x=[0.0, 1.0, 2.0],
+                    y=[0.0] * p,
+                    z=[0.0] * p,
+                )
+            ],
+            mode="overwrite",
+        )
         return path, ["modes.uff", "dataset 58", "no dataset 58"], ["--poles", tmp_path / "p.csv"]
     raise AssertionError(kind)
 
 
-KINDS = ["truncated-wav", "short-wav", "csv-no-signal", "csv-uneven-time", "frf-csv-no-im",
-         "uff-without-58"]  # fmt: skip
+KINDS = [
+    "truncated-wav",
+    "short-wav",
+    "csv-no-signal",
+    "csv-uneven-time",
+    "frf-csv-no-im",
+    "uff-without-58",
+]
 
 
 @pytest.mark.parametrize("kind", KINDS)

@@ -21,8 +21,9 @@ def _plate1_toml(tmp_path, drop=None, points=True):
     listed = ", ".join(repr(float(v)) for v in f)
     text = re.sub(r"frequency_Hz = \[[^\]]*\]", f"frequency_Hz = [{listed}]", text)
     if points:
-        text = text.replace("[measured]\n", f"[measured]\ntap_point_mm = {TAP_MM}\n"
-                            f"sensor_point_mm = {SENSOR_MM}\n")  # fmt: skip
+        text = text.replace(
+            "[measured]\n", f"[measured]\ntap_point_mm = {TAP_MM}\nsensor_point_mm = {SENSOR_MM}\n"
+        )
     path = tmp_path / "plate1_tapped.toml"
     path.write_text(text)
     return path
@@ -31,11 +32,28 @@ def _plate1_toml(tmp_path, drop=None, points=True):
 def test_the_points_are_read_in_metres_and_checked(tmp_path):
     case = load_case(_plate1_toml(tmp_path))
     np.testing.assert_allclose(case.measured.tap_points, [[0.0, 0.0], [0.2, 0.07]])
-    data = {"name": "x", "plate": {"length_mm": 200, "width_mm": 100, "thickness_mm": 2,
-            "density_kg_m3": 1500, "layup_deg": [0]},
-            "measured": {"frequency_Hz": [100.0], "sigma_rel": 0.01, "tap_point_mm": [1, 1]},
-            "prior": {k: {"mean": m, "sd": m / 5} for k, m in (("E1_GPa", 100), ("E2_GPa", 7),
-                      ("nu12", 0.3), ("G12_GPa", 4), ("G13_GPa", 4), ("G23_GPa", 1))}}  # fmt: skip
+    data = {
+        "name": "x",
+        "plate": {
+            "length_mm": 200,
+            "width_mm": 100,
+            "thickness_mm": 2,
+            "density_kg_m3": 1500,
+            "layup_deg": [0],
+        },
+        "measured": {"frequency_Hz": [100.0], "sigma_rel": 0.01, "tap_point_mm": [1, 1]},
+        "prior": {
+            k: {"mean": m, "sd": m / 5}
+            for k, m in (
+                ("E1_GPa", 100),
+                ("E2_GPa", 7),
+                ("nu12", 0.3),
+                ("G12_GPa", 4),
+                ("G13_GPa", 4),
+                ("G23_GPa", 1),
+            )
+        },
+    }
     with pytest.raises(CaseError, match="measured.sensor_point_mm.*required with"):
         parse_case(data)
     data["measured"]["sensor_point_mm"] = [250, 1]

@@ -35,8 +35,14 @@ KEYS = ("E1_GPa", "E2_GPa", "G12_GPa")
 # truth in case units (GPa): from the prior mean (10.9, 0.64, 0.39, 0.58, 0.59, 0.026) with
 # prior sd (2.7, 0.16, 0.08, 0.15, 0.15, 0.0065) this is E1 -0.7 sd, E2 +2.0 sd (1.5x),
 # nu12 +0.75 sd, G12 +1.1 sd, G13 +0.07 sd, G23 +0.6 sd
-TRUTH = {"E1_GPa": 9.0, "E2_GPa": 0.96, "nu12": 0.45, "G12_GPa": 0.74, "G13_GPa": 0.60,
-         "G23_GPa": 0.030}  # fmt: skip
+TRUTH = {
+    "E1_GPa": 9.0,
+    "E2_GPa": 0.96,
+    "nu12": 0.45,
+    "G12_GPa": 0.74,
+    "G13_GPa": 0.60,
+    "G23_GPa": 0.030,
+}
 SHEET_MESH = (30, 12)
 DATA_MESH = (40, 16)  # finer than the sheet's: the data are not the model's own
 N_MODES = 14  # recorded (up to 528 Hz; the import fits poles up to 591 Hz)
@@ -104,8 +110,9 @@ def tap_and_estimate(folder, sheet, frequency, amplitude, seed, **artefacts):
     argv = ["import", *map(str, paths), "--plate", str(sheet), "-o", str(case_path)]
     status, out, err = run_cli(argv)
     assert status == 0, err
-    status, _, estimate_err = run_cli(["estimate", str(case_path), "--method", "B", "--json",
-                                       str(json_path), "-q"])  # fmt: skip
+    status, _, estimate_err = run_cli(
+        ["estimate", str(case_path), "--method", "B", "--json", str(json_path), "-q"]
+    )
     assert status == 0, estimate_err
     result = json.loads(json_path.read_text())
     case = load_case(case_path)
@@ -124,16 +131,20 @@ def run_cli(argv):
 
 def summary(case, result, truth=TRUTH):
     """One line per constant and the fit, for the test's log."""
-    lines = [f"status {result['status']}, fit {result['fit']}, warnings {result['warnings']}",
-             f"measured {case.measured.frequency_Hz.tolist()}",
-             f"p_spurious {case.measured.p_spurious.tolist()}",
-             f"paired modes {result['modes']} of peaks {result['measured_Hz']}"]  # fmt: skip
+    lines = [
+        f"status {result['status']}, fit {result['fit']}, warnings {result['warnings']}",
+        f"measured {case.measured.frequency_Hz.tolist()}",
+        f"p_spurious {case.measured.p_spurious.tolist()}",
+        f"paired modes {result['modes']} of peaks {result['measured_Hz']}",
+    ]
     for key in KEYS:
         c = result["constants"][key]
         error = c["mean"] / truth[key] - 1
         z = (c["mean"] - truth[key]) / c["sd"]
-        lines.append(f"{key}: {c['mean']:.4f} +- {c['sd']:.4f} against {truth[key]}: "
-                     f"{100 * error:+.2f} % ({z:+.2f} sd)")  # fmt: skip
+        lines.append(
+            f"{key}: {c['mean']:.4f} +- {c['sd']:.4f} against {truth[key]}: "
+            f"{100 * error:+.2f} % ({z:+.2f} sd)"
+        )
     return "\n".join(lines)
 
 
@@ -174,8 +185,9 @@ def modes(plate):
 
 def test_clean_taps_with_noise(tmp_path, sheet, modes):
     frequency, amplitude = modes
-    case, result, out, err = tap_and_estimate(tmp_path, sheet, frequency, amplitude,
-                                              1, noise=1e-3, force_noise=1e-3)  # fmt: skip
+    case, result, out, err = tap_and_estimate(
+        tmp_path, sheet, frequency, amplitude, 1, noise=1e-3, force_noise=1e-3
+    )
 
     assert NO_WINDOW in out  # the 1 s records have decayed: no window, no leakage
     assert "warning" not in err
@@ -190,8 +202,9 @@ def test_clean_taps_with_noise(tmp_path, sheet, modes):
 def test_split_mode_one_of_its_two_peaks_paired(tmp_path, sheet, modes):
     frequency, amplitude = modes
     split = (2, 0.02, 0.7)  # mode 3 (125 Hz) and a partner 2 % above, 0.7 times as strong
-    case, result, out, _ = tap_and_estimate(tmp_path, sheet, frequency, amplitude, 2,
-                                            noise=1e-3, split=split)  # fmt: skip
+    case, result, out, _ = tap_and_estimate(
+        tmp_path, sheet, frequency, amplitude, 2, noise=1e-3, split=split
+    )
 
     assert NO_WINDOW in out
     assert result["status"] != "rejected"
@@ -210,9 +223,9 @@ def test_split_mode_one_of_its_two_peaks_paired(tmp_path, sheet, modes):
 def test_rattle_pole_in_a_coherence_dip_is_spurious(tmp_path, sheet, modes):
     frequency, amplitude = modes
     rattle = 320.0  # between modes 8 (272 Hz) and 9 (367 Hz), inside the band
-    case, result, out, err = tap_and_estimate(tmp_path, sheet, frequency, amplitude, 3,
-                                              noise=1e-3, rattle_Hz=rattle,
-                                              rattle_level=0.05)  # fmt: skip
+    case, result, out, err = tap_and_estimate(
+        tmp_path, sheet, frequency, amplitude, 3, noise=1e-3, rattle_Hz=rattle, rattle_level=0.05
+    )
 
     assert NO_WINDOW in out
     assert result["status"] != "rejected"
@@ -252,8 +265,7 @@ def test_mode_at_a_node_of_the_sensor_is_unobserved(tmp_path, sheet, plate, noda
     print(f"sensor at {nodal_sensor}: amplitudes / largest {relative.round(4)}")
     assert relative[3] < 1e-6 and np.delete(relative[:13], 3).min() > 0.05  # mode 4 alone
 
-    case, result, out, _ = tap_and_estimate(tmp_path, sheet, frequency, amplitude, 4,
-                                            noise=1e-3)  # fmt: skip
+    case, result, out, _ = tap_and_estimate(tmp_path, sheet, frequency, amplitude, 4, noise=1e-3)
 
     assert NO_WINDOW in out
     assert result["status"] != "rejected"
@@ -271,8 +283,9 @@ def test_mode_at_a_node_of_the_sensor_is_unobserved(tmp_path, sheet, plate, noda
 def test_clipped_tap(tmp_path, sheet, modes):
     frequency, amplitude = modes
     clip = (1, 0.5)  # tap 2's response clipped at half its peak (a recorder's range)
-    case, result, out, err = tap_and_estimate(tmp_path, sheet, frequency, amplitude, 5,
-                                              noise=1e-3, clip=clip)  # fmt: skip
+    case, result, out, err = tap_and_estimate(
+        tmp_path, sheet, frequency, amplitude, 5, noise=1e-3, clip=clip
+    )
 
     assert result["status"] != "rejected"
     assert_constants(result)
@@ -290,8 +303,9 @@ def test_clipped_tap(tmp_path, sheet, modes):
 def test_double_hit(tmp_path, sheet, modes):
     frequency, amplitude = modes
     hit = (2, 2e-3, 0.5)  # tap 3: a second hit 2 ms after the first, half as strong
-    case, result, out, err = tap_and_estimate(tmp_path, sheet, frequency, amplitude, 6,
-                                              noise=1e-3, double_hit=hit)  # fmt: skip
+    case, result, out, err = tap_and_estimate(
+        tmp_path, sheet, frequency, amplitude, 6, noise=1e-3, double_hit=hit
+    )
 
     assert NO_WINDOW in out
     assert result["status"] != "rejected"
@@ -309,10 +323,8 @@ def test_double_hit(tmp_path, sheet, modes):
 def test_tapered_plate_within_tolerance(tmp_path, sheet, plate):
     model, b = plate
     # thickness h (1 + 0.05 (2 x / a - 1)): 5 % thinner at one end, 5 % thicker at the other
-    frequency, amplitude = plate_modes_at(model, b, TAP_MM, SENSOR_MM, N_MODES,
-                                          taper=("x", 0.05))  # fmt: skip
-    case, result, out, _ = tap_and_estimate(tmp_path, sheet, frequency, amplitude, 7,
-                                            noise=1e-3)  # fmt: skip
+    frequency, amplitude = plate_modes_at(model, b, TAP_MM, SENSOR_MM, N_MODES, taper=("x", 0.05))
+    case, result, out, _ = tap_and_estimate(tmp_path, sheet, frequency, amplitude, 7, noise=1e-3)
 
     assert result["status"] == "converged"  # not flagged: the fit is as good as the flat plate's
     assert_constants(result)
@@ -326,8 +338,9 @@ THICKNESS_SCALE = 1.02
 def thicker(tmp_path_factory, sheet, plate):
     """Taps of a plate 2 % thicker than its sheet says, imported and estimated."""
     model, b = plate
-    frequency, amplitude = plate_modes_at(model, b, TAP_MM, SENSOR_MM, N_MODES,
-                                          thickness_scale=THICKNESS_SCALE)  # fmt: skip
+    frequency, amplitude = plate_modes_at(
+        model, b, TAP_MM, SENSOR_MM, N_MODES, thickness_scale=THICKNESS_SCALE
+    )
     folder = tmp_path_factory.mktemp("thicker")
     return tap_and_estimate(folder, sheet, frequency, amplitude, 8, noise=1e-3)
 
@@ -378,11 +391,13 @@ def test_real_5R_taps_give_the_source_constants(tmp_path):
     taps = [DATA_5R / f"tap{k}.wav" for k in range(1, 6)]
     case_path, json_path = tmp_path / "case.toml", tmp_path / "estimate.json"
 
-    status, out, err = run_cli(["import", *map(str, taps), "--plate", str(sheet), "-o",
-                                str(case_path)])  # fmt: skip
+    status, out, err = run_cli(
+        ["import", *map(str, taps), "--plate", str(sheet), "-o", str(case_path)]
+    )
     assert status == 0, err
-    status, _, err = run_cli(["estimate", str(case_path), "--method", "B", "--json",
-                              str(json_path), "-q"])  # fmt: skip
+    status, _, err = run_cli(
+        ["estimate", str(case_path), "--method", "B", "--json", str(json_path), "-q"]
+    )
     assert status == 0, err
 
     case, result = load_case(case_path), json.loads(json_path.read_text())

@@ -78,8 +78,15 @@ def test_variants_share_their_candidate_prior_and_are_summed():
     assert p["pm"] == pytest.approx(np.exp(g3) / total, rel=1e-13)
     assert list(p) == [NOMINAL, "thickness_taper", "pm"]  # candidates most probable first
     # a failed fit (-inf, NaN) has probability zero and changes nothing else
-    r = model_probabilities([("thickness_taper", g1), ("thickness_taper", g2), ("pm", g3),
-                             ("foundation", -np.inf), ("loss", np.nan)])  # fmt: skip
+    r = model_probabilities(
+        [
+            ("thickness_taper", g1),
+            ("thickness_taper", g2),
+            ("pm", g3),
+            ("foundation", -np.inf),
+            ("loss", np.nan),
+        ]
+    )
     assert r["foundation"] == r["loss"] == 0.0 and r["pm"] == pytest.approx(p["pm"], rel=1e-14)
     with pytest.raises(ValueError, match="prior_odds"):
         model_probabilities([("pm", 1.0)], prior_odds={"pm": -1.0})
@@ -97,8 +104,12 @@ class _Result:
 
 
 def test_a_runner_up_within_two_nats_makes_an_explained_mismatch_ambiguous():
-    ranked = [_Result("thickness_taper", 3.2), _Result("thickness_taper", 3.1),
-              _Result("local_stiffness_loss", 2.6), _Result("point_mass", 0.5)]  # fmt: skip
+    ranked = [
+        _Result("thickness_taper", 3.2),
+        _Result("thickness_taper", 3.1),
+        _Result("local_stiffness_loss", 2.6),
+        _Result("point_mass", 0.5),
+    ]
     p = model_probabilities([(c.name, c.log_evidence_gain) for c in ranked])
     rival, gap, tie = runner_up(ranked[0], ranked, p)
     assert (rival, tie) == (ranked[2], "odds")  # the other taper direction: a variant, no rival
@@ -106,8 +117,10 @@ def test_a_runner_up_within_two_nats_makes_an_explained_mismatch_ambiguous():
     assert gap == pytest.approx(np.log(0.5 * (np.exp(3.2) + np.exp(3.1)) / np.exp(2.6)))
     assert verdict(1e-6, True, 0.5, 0.01, ranked[0], tie is not None) == ("ambiguous", ranked[0])
     # a rival 2.5 nats below that fits worse (chi2 + 8) is no tie: explained
-    apart = [_Result("thickness_taper", 3.2, chi2=1.0),
-             _Result("local_stiffness_loss", 0.7, chi2=9.0)]  # fmt: skip
+    apart = [
+        _Result("thickness_taper", 3.2, chi2=1.0),
+        _Result("local_stiffness_loss", 0.7, chi2=9.0),
+    ]
     q = model_probabilities([(c.name, c.log_evidence_gain) for c in apart])
     assert runner_up(apart[0], apart, q)[1:] == (pytest.approx(2.5), None)
     assert ties(apart[0], apart, q) == []
@@ -120,9 +133,11 @@ def test_a_runner_up_within_two_nats_makes_an_explained_mismatch_ambiguous():
 def test_a_rival_that_fits_as_well_ties_within_the_prior_margin():
     """A point support named a foundation on a calibration replicate (chi2 0.7 against 1.6,
     gains +18.5 and +22.2): the odds, 3.7 nats, were the Occam factors' alone."""
-    ranked = [_Result("elastic_foundation", 22.2, chi2=1.6),
-              _Result("point_support", 18.5, chi2=0.7),
-              _Result("local_stiffness_loss", 9.0, chi2=16.0)]  # fmt: skip
+    ranked = [
+        _Result("elastic_foundation", 22.2, chi2=1.6),
+        _Result("point_support", 18.5, chi2=0.7),
+        _Result("local_stiffness_loss", 9.0, chi2=16.0),
+    ]
     p = model_probabilities([(c.name, c.log_evidence_gain) for c in ranked])
     rival, gap, tie = runner_up(ranked[0], ranked, p, 2.0, 4.0)
     assert (rival, tie) == (ranked[1], "fit") and gap == pytest.approx(3.7)
@@ -135,21 +150,29 @@ def test_a_rival_that_fits_as_well_ties_within_the_prior_margin():
     assert runner_up(worse[0], worse, p, 2.0, 4.0)[2] is None
     # three that tie (a calibration replicate: a point support of 32,000 N/m, 2026-11-27): all
     # are named, each name once, best first
-    three = [_Result("elastic_foundation", 4.08, chi2=2.69),
-             _Result("local_stiffness_loss", 1.88, chi2=2.82),
-             _Result("point_support", 1.03, chi2=3.14),
-             _Result("thickness_taper", 0.0, chi2=13.8), _Result("thickness_taper", -0.5),
-             _Result("point_mass", -1.19, chi2=2.90)]  # fmt: skip
+    three = [
+        _Result("elastic_foundation", 4.08, chi2=2.69),
+        _Result("local_stiffness_loss", 1.88, chi2=2.82),
+        _Result("point_support", 1.03, chi2=3.14),
+        _Result("thickness_taper", 0.0, chi2=13.8),
+        _Result("thickness_taper", -0.5),
+        _Result("point_mass", -1.19, chi2=2.90),
+    ]
     p = model_probabilities([(c.name, c.log_evidence_gain) for c in three])
     tied = ties(three[0], three, p, 2.0, 4.0)
     assert [(c.name, kind) for c, kind in tied] == [
-        ("local_stiffness_loss", "fit"), ("point_support", "fit")]  # point mass: 5.3 nats
+        ("local_stiffness_loss", "fit"),
+        ("point_support", "fit"),
+    ]  # point mass: 5.3 nats
     assert runner_up(three[0], three, p, 2.0, 4.0)[0] is three[1]
     text = tie_text(three[0], tied, p)
     assert "local_stiffness_loss" in text and "so does point_support (chi2 3.1" in text
     # the first rival not tying, a lower one that fits as well is the rival
-    lower = [ranked[0], _Result("local_stiffness_loss", 20.0, chi2=9.0),
-             _Result("point_support", 18.5, chi2=2.0)]  # fmt: skip
+    lower = [
+        ranked[0],
+        _Result("local_stiffness_loss", 20.0, chi2=9.0),
+        _Result("point_support", 18.5, chi2=2.0),
+    ]
     p = model_probabilities([(c.name, c.log_evidence_gain) for c in lower])
     rival, gap, tie = runner_up(lower[0], lower, p, 2.0, 4.0)
     assert (rival, tie) == (lower[2], "fit")
@@ -168,8 +191,7 @@ class _Triplet(PointMass):
 def test_a_constructed_tie_is_ambiguous_and_names_all(model):
     truth = np.array([15.0, 50.0, 30.0])  # as tests/test_diagnose.py: 15 g at (50, 30) mm
     case = _recordings(_plate1_case(), PointMass(), truth, seed=2)
-    d = diagnose(case, model=model, rng=0, n_starts=1,
-                 physics=[PointMass(), _Twin(), _Triplet()])  # fmt: skip
+    d = diagnose(case, model=model, rng=0, n_starts=1, physics=[PointMass(), _Twin(), _Triplet()])
     assert d.verdict == "ambiguous"
     named = [d.chosen.name, d.rival.name, *(c.name for c in d.also_tied)]
     assert sorted(named) == ["point_mass", "point_mass_triplet", "point_mass_twin"]
@@ -259,8 +281,11 @@ def test_a_pairs_ritz_form_reproduces_its_plate_at_a_snapshot(model, b):
     # y -> b - y: (50, 70) mm with -0.12; under x -> a - x: (150, 30) mm with +0.12; under
     # the half-turn: (150, 70) mm with -0.12 (a y-taper is unchanged by x -> a - x)
     images = sorted(tuple(np.round(t, 9)) for t in pair.mirror_images(model, theta))
-    assert images == [(10.0, 50.0, 70.0, -0.12), (10.0, 150.0, 30.0, 0.12),
-                      (10.0, 150.0, 70.0, -0.12)]  # fmt: skip
+    assert images == [
+        (10.0, 50.0, 70.0, -0.12),
+        (10.0, 150.0, 30.0, 0.12),
+        (10.0, 150.0, 70.0, -0.12),
+    ]
 
 
 def test_a_pairs_ritz_differences_are_its_matrices_differenced(model, b):
@@ -301,8 +326,11 @@ def test_a_pairs_mirror_images_are_told_on_a_small_mesh_as_on_its_own(b):
     pair = Pair(_ImagesOnly(), ThicknessTaper("y"), b)
     theta = np.array([10.0, 50.0, 30.0, 0.12])
     images = sorted(tuple(np.round(t, 9)) for t in pair.mirror_images(fine, theta))
-    assert images == [(10.0, 50.0, 70.0, -0.12), (10.0, 150.0, 30.0, 0.12),
-                      (10.0, 150.0, 70.0, -0.12)]  # fmt: skip
+    assert images == [
+        (10.0, 50.0, 70.0, -0.12),
+        (10.0, 150.0, 30.0, 0.12),
+        (10.0, 150.0, 70.0, -0.12),
+    ]
     # a combination that is no image is told apart on the small mesh too: the same
     # eigenvalues there only for the images
     from bayesplate.discrepancy.physics.combined import _check_model
@@ -320,8 +348,10 @@ def test_pairs_are_the_best_with_every_other_candidate(model, b):
     best = type("C", (), {"name": "thickness_taper", "fit": fit})()
     pairs = pairs_with(best, physics, [best], model, {})
     # the other taper direction is a variant of the same candidate, not a second effect
-    assert [p.name for p in pairs] == ["thickness_taper+point_mass",
-                                       "thickness_taper+elastic_foundation"]  # fmt: skip
+    assert [p.name for p in pairs] == [
+        "thickness_taper+point_mass",
+        "thickness_taper+elastic_foundation",
+    ]
     starts = pairs[0].starting_points(model, b)
     np.testing.assert_allclose(starts[0][0], 0.1)  # from the best single fit
 
@@ -342,8 +372,12 @@ def test_two_concealed_effects_are_named_as_a_pair(model, b):
     assert d.refit_p_value > 0.01 and d.probabilities["point_mass+thickness_taper"] > 0.99
     got, sd = d.chosen.fit.theta, d.chosen.fit.theta_sd
     # the truth or one of its mirror images (a symmetry moves the mass and turns the taper)
-    images = [truth, [15.0, 150.0, 30.0, -0.15], [15.0, 50.0, 70.0, 0.15],
-              [15.0, 150.0, 70.0, -0.15]]  # fmt: skip
+    images = [
+        truth,
+        [15.0, 150.0, 30.0, -0.15],
+        [15.0, 50.0, 70.0, 0.15],
+        [15.0, 150.0, 70.0, -0.15],
+    ]
     near = min(images, key=lambda t: np.hypot(*(got[1:3] - np.asarray(t)[1:3])))
     assert np.all(np.abs(got - near) < 3 * sd + np.array([0.5, 3.0, 3.0, 0.01]))
 
@@ -376,11 +410,16 @@ def test_a_named_candidates_rivals_left_on_the_coarse_model_are_refined():
     from bayesplate.discrepancy.search.rank import RIVAL_REACH, _rivals
 
     def result(gain, refined, failed=""):
-        return SimpleNamespace(log_evidence_gain=gain, fit=SimpleNamespace(refined=refined),
-                               failed=failed)  # fmt: skip
+        return SimpleNamespace(
+            log_evidence_gain=gain, fit=SimpleNamespace(refined=refined), failed=failed
+        )
 
-    results = [result(3.5, True), result(-0.7, False), result(3.5 - RIVAL_REACH - 0.1, False),
-               result(2.0, True)]  # fmt: skip
+    results = [
+        result(3.5, True),
+        result(-0.7, False),
+        result(3.5 - RIVAL_REACH - 0.1, False),
+        result(2.0, True),
+    ]
     assert _rivals(results, threshold=3.0) == [1]
     # one whose refinement failed already is not tried again
     assert _rivals([*results, result(3.0, False, "its settled fit failed")], 3.0) == [1]
@@ -412,4 +451,5 @@ def test_every_named_fit_not_settled_gets_its_note():
     failed = SimpleNamespace(name="cutout+thickness_taper", failed="its settled fit failed (x)")
     fitted_ok = SimpleNamespace(name="b", failed="")
     assert unsettled_notes(nominal, None, ranked=[fitted_ok, failed]) == [
-        "cutout+thickness_taper: its settled fit failed (x)"]  # fmt: skip
+        "cutout+thickness_taper: its settled fit failed (x)"
+    ]

@@ -105,9 +105,15 @@ def _estimate(case, options):
     """``bayesplate estimate`` (its defaults: TOL 1e-3, the paper's conventions)."""
     from ..run import EstimateOptions, run_estimate
 
-    done = run_estimate(case, EstimateOptions(method=options["method"], mesh=_mesh(options),
-                                              pairing=options["pairing"],
-                                              forward=options["forward"]))  # fmt: skip
+    done = run_estimate(
+        case,
+        EstimateOptions(
+            method=options["method"],
+            mesh=_mesh(options),
+            pairing=options["pairing"],
+            forward=options["forward"],
+        ),
+    )
     r, model, scale, doc = done.result, done.model, done.scale, done.document
     chi2, dof = _estimate_chi2(case, r)
     row = {
@@ -149,9 +155,13 @@ def _sample(case, options):
     """``bayesplate sample --seed SEED`` (on the reduced model, with MVE beside B)."""
     from ..run import SampleOptions, run_sample
 
-    chain = SampleOptions(mesh=_mesh(options), walkers=options["walkers"],
-                          max_steps=options["max_steps"], min_ess=options["min_ess"],
-                          pairing=options["pairing"])  # fmt: skip
+    chain = SampleOptions(
+        mesh=_mesh(options),
+        walkers=options["walkers"],
+        max_steps=options["max_steps"],
+        min_ess=options["min_ess"],
+        pairing=options["pairing"],
+    )
     done = run_sample(case, chain, options["seed"])
     r, doc = done.result, done.document
     columns = {}

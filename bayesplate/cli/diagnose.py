@@ -98,8 +98,10 @@ def diagnosis_text(d):
         lines.append(f"  {c.name:22s} {c.log_evidence_gain:+8.1f}   {params}")
     probabilities = getattr(d, "probabilities", {})
     if probabilities:
-        lines.append("posterior probabilities: " + ", ".join(
-            f"{k} {v:.3g}" for k, v in probabilities.items() if v >= 1e-3))  # fmt: skip
+        lines.append(
+            "posterior probabilities: "
+            + ", ".join(f"{k} {v:.3g}" for k, v in probabilities.items() if v >= 1e-3)
+        )
     if d.chosen is not None:
         lines.append(
             f"refit: chi2 = {d.chosen.fit.chi2:.1f} on {d.refit_dof:.1f} dof, "

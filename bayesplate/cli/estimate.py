@@ -93,12 +93,16 @@ def budget_text(budget):
         cells = "".join(f"{sd[i, j]:#9.3g} ({100 * budget.share[i, j]:3.0f}%)" for i in keep)
         lines.append(f"{key:>9}{cells}{total[j]:#10.3g}")
     if budget.status == "approximate":
-        lines.append(f"  frequencies + prior split with the full model's sensitivities at the "
-                     f"fast model's answer: they add up to its covariance within "
-                     f"{budget.closure:.1e}")  # fmt: skip
+        lines.append(
+            f"  frequencies + prior split with the full model's sensitivities at the "
+            f"fast model's answer: they add up to its covariance within "
+            f"{budget.closure:.1e}"
+        )
     elif budget.status != "ok":
-        lines.append(f"  budget status {budget.status}: the split of the estimator's own "
-                     f"covariance does not close (closure {budget.closure:.1e})")  # fmt: skip
+        lines.append(
+            f"  budget status {budget.status}: the split of the estimator's own "
+            f"covariance does not close (closure {budget.closure:.1e})"
+        )
     return "\n".join(lines)
 
 
@@ -121,9 +125,15 @@ def run(args):
     case = resolve_case(args.case)
     if not args.quiet:
         logging.getLogger("bayesplate.estimators").setLevel(logging.INFO)  # progress
-    options = EstimateOptions(method=args.method, mesh=mesh_of(args), tol=args.tol,
-                              max_iter=args.max_iter, convention=args.convention,
-                              pairing=args.pairing, forward=args.forward)  # fmt: skip
+    options = EstimateOptions(
+        method=args.method,
+        mesh=mesh_of(args),
+        tol=args.tol,
+        max_iter=args.max_iter,
+        convention=args.convention,
+        pairing=args.pairing,
+        forward=args.forward,
+    )
     done = run_estimate(case, options)
     result, budget, scale = done.result, done.budget, done.scale
     if args.json:
@@ -133,8 +143,10 @@ def run(args):
         if scale is not None:
             print(scale_text(scale))
             if budget is not None:
-                print("the variance budget below is at s = 1 (the declared deviations): the "
-                      "error scale widens the frequencies' share")  # fmt: skip
+                print(
+                    "the variance budget below is at s = 1 (the declared deviations): the "
+                    "error scale widens the frequencies' share"
+                )
         if budget is not None:
             print(budget_text(budget))
         sys.stdout.flush()  # the warnings follow the table

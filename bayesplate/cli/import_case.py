@@ -106,8 +106,10 @@ def _tap_modal_data(args, tests):
     if kept is None:
         kept = analysis.kept
         if not kept:
-            rule = (f"no pole is stable over the last orders ({len(analysis.candidates)} "
-                    "candidates): write them with --poles, edit, and give --use-poles")  # fmt: skip
+            rule = (
+                f"no pole is stable over the last orders ({len(analysis.candidates)} "
+                "candidates): write them with --poles, edit, and give --use-poles"
+            )
             raise CaseError(None, rule=rule, path=tests[0])
         listed = ", ".join(f"{pole.frequency_Hz:.6g}" for pole in kept)
         print(f"{len(kept)} stable poles taken automatically (Hz): {listed}")
@@ -120,8 +122,17 @@ def _tap_modal_data(args, tests):
         _written("--poles", args.poles, write_poles, args.poles, analysis, spectra.source)
         print(f"{len(analysis.candidates)} candidate poles -> {args.poles}")
     if args.chart is not None:
-        _written("--chart", args.chart, write_chart, args.chart, analysis,
-                 spectra.frequency_Hz, spectra.frf, kept, spectra.coherence)  # fmt: skip
+        _written(
+            "--chart",
+            args.chart,
+            write_chart,
+            args.chart,
+            analysis,
+            spectra.frequency_Hz,
+            spectra.frf,
+            kept,
+            spectra.coherence,
+        )
         print(f"stabilisation chart -> {args.chart}")
     from ..report.data import TapTest
 
@@ -138,9 +149,11 @@ def _prior_band(args, spectra):
     lower, upper, top = prior_band_Hz(sheet_case(_plate_path(args.plate)), n_modes)
     axis = spectra.frequency_Hz
     lower, top = max(lower, float(axis[axis > 0][0])), min(top, float(axis[-1]))
-    print(f"band {lower:.4g}-{upper:.4g} Hz (poles fitted up to {top:.4g} Hz): the lowest "
-          f"{n_modes} modes at the sheet's prior mean, x {BAND_LOW_FACTOR:g} and "
-          f"x {BAND_HIGH_FACTOR:g} (--band, --modes)")
+    print(
+        f"band {lower:.4g}-{upper:.4g} Hz (poles fitted up to {top:.4g} Hz): the lowest "
+        f"{n_modes} modes at the sheet's prior mean, x {BAND_LOW_FACTOR:g} and "
+        f"x {BAND_HIGH_FACTOR:g} (--band, --modes)"
+    )
     return (lower, top), upper
 
 
@@ -169,8 +182,16 @@ def _read_spectra(args, tests):
                 rule = "several files are taps of one test: each must be a WAV or a CSV time series"
                 raise CaseError("TEST", rule=rule, path=test)
         force = {None: "auto", "none": None}.get(args.force_channel, args.force_channel)
-        return read_taps(tests, window, force, args.channel, args.points, args.rate_Hz,
-                         args.force_column, args.response_column)  # fmt: skip
+        return read_taps(
+            tests,
+            window,
+            force,
+            args.channel,
+            args.points,
+            args.rate_Hz,
+            args.force_column,
+            args.response_column,
+        )
     for option in ("force_channel", "channel", "rate_Hz", "force_column", "response_column"):
         if getattr(args, option) is not None:
             name = "--" + option.replace("_", "-")
@@ -193,9 +214,11 @@ def _warn_coherence(spectra, kept):
     low = [(f, c) for f, c in coherence_at_poles(spectra, kept) if c < COHERENCE_WARNING]
     if low:
         listed = ", ".join(f"{f:.6g} Hz ({c:.2f})" for f, c in low)
-        print(f"bayesplate: warning: coherence below {COHERENCE_WARNING} at {len(low)} chosen "
-              f"poles: {listed}: noise, a double hit or a nonlinearity; see --chart",
-              file=sys.stderr)  # fmt: skip
+        print(
+            f"bayesplate: warning: coherence below {COHERENCE_WARNING} at {len(low)} chosen "
+            f"poles: {listed}: noise, a double hit or a nonlinearity; see --chart",
+            file=sys.stderr,
+        )
 
 
 def _written(option, path, write, *args):

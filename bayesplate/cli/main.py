@@ -168,8 +168,9 @@ def main(argv=None):
         # was done
         signum = _stopped_by or signal.SIGINT
         by = "" if signum == signal.SIGINT else f" ({signal.Signals(signum).name})"
-        print(f"bayesplate {args.command}: interrupted{by}; run it again to resume",
-              file=sys.stderr)  # fmt: skip
+        print(
+            f"bayesplate {args.command}: interrupted{by}; run it again to resume", file=sys.stderr
+        )
         _end_children(before, exiting=argv is None)
         status = INTERRUPTED if signum == signal.SIGINT else 128 + signum
         if argv is None:  # the command itself: end here, so that the status stays as said

@@ -85,14 +85,27 @@ def register(sub):
     )
     p.add_argument("case", nargs="?", help="case file (TOML) or the name of a bundled case")
     taps = p.add_argument_group("from a tap test (instead of CASE)")
-    taps.add_argument("--taps", nargs="+", metavar="TAP",
-                      help="the recordings (WAV or CSV time series), imported as "
-                      "`bayesplate import` does with no options into DIR/case.toml")  # fmt: skip
+    taps.add_argument(
+        "--taps",
+        nargs="+",
+        metavar="TAP",
+        help="the recordings (WAV or CSV time series), imported as "
+        "`bayesplate import` does with no options into DIR/case.toml",
+    )
     taps.add_argument("--plate", metavar="SHEET", help="the plate sheet (TOML), with --taps")
-    taps.add_argument("--modes", type=positive_int, metavar="N",
-                      help="modes wanted from the taps (`bayesplate import --modes`)")  # fmt: skip
-    p.add_argument("-o", "--output", default="report", metavar="DIR",
-                   help="folder of the report (default: ./report)")  # fmt: skip
+    taps.add_argument(
+        "--modes",
+        type=positive_int,
+        metavar="N",
+        help="modes wanted from the taps (`bayesplate import --modes`)",
+    )
+    p.add_argument(
+        "-o",
+        "--output",
+        default="report",
+        metavar="DIR",
+        help="folder of the report (default: ./report)",
+    )
     p.add_argument(
         "--quick",
         action="store_true",

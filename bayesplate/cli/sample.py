@@ -68,8 +68,9 @@ def _assignment_lines(result):
     lines = [note]
     if result.assignment is not None:
         varying = result.assignment.lines()
-        lines += varying or [f"every peak kept one assignment in all {result.assignment.n_draws} "
-                             "draws"]  # fmt: skip
+        lines += varying or [
+            f"every peak kept one assignment in all {result.assignment.n_draws} draws"
+        ]
     return lines
 
 
@@ -81,13 +82,17 @@ def _input_rows(result):
     lines = []
     posterior = result.input_posterior
     if posterior is not None:
-        lines.append(f"{'input':>13} {'declared':>10} {'decl. sd':>9} {'post mean':>10} "
-                     f"{'post sd':>9} {'hdi 3%':>9} {'hdi 97%':>9}  "
-                     f"({len(posterior.rows)} draws, one per kept draw)")  # fmt: skip
+        lines.append(
+            f"{'input':>13} {'declared':>10} {'decl. sd':>9} {'post mean':>10} "
+            f"{'post sd':>9} {'hdi 3%':>9} {'hdi 97%':>9}  "
+            f"({len(posterior.rows)} draws, one per kept draw)"
+        )
         for key, row in posterior.table().items():
-            lines.append(f"{key:>13} {row['declared']:#10.4g} {row['declared_sd']:#9.3g} "
-                         f"{row['mean']:#10.4g} {row['sd']:#9.3g} {row['hdi_3%']:#9.4g} "
-                         f"{row['hdi_97%']:#9.4g}")  # fmt: skip
+            lines.append(
+                f"{key:>13} {row['declared']:#10.4g} {row['declared_sd']:#9.3g} "
+                f"{row['mean']:#10.4g} {row['sd']:#9.3g} {row['hdi_3%']:#9.4g} "
+                f"{row['hdi_97%']:#9.4g}"
+            )
     certificate = result.input_certificate
     if certificate is not None:
         warning = "" if certificate.passed else "WARNING: "
@@ -137,10 +142,17 @@ def _run_one(args):
     quiet = args.json == "-"
     if not quiet:
         logging.getLogger("bayesplate.sampling").setLevel(logging.INFO)  # progress
-    options = SampleOptions(mesh=mesh_of(args), walkers=args.walkers, max_steps=args.max_steps,
-                            min_ess=args.min_ess, forward="full" if args.full else "reduced",
-                            pairing=args.pairing, inputs=args.inputs or "auto",
-                            backend=args.backend, mve=bool(args.plots or args.json))  # fmt: skip
+    options = SampleOptions(
+        mesh=mesh_of(args),
+        walkers=args.walkers,
+        max_steps=args.max_steps,
+        min_ess=args.min_ess,
+        forward="full" if args.full else "reduced",
+        pairing=args.pairing,
+        inputs=args.inputs or "auto",
+        backend=args.backend,
+        mve=bool(args.plots or args.json),
+    )
     with _walker_pool(args) as pool:
         done = run_sample(case, options, args.seed, pool=pool, progress=not quiet)
     result, scale = done.result, done.scale
@@ -195,41 +207,72 @@ def register(sub):
         "files: plates of one material (one prior, the first case's, stated by every case), "
         "the six constants shared; each plate is checked against the others (flagged at 1 %%).",
     )
-    p.add_argument("case", nargs="+",
-                   help="case file (TOML) or the name of a bundled case; several: plates of "
-                   "one material, sampled jointly")  # fmt: skip
-    p.add_argument("--hierarchical", action="store_true",
-                   help="several plates: the population instead of shared constants: the "
-                   "material's mean and plate-to-plate spread per constant, each plate "
-                   "shrunk towards it, each plate's outlier probability (--workers builds "
-                   "the plates' fast models in parallel; -o DIR: population.png)")  # fmt: skip
-    p.add_argument("-o", "--output", metavar="DIR",
-                   help="write the figures into DIR (several plates: plates.png, one row per "
-                   "plate beside the shared estimate; one case: as --plots)")  # fmt: skip
+    p.add_argument(
+        "case",
+        nargs="+",
+        help="case file (TOML) or the name of a bundled case; several: plates of "
+        "one material, sampled jointly",
+    )
+    p.add_argument(
+        "--hierarchical",
+        action="store_true",
+        help="several plates: the population instead of shared constants: the "
+        "material's mean and plate-to-plate spread per constant, each plate "
+        "shrunk towards it, each plate's outlier probability (--workers builds "
+        "the plates' fast models in parallel; -o DIR: population.png)",
+    )
+    p.add_argument(
+        "-o",
+        "--output",
+        metavar="DIR",
+        help="write the figures into DIR (several plates: plates.png, one row per "
+        "plate beside the shared estimate; one case: as --plots)",
+    )
     p.add_argument("--seed", type=seed_int, default=None, help="seed (default: fresh entropy)")
     p.add_argument("--walkers", type=walker_count, default=32, help="emcee walkers (default 32)")
-    p.add_argument("--max-steps", type=chain_steps, default=5000,
-                   help="cap on steps (default 5000)")  # fmt: skip
-    p.add_argument("--min-ess", type=positive_float, default=2000.0,
-                   help="effective samples per constant to reach (default 2000)")  # fmt: skip
+    p.add_argument(
+        "--max-steps", type=chain_steps, default=5000, help="cap on steps (default 5000)"
+    )
+    p.add_argument(
+        "--min-ess",
+        type=positive_float,
+        default=2000.0,
+        help="effective samples per constant to reach (default 2000)",
+    )
     p.add_argument("--out", metavar="FILE.nc", help="write the ArviZ data (netCDF)")
-    p.add_argument("--backend", metavar="FILE.h5",
-                   help="keep the chain in this HDF5 file; re-running continues it")  # fmt: skip
+    p.add_argument(
+        "--backend",
+        metavar="FILE.h5",
+        help="keep the chain in this HDF5 file; re-running continues it",
+    )
     p.add_argument("--full", action="store_true", help="sample the full model (slow)")
-    p.add_argument("--workers", type=positive_int, default=None,
-                   help="evaluate the walkers on this many Dask worker processes (a local "
-                   "cluster; worth it with --full; default: this process)")  # fmt: skip
-    p.add_argument("--scheduler", metavar="ADDRESS", default=None,
-                   help="evaluate the walkers on a running Dask scheduler "
-                   "(tcp://HOST:8786) instead")  # fmt: skip
-    p.add_argument("--inputs", choices=("exact", "marginal"), default=None,
-                   help="the plate's thickness, density, length and width as exact numbers, "
-                   "or their case deviations (plate.*_sd) marginalised to first order "
-                   "(default: marginal when the case gives any deviation)")  # fmt: skip
+    p.add_argument(
+        "--workers",
+        type=positive_int,
+        default=None,
+        help="evaluate the walkers on this many Dask worker processes (a local "
+        "cluster; worth it with --full; default: this process)",
+    )
+    p.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        default=None,
+        help="evaluate the walkers on a running Dask scheduler (tcp://HOST:8786) instead",
+    )
+    p.add_argument(
+        "--inputs",
+        choices=("exact", "marginal"),
+        default=None,
+        help="the plate's thickness, density, length and width as exact numbers, "
+        "or their case deviations (plate.*_sd) marginalised to first order "
+        "(default: marginal when the case gives any deviation)",
+    )
     add_pairing_option(p)
     add_mesh_option(p)
     add_json_option(p)
-    p.add_argument("--plots", metavar="DIR",
-                   help="write corner.png (with B and MVE ellipses), trace.png, "
-                   "autocorrelation.png into DIR")  # fmt: skip
+    p.add_argument(
+        "--plots",
+        metavar="DIR",
+        help="write corner.png (with B and MVE ellipses), trace.png, autocorrelation.png into DIR",
+    )
     p.set_defaults(func=run)

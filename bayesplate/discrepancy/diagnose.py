@@ -72,8 +72,19 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 
-def diagnose(case, model=None, physics=None, rng=None, progress=None, pairing="auto", *,
-             options=None, fast=None, store=None, **settings):  # fmt: skip
+def diagnose(
+    case,
+    model=None,
+    physics=None,
+    rng=None,
+    progress=None,
+    pairing="auto",
+    *,
+    options=None,
+    fast=None,
+    store=None,
+    **settings,
+):
     """Diagnose a case: nominal fit, location, candidate ranking, refit, verdict.
 
     Parameters
@@ -127,7 +138,15 @@ def diagnose(case, model=None, physics=None, rng=None, progress=None, pairing="a
 
         pairing, _ = settle_pairing(case, model, pairing, tol=1e-2)
     say = progress or (lambda message: log.info(message))
-    run = Run(case=case, model=model, coarse=coarse_model(model),  # the same in every pass
-              physics=physics or all_candidates(), prior=(mu_b, V_b), options=options,
-              say=say, store=store, fast=fast)  # fmt: skip
+    run = Run(
+        case=case,
+        model=model,
+        coarse=coarse_model(model),  # the same in every pass
+        physics=physics or all_candidates(),
+        prior=(mu_b, V_b),
+        options=options,
+        say=say,
+        store=store,
+        fast=fast,
+    )
     return diagnose_passes(run, pairing, rng, checked)

@@ -155,7 +155,7 @@ class FitStatement:
                     "sd": w.sd,
                 }
                 for w in self.worst_residuals
-            ],  # fmt: skip
+            ],
         }
 
 
@@ -233,9 +233,17 @@ def fit_statement(measured_Hz, computed_Hz, sigma_Hz, p_effective, peaks=None, n
 
 
 def plausibility_warnings(
-    constants, prior_mean, prior_sd, *, sd=None, settings=None, modes=None,
-    measured_Hz=None, rivals=(), limit=PRIOR_SD_LIMIT,
-):  # fmt: skip
+    constants,
+    prior_mean,
+    prior_sd,
+    *,
+    sd=None,
+    settings=None,
+    modes=None,
+    measured_Hz=None,
+    rivals=(),
+    limit=PRIOR_SD_LIMIT,
+):
     """Warnings (b)-(d) of the module docstring, each one sentence.
 
     Parameters
@@ -346,8 +354,9 @@ def assess(result, case, *, rivals=None):
     measured = case.measured
     kept = _paired_peaks(result, measured.frequency_Hz)
     sigma = np.asarray(measured.sigma_Hz, dtype=float)[kept]
-    fit = fit_statement(result.measured_Hz, result.frequency_Hz, sigma,
-                        _p_effective(result, case), peaks=kept + 1)  # fmt: skip
+    fit = fit_statement(
+        result.measured_Hz, result.frequency_Hz, sigma, _p_effective(result, case), peaks=kept + 1
+    )
     warnings = []
     if fit.rejected:
         warnings.append(
@@ -359,9 +368,15 @@ def assess(result, case, *, rivals=None):
     sd = initial.get("prior_sd", case.prior.sd)
     rivals = result.settings.get("rivals", ()) if rivals is None else rivals
     other = plausibility_warnings(
-        result.constants, mean, sd, sd=result.sd, settings=result.settings,
-        modes=result.modes, measured_Hz=measured.frequency_Hz, rivals=rivals,
-    )  # fmt: skip
+        result.constants,
+        mean,
+        sd,
+        sd=result.sd,
+        settings=result.settings,
+        modes=result.modes,
+        measured_Hz=measured.frequency_Hz,
+        rivals=rivals,
+    )
     warnings += other
     status = result.status
     if result.converged and status in ("converged", "rejected", "implausible"):

@@ -73,7 +73,7 @@ def slow_directions(b, S, V_Y, V, step, tol):
     L = np.linalg.cholesky(Vx)
     lam, Q = np.linalg.eigh(L.T @ F @ L)
     U = L @ Q
-    parts = (np.linalg.solve(U, step)[:, None] * U.T)
+    parts = np.linalg.solve(U, step)[:, None] * U.T
     size = np.max(np.abs(parts), axis=1)
     c = 1.0 / (1.0 + np.maximum(lam, 0.0))
     with np.errstate(divide="ignore"):
@@ -105,8 +105,12 @@ def drift(problem, state, V, step, tol, k, max_iter):
         state.drift = []
         return ""
     moving = np.flatnonzero(n > 0)
-    if (len(sizes) < 2 or sizes[-1] >= sizes[-2] or moving.size == 0
-            or np.any(n[moving] <= max_iter - k)):  # fmt: skip
+    if (
+        len(sizes) < 2
+        or sizes[-1] >= sizes[-2]
+        or moving.size == 0
+        or np.any(n[moving] <= max_iter - k)
+    ):
         state.drift = []
         return ""
     i = moving[np.argmax(n[moving])]

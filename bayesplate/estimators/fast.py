@@ -170,9 +170,15 @@ def confirmed_run(run, model, fast):
         full, fast_Hz, full_Hz = _full_at(model, result)
         n_full += (full is not None) + forward.n_full
         check = FullModelCheck(
-            np.array(result.b), fast_Hz, full_Hz, tolerance, rounds, n_full,
-            fast.build_solves, fast.build_seconds,
-        )  # fmt: skip
+            np.array(result.b),
+            fast_Hz,
+            full_Hz,
+            tolerance,
+            rounds,
+            n_full,
+            fast.build_solves,
+            fast.build_seconds,
+        )
         if check.confirmed or full is None or rounds == CONFIRM_ROUNDS:
             break
         log.info("%s: %s; the basis takes the full modes there", result.method, check)
@@ -274,8 +280,9 @@ def _with_reduced(fast, reduced):
     """
     if reduced is fast.reduced:
         return fast
-    return CertifiedModel(fast.model, reduced, fast.certificate, fast.history,
-                          fast.build_seconds, fast.build_solves)  # fmt: skip
+    return CertifiedModel(
+        fast.model, reduced, fast.certificate, fast.history, fast.build_seconds, fast.build_solves
+    )
 
 
 def _checked(result, check):

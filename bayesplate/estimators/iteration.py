@@ -202,8 +202,11 @@ def _iterate(problem, method, tol, max_iter, conventions, tracking, weight, star
             new, note, frozen = _freeze(problem, new, moved, peaks, k)
             tracking, state.since, state.note = "follow", k, state.note + note
             state.drift = []
-            state.frozen = {"iteration": k, "peaks": frozen,
-                            "modes": (np.asarray(new.modes) + 1).tolist()}  # fmt: skip
+            state.frozen = {
+                "iteration": k,
+                "peaks": frozen,
+                "modes": (np.asarray(new.modes) + 1).tolist(),
+            }
             log.info("%s iteration %d: pairing frozen%s", method, k, note)
         change = _change(b_next, state.b, conventions)
         step = (b_next - state.b) / np.abs(state.b)
@@ -218,8 +221,9 @@ def _iterate(problem, method, tol, max_iter, conventions, tracking, weight, star
         state.message = _oscillation(_space(state.history[state.since :], conventions), tol)
         if state.message and method == "MVE" and conventions.covariance == "fixed":
             weak = _drift_rule.weakly_determined(problem, state, V, step, tol)
-            state.message, state.status = (weak, "unidentified") if weak else (
-                state.message, "oscillating")  # fmt: skip
+            state.message, state.status = (
+                (weak, "unidentified") if weak else (state.message, "oscillating")
+            )
             return state
         if state.message:
             state.status = "oscillating"

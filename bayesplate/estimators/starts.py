@@ -29,8 +29,14 @@ __all__ = ["START_SCALES", "start_points", "log_evidence", "rivals_of"]
 
 #: ``(which constants, factor)`` of each start beside the prior mean: all six moduli, E2
 #: alone and G12 alone (what orders a plate's low modes), each down and up.
-START_SCALES = (("moduli", 0.6), ("moduli", 1.6), ("E2", 0.5), ("E2", 2.0), ("G12", 0.5),
-                ("G12", 2.0))  # fmt: skip
+START_SCALES = (
+    ("moduli", 0.6),
+    ("moduli", 1.6),
+    ("E2", 0.5),
+    ("E2", 2.0),
+    ("G12", 0.5),
+    ("G12", 2.0),
+)
 _WHICH = {"moduli": [0, 1, 3, 4, 5], "E2": [1], "G12": [3]}
 
 

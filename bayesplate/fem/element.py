@@ -98,8 +98,11 @@ class TSDTRectangle:
         hx, hy = self.dx / 2, self.dy / 2
         p = len(xi)
         if names is None:
-            names = [name + suffix for name in ("u", "v", "psi_x", "psi_y")
-                     for suffix in ("", "_x", "_y")]  # fmt: skip
+            names = [
+                name + suffix
+                for name in ("u", "v", "psi_x", "psi_y")
+                for suffix in ("", "_x", "_y")
+            ]
             names += ["w", "w_x", "w_y", "w_xx", "w_yy", "w_xy"]
         out = {name: np.zeros((p, _N_LOCAL)) for name in names}
         lagrange = any(not name.startswith("w") for name in out)
@@ -146,12 +149,22 @@ class TSDTRectangle:
         """
         f = self.fields(local)
         rows = [
-            f["u_x"], f["v_y"], f["u_y"] + f["v_x"],
-            f["psi_x_x"], f["psi_y_y"], f["psi_x_y"] + f["psi_y_x"],
-            f["psi_x_x"] + f["w_xx"], f["psi_y_y"] + f["w_yy"],
+            # eps0 (x, y, xy)
+            f["u_x"],
+            f["v_y"],
+            f["u_y"] + f["v_x"],
+            # chi (x, y, xy)
+            f["psi_x_x"],
+            f["psi_y_y"],
+            f["psi_x_y"] + f["psi_y_x"],
+            # chih (x, y, xy)
+            f["psi_x_x"] + f["w_xx"],
+            f["psi_y_y"] + f["w_yy"],
             f["psi_x_y"] + f["psi_y_x"] + 2 * f["w_xy"],
-            f["w_y"] + f["psi_y"], f["w_x"] + f["psi_x"],
-        ]  # fmt: skip
+            # gamma (yz, xz)
+            f["w_y"] + f["psi_y"],
+            f["w_x"] + f["psi_x"],
+        ]
         return np.stack(rows, axis=1)
 
     def displacement_operator(self, local):

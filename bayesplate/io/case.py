@@ -113,8 +113,12 @@ class Plate(_EqualByValue):
                     getattr(self, sd),
                     f"must be below half of plate.{name} (a standard deviation)",
                 )
-        for name, unit in (("length", "_mm"), ("width", "_mm"), ("thickness", "_mm"),
-                           ("density", "_kg_m3")):  # fmt: skip
+        for name, unit in (
+            ("length", "_mm"),
+            ("width", "_mm"),
+            ("thickness", "_mm"),
+            ("density", "_kg_m3"),
+        ):
             check_plausible(getattr(self, name), name + unit, f"plate.{name}{unit}", si=True)
         if self.mass is not None:
             _set(self, "mass", _positive(self.mass, "plate.mass"))
@@ -122,8 +126,11 @@ class Plate(_EqualByValue):
         if self.mass is None and self.mass_sd:
             raise CaseError("plate.mass_sd", self.mass_sd, "needs plate.mass")
         if self.mass is not None and self.mass_sd >= 0.5 * self.mass:
-            raise CaseError("plate.mass_sd", self.mass_sd,
-                            "must be below half of plate.mass (a standard deviation)")  # fmt: skip
+            raise CaseError(
+                "plate.mass_sd",
+                self.mass_sd,
+                "must be below half of plate.mass (a standard deviation)",
+            )
         layup = _angles(self.layup_deg, "plate.layup_deg")
         _set(self, "layup_deg", tuple(layup))
         if self.ply_thickness is None:

@@ -218,8 +218,10 @@ def _sheet_sigma_rel(sheet: Mapping) -> float:
         raise CaseError("measured", table, "must be a table (with only sigma_rel)")
     for key, value in table.items():
         if key not in _SHEET_MEASURED_KEYS:
-            rule = ("a plate sheet's [measured] holds only sigma_rel, tap_point_mm and "
-                    "sensor_point_mm; the data come from the test")  # fmt: skip
+            rule = (
+                "a plate sheet's [measured] holds only sigma_rel, tap_point_mm and "
+                "sensor_point_mm; the data come from the test"
+            )
             raise CaseError(f"measured.{key}", value, rule)
     return _check_sigma_rel(table.get("sigma_rel", DEFAULT_SIGMA_REL), "measured.sigma_rel")
 
@@ -237,8 +239,11 @@ def _measured_table(modal: ModalData, sigma_rel: float) -> dict:
     sigma = modal.sigma_Hz
     if sigma is None and modal.spread_Hz is not None:
         spread = np.asarray(modal.spread_Hz, dtype=float)
-        sigma = None if np.all(spread <= sigma_rel * frequency) else np.maximum(
-            spread, sigma_rel * frequency)  # fmt: skip
+        sigma = (
+            None
+            if np.all(spread <= sigma_rel * frequency)
+            else np.maximum(spread, sigma_rel * frequency)
+        )
     if modal.spread_Hz is not None:  # the digits the data support
         sd = sigma_rel * frequency if sigma is None else np.asarray(sigma, dtype=float)
         frequency = np.array([_to_digits(f, s) for f, s in zip(frequency, sd, strict=True)])

@@ -115,8 +115,9 @@ def _read_uff_frf(path: str) -> FRFData:
         data = np.asarray(dset.get("data", []))
         if not np.iscomplexobj(data):
             rule = "must be 5 or 6 (complex ordinates): an FRF has a phase"
-            raise CaseError(f"{key} record 8 field 2 (ordinate type)", dset.get("ord_data_type"),
-                            rule)  # fmt: skip
+            raise CaseError(
+                f"{key} record 8 field 2 (ordinate type)", dset.get("ord_data_type"), rule
+            )
         if x.ndim != 1 or x.shape != data.shape or x.size < 8:
             raise CaseError(f"{key} record 12", rule="malformed: fewer than 8 frequency lines")
         if not (np.all(np.isfinite(x)) and np.all(np.isfinite(data))):
@@ -226,5 +227,3 @@ def _coordinates(points_path, names: list[str], path: str) -> np.ndarray:
             rule = f"{path} has no columns H{name}_re, H{name}_im for this point"
             raise CaseError("column point", name, rule, path=points_path)
     return xy[[given.index(name) for name in names]]
-
-

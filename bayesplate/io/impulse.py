@@ -92,8 +92,9 @@ def is_recording(path, named=()) -> bool:
     return is_time_series_header(sniff_header(path)[1], [n for n in named if n is not None])
 
 
-def read_recording(path, force_channel="auto", channel=None, rate_Hz=None, force_column=None,
-                   response_column=None) -> Recording:  # fmt: skip
+def read_recording(
+    path, force_channel="auto", channel=None, rate_Hz=None, force_column=None, response_column=None
+) -> Recording:
     """Read one tap (WAV or CSV time series) and keep the channels asked for.
 
     Parameters
@@ -125,8 +126,10 @@ def read_recording(path, force_channel="auto", channel=None, rate_Hz=None, force
     path = os.fspath(path)
     try:
         if pathlib.Path(path).suffix.lower() == ".wav":
-            for option, name in (("--force-column", force_column),
-                                 ("--response-column", response_column)):  # fmt: skip
+            for option, name in (
+                ("--force-column", force_column),
+                ("--response-column", response_column),
+            ):
                 if name is not None:
                     raise CaseError(option, name, "is for a CSV time series (WAV: --channel)")
             wav_rate_Hz, data = _read_wav(path)
@@ -134,8 +137,7 @@ def read_recording(path, force_channel="auto", channel=None, rate_Hz=None, force
                 rule = f"disagrees with the WAV file's sampling rate ({wav_rate_Hz:g} Hz)"
                 raise CaseError("--rate-Hz", rate_Hz, rule)
             return _channels(path, wav_rate_Hz, data, force_channel, channel)
-        rate_Hz, signal, force, notes = read_time_csv(path, rate_Hz, force_column,
-                                                      response_column)  # fmt: skip
+        rate_Hz, signal, force, notes = read_time_csv(path, rate_Hz, force_column, response_column)
     except CaseError as err:
         raise err if err.path else err.with_path(path) from None
     if channel not in (None, 0):
@@ -208,8 +210,9 @@ def time_window(y, rate_Hz: float, window: str = "auto"):
         decay = -math.log(_DECAYED) / (n / rate_Hz)  # exp(-decay t) = 1 % at the end
         note = f"exponential window, 1 % at the end: poles corrected by {decay:.4g} 1/s"
         return np.exp(-decay * np.arange(n) / rate_Hz), decay, note
-    note = "no window: the response has decayed within the record" if decayed else (
-        "no window, though the response has not decayed: expect leakage")  # fmt: skip
+    note = (
+        "no window: the response has decayed within the record"
+        if decayed
+        else ("no window, though the response has not decayed: expect leakage")
+    )
     return np.ones(n), 0.0, note
-
-

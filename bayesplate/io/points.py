@@ -54,8 +54,13 @@ def read_points(path) -> tuple[tuple[str, ...], np.ndarray]:
                 raise CaseError(f"line {number}, column point", name, "point named twice")
             names.append(name)
         columns = [name for name in header if name != "point"]
-        table = numeric_table(columns, [(n, [c for c, h in zip(cells, header, strict=True)
-                                             if h != "point"]) for n, cells in rows])  # fmt: skip
+        table = numeric_table(
+            columns,
+            [
+                (n, [c for c, h in zip(cells, header, strict=True) if h != "point"])
+                for n, cells in rows
+            ],
+        )
     except CaseError as err:
         raise err.with_path(path) from None
     return tuple(names), np.column_stack([table["x_mm"], table["y_mm"]])

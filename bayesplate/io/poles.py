@@ -168,8 +168,14 @@ def extract_poles(
         from sdypy import EMA
         from sdypy.EMA import stabilization
 
-        model = EMA.Model(frf=frf.frf, freq=frequency, lower=lower, upper=upper,
-                          pol_order_high=order, frf_form=frf.form)  # fmt: skip
+        model = EMA.Model(
+            frf=frf.frf,
+            freq=frequency,
+            lower=lower,
+            upper=upper,
+            pol_order_high=order,
+            frf_form=frf.form,
+        )
         model.get_poles(method="lscf", show_progress=False)
         poles = [p + frf.added_decay_per_s for p in model.all_poles]
         fn, xi, test_fn, test_xi = stabilization._stabilization(
@@ -187,8 +193,10 @@ def extract_poles(
     orders = np.arange(2, order + 1)
     candidates = _candidates(rows["frequency_Hz"], rows["damping"], rows["stable"], stable_orders)
     if keep_below_Hz is not None:
-        candidates = tuple(replace(pole, keep=pole.keep and pole.frequency_Hz <= keep_below_Hz)
-                           for pole in candidates)  # fmt: skip
+        candidates = tuple(
+            replace(pole, keep=pole.keep and pole.frequency_Hz <= keep_below_Hz)
+            for pole in candidates
+        )
     analysis = PoleAnalysis((lower, upper), orders, candidates=candidates, **rows)
     return assess_poles(frf, analysis)
 
@@ -286,10 +294,15 @@ def assess_poles(frf: FRFData, analysis: PoleAnalysis) -> PoleAnalysis:
     damping = np.array([pole.damping for pole in kept])
     p = spurious_probability(deviation, coherence, damping, fraction, amplitude)
     assessed = iter(
-        replace(pole, coherence=float(c), phase_deviation_deg=float(d), amplitude=float(a),
-                p_spurious=float(ps))
+        replace(
+            pole,
+            coherence=float(c),
+            phase_deviation_deg=float(d),
+            amplitude=float(a),
+            p_spurious=float(ps),
+        )
         for pole, c, d, a, ps in zip(kept, coherence, deviation, amplitude, p, strict=True)
-    )  # fmt: skip
+    )
     candidates = tuple(next(assessed) if pole.keep else pole for pole in analysis.candidates)
     return replace(analysis, candidates=candidates)
 
@@ -316,8 +329,14 @@ def _residues(frf: FRFData, poles, band_Hz) -> np.ndarray:
     with _quiet():
         from sdypy import EMA
 
-        model = EMA.Model(frf=frf.frf, freq=frf.frequency_Hz, lower=lower, upper=upper,
-                          pol_order_high=1, frf_form=frf.form)  # fmt: skip
+        model = EMA.Model(
+            frf=frf.frf,
+            freq=frf.frequency_Hz,
+            lower=lower,
+            upper=upper,
+            pol_order_high=1,
+            frf_form=frf.form,
+        )
         chosen = _ChosenPoles([lam], [[0, i] for i in range(lam.size)])
         _, constants = model.get_constants(whose_poles=chosen)
     return np.asarray(constants).reshape(frf.n_points, lam.size)
@@ -362,16 +381,19 @@ def modal_data_from_poles(frf: FRFData, poles, band_Hz=None) -> ModalData:
         return ModalData(frequency, damping=damping, source=frf.source, notes=notes, **evidence)
     constants = _residues(frf, poles, band_Hz)
     shapes = np.array([_realised(constants[:, i]) for i in range(len(poles))])
-    return ModalData(frequency, frf.points_mm, shapes, damping, source=frf.source, notes=notes,
-                     **evidence)  # fmt: skip
+    return ModalData(
+        frequency, frf.points_mm, shapes, damping, source=frf.source, notes=notes, **evidence
+    )
 
 
 def _evidence(poles) -> dict:
     """``p_spurious`` and ``spread_Hz`` of ModalData, where every pole has them."""
     p = np.array([pole.p_spurious for pole in poles])
     spread = np.array([pole.spread_Hz for pole in poles])
-    return {"p_spurious": None if np.isnan(p).any() else p,
-            "spread_Hz": None if np.isnan(spread).any() else spread}  # fmt: skip
+    return {
+        "p_spurious": None if np.isnan(p).any() else p,
+        "spread_Hz": None if np.isnan(spread).any() else spread,
+    }
 
 
 @dataclass

@@ -30,8 +30,17 @@ from .poles import Pole, PoleAnalysis
 
 __all__ = ["write_poles", "read_poles", "write_chart", "stabilisation_chart"]
 
-_COLUMNS = ("keep", "frequency_Hz", "damping", "orders_stable", "p_spurious", "coherence",
-            "phase_deviation_deg", "amplitude", "spread_Hz")  # fmt: skip
+_COLUMNS = (
+    "keep",
+    "frequency_Hz",
+    "damping",
+    "orders_stable",
+    "p_spurious",
+    "coherence",
+    "phase_deviation_deg",
+    "amplitude",
+    "spread_Hz",
+)
 _EVIDENCE = _COLUMNS[4:]
 _KEEP = {"1": True, "0": False, "true": True, "false": False, "yes": True, "no": False}
 
@@ -55,10 +64,13 @@ def write_poles(path, analysis: PoleAnalysis, source: str = "") -> None:
         ",".join(_COLUMNS),
     ]
     for pole in analysis.candidates:
-        evidence = ",".join("" if np.isnan(v) else f"{v:.4g}"
-                            for v in (getattr(pole, name) for name in _EVIDENCE))  # fmt: skip
-        lines.append(f"{int(pole.keep)},{pole.frequency_Hz!r},{pole.damping!r},"
-                     f"{pole.orders_stable},{evidence}")  # fmt: skip
+        evidence = ",".join(
+            "" if np.isnan(v) else f"{v:.4g}" for v in (getattr(pole, name) for name in _EVIDENCE)
+        )
+        lines.append(
+            f"{int(pole.keep)},{pole.frequency_Hz!r},{pole.damping!r},"
+            f"{pole.orders_stable},{evidence}"
+        )
     atomic_write_text(path, "\n".join(lines) + "\n")
 
 
@@ -182,8 +194,11 @@ def stabilisation_chart(analysis: PoleAnalysis, frequency_Hz, frf, kept=(), cohe
     back.set_ylabel("mean |FRF|")
     ax.set_zorder(back.get_zorder() + 1)
     ax.patch.set_visible(False)
-    styles = (("unstable", "o", "0.6", 2), ("stable frequency", "o", "tab:blue", 3),
-              ("stable frequency and damping", "x", "tab:green", 5))  # fmt: skip
+    styles = (
+        ("unstable", "o", "0.6", 2),
+        ("stable frequency", "o", "tab:blue", 3),
+        ("stable frequency and damping", "x", "tab:green", 5),
+    )
     for label, marker, color, size in styles:
         xs, ys = [], []
         rows = (analysis.orders, analysis.frequency_Hz, analysis.stable_frequency, analysis.stable)

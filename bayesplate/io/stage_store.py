@@ -66,8 +66,11 @@ class DirectoryStore:
             stored = pickle.loads(blob)
         except Exception as err:  # truncated, corrupt, or from an incompatible version
             return self._ignore(path, err)
-        if not (isinstance(stored, dict) and stored.get("format") == _FORMAT
-                and stored.get("key") == key):  # fmt: skip
+        if not (
+            isinstance(stored, dict)
+            and stored.get("format") == _FORMAT
+            and stored.get("key") == key
+        ):
             return self._ignore(path, "not a stage of this key")
         self.hits += 1
         return stored["value"]
@@ -77,13 +80,13 @@ class DirectoryStore:
 
         A folder that cannot be written is logged and passed over: the diagnosis goes on.
         """
-        blob = pickle.dumps({"format": _FORMAT, "key": str(key), "value": value},
-                            protocol=pickle.HIGHEST_PROTOCOL)  # fmt: skip
+        blob = pickle.dumps(
+            {"format": _FORMAT, "key": str(key), "value": value}, protocol=pickle.HIGHEST_PROTOCOL
+        )
         try:
             atomic_write(self.path(key), lambda handle: handle.write(blob), "wb")
         except OSError as err:  # a full disk or a read-only folder costs the resume only
-            log.warning("stage not stored in %s (%s): a run again computes it", self.directory,
-                        err)  # fmt: skip
+            log.warning("stage not stored in %s (%s): a run again computes it", self.directory, err)
             return
         self.puts += 1
 

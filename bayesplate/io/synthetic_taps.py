@@ -62,9 +62,17 @@ _TAIL = 1e-9  # the padded grid is long enough for every pole to decay below thi
 _MAX_PERIODS = 64  # ... but at most this many records long
 
 
-def plate_modes_at(model: PlateModel, b, tap_mm, sensor_mm, n_modes: int, *,
-                   thickness_scale: float = 1.0, density_scale: float = 1.0,
-                   taper=None):  # fmt: skip
+def plate_modes_at(
+    model: PlateModel,
+    b,
+    tap_mm,
+    sensor_mm,
+    n_modes: int,
+    *,
+    thickness_scale: float = 1.0,
+    density_scale: float = 1.0,
+    taper=None,
+):
     """Natural frequencies and modal amplitudes of the plate for one tap and sensor.
 
     Parameters
@@ -96,10 +104,16 @@ def plate_modes_at(model: PlateModel, b, tap_mm, sensor_mm, n_modes: int, *,
     if thickness_scale != 1.0 or density_scale != 1.0:
         mesh = model.mesh
         model = PlateModel(
-            mesh.a, mesh.b, model.thickness * thickness_scale, model.density * density_scale,
-            model.layup_deg, model.ply_thickness * thickness_scale, mesh=(mesh.nx, mesh.ny),
-            boundary=model.boundary, shear_order=model.element.shear_order,
-        )  # fmt: skip
+            mesh.a,
+            mesh.b,
+            model.thickness * thickness_scale,
+            model.density * density_scale,
+            model.layup_deg,
+            model.ply_thickness * thickness_scale,
+            mesh=(mesh.nx, mesh.ny),
+            boundary=model.boundary,
+            shear_order=model.element.shear_order,
+        )
     if taper is not None:
         from ..discrepancy.physics.thickness_taper import ThicknessTaper
 
@@ -259,10 +273,19 @@ def _pulse(t, onset, length, strength):
     return strength * np.where(inside, np.sin(np.pi * (t - onset) / length), 0.0)
 
 
-def synthetic_taps(frequencies_Hz, amplitudes, rate_Hz: float, duration_s: float, n_taps: int,
-                   artefacts: TapArtefacts, rng, *,
-                   pulse_s=(0.4e-3, 0.7e-3), onset_s=(0.8e-3, 1.5e-3),
-                   strength_N=(0.5, 2.0)):  # fmt: skip
+def synthetic_taps(
+    frequencies_Hz,
+    amplitudes,
+    rate_Hz: float,
+    duration_s: float,
+    n_taps: int,
+    artefacts: TapArtefacts,
+    rng,
+    *,
+    pulse_s=(0.4e-3, 0.7e-3),
+    onset_s=(0.8e-3, 1.5e-3),
+    strength_N=(0.5, 2.0),
+):
     """Tap recordings of modes with amplitudes, with the artefacts asked for.
 
     Parameters
@@ -297,19 +320,34 @@ def synthetic_taps(frequencies_Hz, amplitudes, rate_Hz: float, duration_s: float
         if not 0 <= int(tap) < n_taps:
             raise ValueError(f"tap {tap}: must be one of the {n_taps} taps (0-based)")
     # a grid long enough for the slowest pole (or rattle) to decay, a whole number of records
-    rates = 2 * np.pi * np.concatenate([frequency * damping, np.asarray(artefacts.rattle_Hz)
-                                        * artefacts.rattle_damping])  # fmt: skip
+    rates = (
+        2
+        * np.pi
+        * np.concatenate(
+            [frequency * damping, np.asarray(artefacts.rattle_Hz) * artefacts.rattle_damping]
+        )
+    )
     ring = -math.log(_TAIL) / rates.min() * rate_Hz if rates.size else 0.0
     periods = min(_MAX_PERIODS, 1 + math.ceil(ring / n))
     size = periods * n
     t = np.arange(size) / rate_Hz
     axis = np.fft.rfftfreq(size, 1.0 / rate_Hz)
     H = accelerance(axis, frequency, amplitude, damping)
-    hammer = np.column_stack([rng.uniform(*strength_N, n_taps), rng.uniform(*pulse_s, n_taps),
-                              rng.uniform(*onset_s, n_taps)])  # fmt: skip
-    rattle = [(accelerance(axis, [f], [1.0], [artefacts.rattle_damping]),
-               rng.uniform(0.0, 1.0 / f, n_taps), rng.uniform(0.5, 1.5, n_taps))
-              for f in artefacts.rattle_Hz]  # fmt: skip
+    hammer = np.column_stack(
+        [
+            rng.uniform(*strength_N, n_taps),
+            rng.uniform(*pulse_s, n_taps),
+            rng.uniform(*onset_s, n_taps),
+        ]
+    )
+    rattle = [
+        (
+            accelerance(axis, [f], [1.0], [artefacts.rattle_damping]),
+            rng.uniform(0.0, 1.0 / f, n_taps),
+            rng.uniform(0.5, 1.5, n_taps),
+        )
+        for f in artefacts.rattle_Hz
+    ]
     taps = []
     for k, (strength, length, onset) in enumerate(hammer):
         unit = np.fft.rfft(_pulse(t, onset, length, 1.0))

@@ -123,11 +123,20 @@ def average_taps(recordings, window: str = "auto", points_mm=None) -> FRFData:
         note += "; no force channel: the response spectrum stands for the FRF"
     else:
         frf = np.mean([_aligned(s, spectra[0], frequency) for s in spectra], axis=0)
-        note += (f"; no force channel: the response spectra of {k} taps, each aligned on the "
-                 "first (delay, complex scale), averaged")  # fmt: skip
+        note += (
+            f"; no force channel: the response spectra of {k} taps, each aligned on the "
+            "first (delay, complex scale), averaged"
+        )
     source = first.source if k == 1 else f"{first.source} and {k - 1} more taps"
-    return FRFData(frequency, frf, points_mm, added_decay_per_s=decay, source=source,
-                   notes=(note,), coherence=coherence)  # fmt: skip
+    return FRFData(
+        frequency,
+        frf,
+        points_mm,
+        added_decay_per_s=decay,
+        source=source,
+        notes=(note,),
+        coherence=coherence,
+    )
 
 
 def _check_same(first: Recording, rec: Recording) -> None:
@@ -176,8 +185,16 @@ def _aligned(spectrum: np.ndarray, reference: np.ndarray, frequency: np.ndarray)
     return scale * moved
 
 
-def read_taps(paths, window="auto", force_channel="auto", channel=None, points=None,
-              rate_Hz=None, force_column=None, response_column=None) -> FRFData:  # fmt: skip
+def read_taps(
+    paths,
+    window="auto",
+    force_channel="auto",
+    channel=None,
+    points=None,
+    rate_Hz=None,
+    force_column=None,
+    response_column=None,
+) -> FRFData:
     """Read and average the taps in `paths`, with the points of their response channels.
 
     Parameters
@@ -207,8 +224,10 @@ def read_taps(paths, window="auto", force_channel="auto", channel=None, points=N
         Naming the file (or option) and the rule, e.g. several response channels without
         points, or a points file whose rows do not match the response channels.
     """
-    recordings = [read_recording(path, force_channel, channel, rate_Hz, force_column,
-                                 response_column) for path in paths]  # fmt: skip
+    recordings = [
+        read_recording(path, force_channel, channel, rate_Hz, force_column, response_column)
+        for path in paths
+    ]
     count = len(recordings[0].channels)
     points_mm = None
     if points is not None:
@@ -253,9 +272,16 @@ def coherence_at_poles(frf: FRFData, poles) -> list[tuple[float, float]]:
     return found
 
 
-def read_impulse(path, window: str = "auto", force_channel="auto", channel=None,
-                 points=None, rate_Hz=None, force_column=None,
-                 response_column=None) -> FRFData:  # fmt: skip
+def read_impulse(
+    path,
+    window: str = "auto",
+    force_channel="auto",
+    channel=None,
+    points=None,
+    rate_Hz=None,
+    force_column=None,
+    response_column=None,
+) -> FRFData:
     """Read an impulse recording (``.wav`` or a CSV time series) and return its spectrum.
 
     WAV (scipy.io.wavfile, any sample format): one channel, the response; two, the response
@@ -286,8 +312,9 @@ def read_impulse(path, window: str = "auto", force_channel="auto", channel=None,
     """
     path = os.fspath(path)
     try:
-        return read_taps([path], window, force_channel, channel, points, rate_Hz,
-                         force_column, response_column)  # fmt: skip
+        return read_taps(
+            [path], window, force_channel, channel, points, rate_Hz, force_column, response_column
+        )
     except CaseError as err:
         raise err if err.path else err.with_path(path) from None
 

@@ -55,19 +55,46 @@ __all__ = [
 TIME_NAMES = ("time", "t", "times")
 """Names of a time column (lower case, words separated by one space)."""
 
-FORCE_NAMES = ("force", "f", "hammer", "hammer force", "force hammer", "impact", "impact force",
-               "excitation", "load cell", "loadcell")  # fmt: skip
+FORCE_NAMES = (
+    "force",
+    "f",
+    "hammer",
+    "hammer force",
+    "force hammer",
+    "impact",
+    "impact force",
+    "excitation",
+    "load cell",
+    "loadcell",
+)
 """Names of a force column."""
 
 RESPONSE_NAMES = (
-    "signal", "response", "resp", "acceleration", "accel", "acc", "accelerometer", "a",
-    "velocity", "vel", "displacement", "disp", "mic", "microphone", "sound", "sound pressure",
-    "pressure", "audio", "vibration", "vibrometer", "ldv",
-)  # fmt: skip
+    "signal",
+    "response",
+    "resp",
+    "acceleration",
+    "accel",
+    "acc",
+    "accelerometer",
+    "a",
+    "velocity",
+    "vel",
+    "displacement",
+    "disp",
+    "mic",
+    "microphone",
+    "sound",
+    "sound pressure",
+    "pressure",
+    "audio",
+    "vibration",
+    "vibrometer",
+    "ldv",
+)
 """Names of a response column."""
 
-TIME_UNITS_S = {"s": 1.0, "sec": 1.0, "ms": 1e-3, "msec": 1e-3, "us": 1e-6, "µs": 1e-6,
-                "μs": 1e-6}  # fmt: skip
+TIME_UNITS_S = {"s": 1.0, "sec": 1.0, "ms": 1e-3, "msec": 1e-3, "us": 1e-6, "µs": 1e-6, "μs": 1e-6}
 """Seconds per unit of a time column."""
 
 _ROLES = {
@@ -227,8 +254,10 @@ def _choose(header_line, header, force_column, response_column):
     where = f"line {header_line}"
     listing = f"the header has {', '.join(header)}"
     chosen = {}
-    for option, role, name in (("--force-column", "force", force_column),
-                               ("--response-column", "response", response_column)):  # fmt: skip
+    for option, role, name in (
+        ("--force-column", "force", force_column),
+        ("--response-column", "response", response_column),
+    ):
         if name is not None:
             j = _find(header, name)
             if j is None:
@@ -237,8 +266,11 @@ def _choose(header_line, header, force_column, response_column):
                 raise CaseError(option, name, "is also the --force-column: name two columns")
             chosen[role] = j
     roles = {j: column_role(cell) for j, cell in enumerate(header) if j not in chosen.values()}
-    for role, option in (("time", None), ("force", "--force-column"),
-                         ("response", "--response-column")):  # fmt: skip
+    for role, option in (
+        ("time", None),
+        ("force", "--force-column"),
+        ("response", "--response-column"),
+    ):
         found = [j for j, (r, _) in roles.items() if r == role]
         if role in chosen or not found:
             continue
@@ -249,8 +281,10 @@ def _choose(header_line, header, force_column, response_column):
             raise CaseError(where, rule=rule)
         chosen[role] = found[0]
     if "response" not in chosen:
-        rule = (f"required column is missing from the header ({', '.join(header)}): name the "
-                "response signal, acceleration, mic, ... or give --response-column")  # fmt: skip
+        rule = (
+            f"required column is missing from the header ({', '.join(header)}): name the "
+            "response signal, acceleration, mic, ... or give --response-column"
+        )
         raise CaseError(f"{where}, column signal", rule=rule)
     order = {role: chosen[role] for role in ("time", "force", "response") if role in chosen}
     ignored = [f'"{cell}"' for j, cell in enumerate(header) if j not in chosen.values()]
@@ -314,9 +348,11 @@ def _rate_from_times(header, j, rows, times, rate_Hz):
     allowed = error + (1 - along) * error[0] + along * error[-1]
     if np.any(off > allowed):
         i = int(np.argmax(off > allowed))
-        rule = (f"times must be evenly spaced: {off[i]:.3g} s off the line through the first "
-                "and last times, more than their written decimals allow "
-                f"({allowed[i]:.3g} s)")  # fmt: skip
+        rule = (
+            f"times must be evenly spaced: {off[i]:.3g} s off the line through the first "
+            "and last times, more than their written decimals allow "
+            f"({allowed[i]:.3g} s)"
+        )
         raise CaseError(f"line {rows[i][0]}, column {name}", rows[i][1][j], rule)
     step = (t[-1] - t[0]) / (n - 1)
     tolerance = (error[0] + error[-1]) / (n - 1)
@@ -327,8 +363,10 @@ def _rate_from_times(header, j, rows, times, rate_Hz):
         note = f'sampling rate {rate_Hz:.10g} Hz from the column "{name}" (the shortest '
         return rate_Hz, note + f"number from {low:.12g} to {high:.12g} Hz, its precision)"
     if not low <= rate_Hz <= high:
-        rule = (f'disagrees with the time column "{name}" ({1 / step:.12g} Hz, between '
-                f"{low:.12g} and {high:.12g} Hz at the precision it is written)")  # fmt: skip
+        rule = (
+            f'disagrees with the time column "{name}" ({1 / step:.12g} Hz, between '
+            f"{low:.12g} and {high:.12g} Hz at the precision it is written)"
+        )
         raise CaseError("--rate-Hz", rate_Hz, rule)
     return rate_Hz, f'sampling rate {rate_Hz:.10g} Hz from --rate-Hz (agrees with "{name}")'
 

@@ -176,8 +176,13 @@ def _uff_mode(key: str, dset: dict) -> dict:
             raise CaseError(f"{key} record 9 (node {node})", node, "appears twice in the dataset")
         values[node] = value
     load_case = dset.get("load_case", 0)
-    return {"key": key, "frequency": frequency, "damping": damping, "load_case": load_case,
-            "values": values}  # fmt: skip
+    return {
+        "key": key,
+        "frequency": frequency,
+        "damping": damping,
+        "load_case": load_case,
+        "values": values,
+    }
 
 
 def _uff_number(dset: dict, name: str, key: str) -> float:

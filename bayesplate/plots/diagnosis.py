@@ -57,12 +57,19 @@ def location_map(location, model, ax=None, title=None, mirrors=(), nothing_found
         ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.18), ncol=2, frameon=False)
     if nothing:
         title = f"{title}: nothing found" if title else "nothing found"
-    ax.set(xlim=(0, a), ylim=(0, b), aspect="equal", xlabel="x (mm)", ylabel="y (mm)",
-           title=title)  # fmt: skip
+    ax.set(xlim=(0, a), ylim=(0, b), aspect="equal", xlabel="x (mm)", ylabel="y (mm)", title=title)
     if nothing:  # under the x label (where the legend goes otherwise): the map stays in view
-        ax.annotate(_nothing_found(explained, nothing_found_chi2), (0.5, 0.0),
-                    xycoords=ax.xaxis.label, xytext=(0, -8), textcoords="offset points",
-                    ha="center", va="top", fontsize=9, bbox=_BOX)  # fmt: skip
+        ax.annotate(
+            _nothing_found(explained, nothing_found_chi2),
+            (0.5, 0.0),
+            xycoords=ax.xaxis.label,
+            xytext=(0, -8),
+            textcoords="offset points",
+            ha="center",
+            va="top",
+            fontsize=9,
+            bbox=_BOX,
+        )
     return fig
 
 
@@ -72,13 +79,16 @@ def _nothing_found(explained, chi2):
         return "nothing found: no place explains any of the misfit"
     share = explained / chi2 if chi2 > 0 else 1.0
     only = " only" if share < 0.25 else ""
-    return (f"nothing found: the best place explains{only} {explained:.2g} of the chi-square "
-            f"{chi2:.2g} ({100 * share:.0f} %),\na chi-square the plate model already fits "
-            "(verdict: consistent)")  # fmt: skip
+    return (
+        f"nothing found: the best place explains{only} {explained:.2g} of the chi-square "
+        f"{chi2:.2g} ({100 * share:.0f} %),\na chi-square the plate model already fits "
+        "(verdict: consistent)"
+    )
 
 
-def residual_comparison(measured_Hz, before_sigma, after_sigma=None, kinds=None, ax=None,
-                        title=None):  # fmt: skip
+def residual_comparison(
+    measured_Hz, before_sigma, after_sigma=None, kinds=None, ax=None, title=None
+):
     """Standardised residuals per mode before and after a refit (diagnose, step 4).
 
     Parameters
@@ -97,14 +107,21 @@ def residual_comparison(measured_Hz, before_sigma, after_sigma=None, kinds=None,
     n = len(measured_Hz)
     modes = np.arange(1, n + 1)
     width = 0.4 if after_sigma is not None else 0.7
-    ax.bar(modes - (width / 2 if after_sigma is not None else 0), before_sigma, width,
-           color="tab:red", label="nominal fit")  # fmt: skip
+    ax.bar(
+        modes - (width / 2 if after_sigma is not None else 0),
+        before_sigma,
+        width,
+        color="tab:red",
+        label="nominal fit",
+    )
     if after_sigma is not None:
         ax.bar(modes + width / 2, after_sigma, width, color="tab:blue", label="refit")
     for level in (-2, 2):
         ax.axhline(level, color="0.5", lw=0.8, ls="--")
-    labels = [f"{i}" if not kinds else f"{i}\n{k.replace('bending along ', 'bend ')}"
-              for i, k in zip(modes, kinds or [""] * n, strict=True)]  # fmt: skip
+    labels = [
+        f"{i}" if not kinds else f"{i}\n{k.replace('bending along ', 'bend ')}"
+        for i, k in zip(modes, kinds or [""] * n, strict=True)
+    ]
     ax.set_xticks(modes, labels, fontsize=7)
     ax.set(xlabel="measured mode", ylabel=r"(measured $-$ model) / $\sigma$ (-)", title=title)
     ax.legend(frameon=False)
@@ -118,9 +135,14 @@ def diagnosis_figures(model, diagnosis):
     d = diagnosis
     after = d.chosen.fit.residual_sigma if d.chosen is not None else None
     figs = {
-        "residuals": residual_comparison(d.measured_Hz, d.nominal.residual_sigma, after,
-                                         d.mode_kinds, title=f"verdict: {d.verdict}"),
-    }  # fmt: skip
+        "residuals": residual_comparison(
+            d.measured_Hz,
+            d.nominal.residual_sigma,
+            after,
+            d.mode_kinds,
+            title=f"verdict: {d.verdict}",
+        ),
+    }
     # nothing found: the maps say so instead of marking a best place as if it meant a defect
     chi2 = float(np.sum(np.square(d.nominal.residual_sigma)))
     nothing = chi2 if d.verdict == "consistent" else None
@@ -128,6 +150,7 @@ def diagnosis_figures(model, diagnosis):
         title = key.replace("_", " ")
         best = lm.best()
         mirrors = [] if best is None else mirror_positions(model, *lm.points_mm[best])
-        figs[f"map_{key}"] = location_map(lm, model, title=f"where: {title}", mirrors=mirrors,
-                                          nothing_found_chi2=nothing)  # fmt: skip
+        figs[f"map_{key}"] = location_map(
+            lm, model, title=f"where: {title}", mirrors=mirrors, nothing_found_chi2=nothing
+        )
     return figs

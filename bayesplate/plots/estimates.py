@@ -145,8 +145,7 @@ def estimate_residuals(measured_Hz, sigma_Hz, computed, labels=None, ax=None, ti
     for k, (label, values) in enumerate(computed.items()):
         z = (measured - np.asarray(values, dtype=float)) / sigma
         offset = (k - (len(computed) - 1) / 2) * width
-        ax.bar(x + offset, z, width, color=f"C{k}",
-               label=f"{label}: chi-square {np.sum(z**2):.3g}")  # fmt: skip
+        ax.bar(x + offset, z, width, color=f"C{k}", label=f"{label}: chi-square {np.sum(z**2):.3g}")
     ax.axhline(0.0, color="black", linewidth=0.8)
     for level in (-2, -1, 1, 2):
         ax.axhline(level, color="0.5", linewidth=0.7, linestyle="--" if abs(level) == 2 else ":")
@@ -155,8 +154,13 @@ def estimate_residuals(measured_Hz, sigma_Hz, computed, labels=None, ax=None, ti
     ax.set_xlabel("measured mode")
     ax.set_ylabel(r"(measured $-$ computed) / $\sigma$ (-)")
     ax.yaxis.grid(False)
-    ax.legend(fontsize="small", loc="upper center", bbox_to_anchor=(0.5, -0.14), frameon=False,
-              ncol=min(len(computed), 3))  # fmt: skip
+    ax.legend(
+        fontsize="small",
+        loc="upper center",
+        bbox_to_anchor=(0.5, -0.14),
+        frameon=False,
+        ncol=min(len(computed), 3),
+    )
     if title:
         ax.set_title(title)
     return fig

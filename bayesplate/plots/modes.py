@@ -80,8 +80,15 @@ _MARK_STYLES = ({"marker": "x", "color": "black"}, {"marker": "o", "color": "gol
 def _mark_points(ax, marks):
     """Each point of ``marks`` (label -> (x, y) in m) as a marker with its label."""
     for (label, (x, y)), style in zip((marks or {}).items(), _MARK_STYLES * 4, strict=False):
-        ax.plot(x * _MM, y * _MM, linestyle="none", markersize=7, markeredgecolor="black",
-                label=label, **style)  # fmt: skip
+        ax.plot(
+            x * _MM,
+            y * _MM,
+            linestyle="none",
+            markersize=7,
+            markeredgecolor="black",
+            label=label,
+            **style,
+        )
 
 
 def mac_matrix_plot(mac, pairs=None, ax=None, title=None, measured_Hz=None):
@@ -110,8 +117,15 @@ def mac_matrix_plot(mac, pairs=None, ax=None, title=None, measured_Hz=None):
     fig.colorbar(image, ax=ax, label="MAC (-); blank cells < 0.01", shrink=0.9)
     for (i, j), value in np.ndenumerate(mac):
         if value >= 0.01:
-            ax.text(j, i, f"{value:.2f}"[1:] if value < 1 else "1", ha="center", va="center",
-                    fontsize=8, color="white" if value > 0.6 else "black")  # fmt: skip
+            ax.text(
+                j,
+                i,
+                f"{value:.2f}"[1:] if value < 1 else "1",
+                ha="center",
+                va="center",
+                fontsize=8,
+                color="white" if value > 0.6 else "black",
+            )
     for i, j in enumerate(np.asarray(pairs if pairs is not None else [], dtype=int)):
         if j >= 0:
             ax.add_patch(_cell_outline(i, j))

@@ -49,14 +49,21 @@ def population_figure(result, reference=None, title=None, fig=None):
         mean = result.plate_mean[:, j] * s
         out = np.isin(np.arange(len(result.names)), result.flagged)
         for mask, color in ((~out, "C0"), (out, "C3")):
-            ax.errorbar(mean[mask], y[mask] - 0.18,
-                        xerr=[mean[mask] - lo[mask], hi[mask] - mean[mask]], fmt="s",
-                        color=color, capsize=2, ms=4)  # fmt: skip
+            ax.errorbar(
+                mean[mask],
+                y[mask] - 0.18,
+                xerr=[mean[mask] - lo[mask], hi[mask] - mean[mask]],
+                fmt="s",
+                color=color,
+                capsize=2,
+                ms=4,
+            )
         if reference is not None:
             ax.axvline(np.asarray(reference)[j] * s, color="0.3", ls="--", lw=1)
         ax.set_xlabel(CONSTANT_LABELS[j])
-        ax.set_yticks(y, [f"{name} ({p:.0%})" for name, p in zip(result.names, result.outlier,
-                                                                  strict=True)])  # fmt: skip
+        ax.set_yticks(
+            y, [f"{name} ({p:.0%})" for name, p in zip(result.names, result.outlier, strict=True)]
+        )
         ax.set_ylim(-0.7, n - 0.3)
     fig.supylabel("plate (outlier probability); grey: own answer, blue: shrunk")
     if title:

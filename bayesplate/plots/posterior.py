@@ -42,10 +42,19 @@ def posterior_corner(samples, labels, truths=None, fig=None, title=None):
 
     k = len(labels)
     fig = fig or Figure(figsize=(1.7 * k + 0.8, 1.7 * k + 0.8))
-    corner.corner(np.asarray(samples, dtype=float), fig=fig, labels=list(labels),
-                  quantiles=[0.03, 0.5, 0.97], show_titles=True, title_fmt=".3g",
-                  title_kwargs={"fontsize": 9}, label_kwargs={"fontsize": 10}, truths=truths,
-                  truth_color="tab:red", max_n_ticks=3)  # fmt: skip
+    corner.corner(
+        np.asarray(samples, dtype=float),
+        fig=fig,
+        labels=list(labels),
+        quantiles=[0.03, 0.5, 0.97],
+        show_titles=True,
+        title_fmt=".3g",
+        title_kwargs={"fontsize": 9},
+        label_kwargs={"fontsize": 10},
+        truths=truths,
+        truth_color="tab:red",
+        max_n_ticks=3,
+    )
     if title:
         fig.suptitle(title, y=1.02)
     return fig
@@ -73,8 +82,15 @@ def _gaussian_ellipse(ax, mean, cov, radius, color, linestyle):
     ax.plot(mean[0] + xy[0], mean[1] + xy[1], color=color, lw=1.2, ls=linestyle)
 
 
-def corner_estimates(samples, labels=CONSTANT_LABELS, estimates=None, reference=None,
-                     fig=None, title=None, reference_label="reference constants"):  # fmt: skip
+def corner_estimates(
+    samples,
+    labels=CONSTANT_LABELS,
+    estimates=None,
+    reference=None,
+    fig=None,
+    title=None,
+    reference_label="reference constants",
+):
     """Corner plot of posterior samples with Gaussian estimates and reference values.
 
     The sample contours and the ellipses enclose the same probabilities, 39.3 % and 86.5 %
@@ -111,12 +127,25 @@ def corner_estimates(samples, labels=CONSTANT_LABELS, estimates=None, reference=
     reference = None if reference is None else np.asarray(reference, dtype=float)
     fig = fig or Figure(figsize=(1.75 * k + 0.9, 1.75 * k + 0.9))
     levels = tuple(1 - np.exp(-0.5 * np.square(_RADII)))
-    corner.corner(samples, fig=fig, labels=list(labels), range=_corner_ranges(
-        samples, estimates, reference), levels=levels, bins=30, smooth=1.0,
-        plot_datapoints=False, plot_density=False, fill_contours=False, color="0.15",
-        hist_kwargs={"density": True, "color": "0.35"}, truths=reference,
-        truth_color="tab:red", max_n_ticks=3, label_kwargs={"fontsize": 11},
-        labelpad=0.08)  # fmt: skip
+    corner.corner(
+        samples,
+        fig=fig,
+        labels=list(labels),
+        range=_corner_ranges(samples, estimates, reference),
+        levels=levels,
+        bins=30,
+        smooth=1.0,
+        plot_datapoints=False,
+        plot_density=False,
+        fill_contours=False,
+        color="0.15",
+        hist_kwargs={"density": True, "color": "0.35"},
+        truths=reference,
+        truth_color="tab:red",
+        max_n_ticks=3,
+        label_kwargs={"fontsize": 11},
+        labelpad=0.08,
+    )
     axes = np.array(fig.axes).reshape(k, k)
     handles = [Line2D([], [], color="0.15", label="posterior samples (emcee)")]
     for n, (name, (mean, cov)) in enumerate(estimates.items()):
@@ -133,14 +162,22 @@ def corner_estimates(samples, labels=CONSTANT_LABELS, estimates=None, reference=
                     _gaussian_ellipse(axes[i, j], mean[[j, i]], sub, radius, color, ls)
         handles.append(Line2D([], [], color=color, label=f"{name} (Gaussian, 1 and 2 sigma)"))
     for i in range(k):  # the densities of the estimates may overshoot the histogram
-        top = max(line.get_ydata().max() for line in axes[i, i].get_lines() if len(
-            line.get_ydata()) > 2) if estimates else None  # fmt: skip
+        top = (
+            max(
+                line.get_ydata().max()
+                for line in axes[i, i].get_lines()
+                if len(line.get_ydata()) > 2
+            )
+            if estimates
+            else None
+        )
         if top is not None:
             axes[i, i].set_ylim(0, 1.08 * max(top, axes[i, i].get_ylim()[1] / 1.1))
     if reference is not None:
         handles.append(Line2D([], [], color="tab:red", label=reference_label))
-    fig.legend(handles=handles, loc="upper right", bbox_to_anchor=(0.98, 0.98),
-               frameon=False, fontsize=11)  # fmt: skip
+    fig.legend(
+        handles=handles, loc="upper right", bbox_to_anchor=(0.98, 0.98), frameon=False, fontsize=11
+    )
     if title:
         fig.suptitle(title, x=0.6, y=0.78, ha="left", fontsize=12)
     return fig
@@ -179,8 +216,9 @@ def trace_plot(chains, labels=CONSTANT_LABELS, burn=0, fig=None, max_walkers=32)
     return fig
 
 
-def autocorrelation_plot(acf, tau_history=None, labels=CONSTANT_LABELS, factor=50.0,
-                         tau=None, fig=None):  # fmt: skip
+def autocorrelation_plot(
+    acf, tau_history=None, labels=CONSTANT_LABELS, factor=50.0, tau=None, fig=None
+):
     """Autocorrelation functions and the autocorrelation time against chain length.
 
     Parameters
@@ -211,8 +249,11 @@ def autocorrelation_plot(acf, tau_history=None, labels=CONSTANT_LABELS, factor=5
         text = name if tau is None else f"{name}: tau = {tau[j]:.1f}"
         ax.plot(np.arange(row.size), row, color=f"C{j}", lw=1.2, label=text)
     ax.axhline(0.0, color="0.5", lw=0.8)
-    ax.set(xlabel="lag (steps)", ylabel="autocorrelation (-)",
-           title="after burn-in, averaged over walkers")  # fmt: skip
+    ax.set(
+        xlabel="lag (steps)",
+        ylabel="autocorrelation (-)",
+        title="after burn-in, averaged over walkers",
+    )
     ax.legend(frameon=False, fontsize=9)
     if tau_history is not None:
         h = np.asarray(tau_history, dtype=float)
@@ -221,14 +262,18 @@ def autocorrelation_plot(acf, tau_history=None, labels=CONSTANT_LABELS, factor=5
         ax.plot(n, h[:, 1:], color="0.6", lw=0.8)
         ax.plot(n, h[:, 1:].max(axis=1), "ko-", ms=3, lw=1.2, label=r"largest $\tau$")
         ax.plot(n, n / factor, "k--", lw=1, label=f"N / {factor:g}: stop once above the largest")
-        ax.set(xlabel="chain length N (steps)", ylabel=r"estimated $\tau$ (steps)",
-               title="stopping rule: the sampler's (whitened) coordinates")  # fmt: skip
+        ax.set(
+            xlabel="chain length N (steps)",
+            ylabel=r"estimated $\tau$ (steps)",
+            title="stopping rule: the sampler's (whitened) coordinates",
+        )
         ax.legend(frameon=False, fontsize=9)
     return fig
 
 
-def sampling_figures(result, estimates=None, reference=None, title=None,
-                     reference_label="reference constants"):  # fmt: skip
+def sampling_figures(
+    result, estimates=None, reference=None, title=None, reference_label="reference constants"
+):
     """The figures of a sampling run: ``{"corner", "trace", "autocorrelation": Figure}``.
 
     Parameters
@@ -243,15 +288,19 @@ def sampling_figures(result, estimates=None, reference=None, title=None,
         Legend entry of the reference constants.
     """
     scale = 1.0 / CASE_SCALE  # [1e-9, 1e-9, 1, 1e-9, ...]: the same doubles as those literals
-    gauss = {name: (r.constants * scale, r.covariance * np.outer(scale, scale))
-             for name, r in (estimates or {}).items()}  # fmt: skip
+    gauss = {
+        name: (r.constants * scale, r.covariance * np.outer(scale, scale))
+        for name, r in (estimates or {}).items()
+    }
     samples = result.chain[:, result.n_burn :].reshape(-1, 6)
     ref = None if reference is None else np.asarray(reference) * scale
     factor = result.settings.get("target_tau_factor", 50.0)
-    acf = autocorrelation_plot(result.acf, result.tau_history, factor=factor,
-                               tau=result.tau_constants)  # fmt: skip
-    corner = corner_estimates(samples, estimates=gauss, reference=ref, title=title,
-                              reference_label=reference_label)  # fmt: skip
+    acf = autocorrelation_plot(
+        result.acf, result.tau_history, factor=factor, tau=result.tau_constants
+    )
+    corner = corner_estimates(
+        samples, estimates=gauss, reference=ref, title=title, reference_label=reference_label
+    )
     return {
         "corner": corner,
         "trace": trace_plot(result.chain, burn=result.n_burn),

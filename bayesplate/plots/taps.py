@@ -54,14 +54,20 @@ def tap_frf(frequency_Hz, frf, band_Hz, peaks_Hz, roles, computed_Hz, unobserved
     for role, (color, marker, label) in _ROLE_STYLE.items():
         chosen = [f for f, r in zip(peaks_Hz, roles, strict=True) if r == role]
         if chosen:
-            ax.plot(chosen, [top] * len(chosen), ls="", marker=marker, color=color, ms=8,
-                    label=label)  # fmt: skip
+            ax.plot(
+                chosen, [top] * len(chosen), ls="", marker=marker, color=color, ms=8, label=label
+            )
     unobserved = set(int(j) for j in unobserved)
     for j, f in enumerate(computed_Hz):
         if lower <= f <= upper:
             missed = j in unobserved
-            ax.axvline(f, color="tab:red" if missed else "tab:blue", lw=0.8,
-                       ls="--" if missed else ":", alpha=0.8)  # fmt: skip
+            ax.axvline(
+                f,
+                color="tab:red" if missed else "tab:blue",
+                lw=0.8,
+                ls="--" if missed else ":",
+                alpha=0.8,
+            )
     ax.plot([], [], color="tab:blue", ls=":", label="computed mode at the estimate")
     if unobserved:
         ax.plot([], [], color="tab:red", ls="--", label="computed mode no peak explains")

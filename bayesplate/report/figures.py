@@ -42,8 +42,13 @@ def figure_groups(data):
     from .. import plots  # imported here, before any fork: the workers inherit it
 
     r = data.results
-    groups = [lambda: {**_residuals_figure(data, plots), **_budget_figure(data, plots),
-                       **_modes_figures(data, plots)}]  # fmt: skip
+    groups = [
+        lambda: {
+            **_residuals_figure(data, plots),
+            **_budget_figure(data, plots),
+            **_modes_figures(data, plots),
+        }
+    ]
     if data.taps is not None:
         groups.append(lambda: _tap_figures(data, plots))
     if "sample" in r:
@@ -151,11 +156,19 @@ def _tap_figures(data, plots):
     from ..io.poles_file import stabilisation_chart
 
     taps, spectra = data.taps, data.taps.spectra
-    chart = stabilisation_chart(taps.analysis, spectra.frequency_Hz, spectra.frf, taps.kept,
-                                spectra.coherence)  # fmt: skip
+    chart = stabilisation_chart(
+        taps.analysis, spectra.frequency_Hz, spectra.frf, taps.kept, spectra.coherence
+    )
     roles, computed, unobserved = tap_roles(data)
-    frf = plots.tap_frf(spectra.frequency_Hz, spectra.frf, taps.analysis.band_Hz,
-                        data.case.measured.frequency_Hz, roles, computed, unobserved)  # fmt: skip
+    frf = plots.tap_frf(
+        spectra.frequency_Hz,
+        spectra.frf,
+        taps.analysis.band_Hz,
+        data.case.measured.frequency_Hz,
+        roles,
+        computed,
+        unobserved,
+    )
     return {"stabilisation": chart, "frf": frf}
 
 
@@ -170,15 +183,22 @@ def _sample_figures(result, plots, b_result=None):
     if covariance is None or not b_result["converged"]:
         truths = None if result["map"] is None else to_case_units(result["map"])
         title = "posterior (emcee); red: the B estimate (MAP)"
-        return {"posterior_corner": plots.posterior_corner(result["draws"], labels,
-                                                           truths=truths, title=title)}  # fmt: skip
+        return {
+            "posterior_corner": plots.posterior_corner(
+                result["draws"], labels, truths=truths, title=title
+            )
+        }
     scale = to_case_units(np.ones(6))
-    estimate = (to_case_units(b_result["constants"]),
-                np.asarray(covariance) * np.outer(scale, scale))  # fmt: skip
+    estimate = (
+        to_case_units(b_result["constants"]),
+        np.asarray(covariance) * np.outer(scale, scale),
+    )
     fig = plots.corner_estimates(
-        result["draws"], labels, estimates={"B, linearised": estimate},
+        result["draws"],
+        labels,
+        estimates={"B, linearised": estimate},
         title="posterior (emcee draws) and B's linearised Gaussian (1 and 2 sigma ellipses)",
-    )  # fmt: skip
+    )
     return {"posterior_corner": fig}
 
 

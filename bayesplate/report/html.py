@@ -72,8 +72,14 @@ def report_summary(data):
     constants = []
     for i, name in enumerate(ENGINEERING_NAMES):
         scale = CASE_SCALE[i]
-        entry = {"name": name, "unit": ENGINEERING_UNITS[i], "estimate": None, "sd": None,
-                 "low": None, "high": None}  # fmt: skip
+        entry = {
+            "name": name,
+            "unit": ENGINEERING_UNITS[i],
+            "estimate": None,
+            "sd": None,
+            "low": None,
+            "high": None,
+        }
         if estimate is not None:
             value, sd = estimate["constants"][i] / scale, estimate["sd"][i] / scale
             entry.update(estimate=_float(value), sd=_float(sd))
@@ -87,17 +93,24 @@ def report_summary(data):
     fit = None if estimate is None else estimate.get("fit")
     if fit is not None:
         fits = bool(fit["p_value"] >= REJECT_P)
-        fit = {"chi2": _float(fit["chi2"]), "dof": _float(fit["dof"]),
-               "p_value": _float(fit["p_value"]), "fits": fits}  # fmt: skip
+        fit = {
+            "chi2": _float(fit["chi2"]),
+            "dof": _float(fit["dof"]),
+            "p_value": _float(fit["p_value"]),
+            "fits": fits,
+        }
     status = None
     if estimate is not None:
         status = estimate.get("status") or ("converged" if estimate["converged"] else "stopped")
     diagnosis = None
     if "diagnose" in r:
         d = r["diagnose"]["diagnosis"]
-        diagnosis = {"verdict": d["verdict"], "chosen": d["chosen"],
-                     "rival": (d.get("rival") or {}).get("physics"),
-                     "also_tied": list(d.get("also_tied") or [])}  # fmt: skip
+        diagnosis = {
+            "verdict": d["verdict"],
+            "chosen": d["chosen"],
+            "rival": (d.get("rival") or {}).get("physics"),
+            "also_tied": list(d.get("also_tied") or []),
+        }
     return {
         "case": data.case.name,
         "label": data.label,
@@ -136,17 +149,24 @@ def summary_lines(summary):
     at = summary["estimator"]
     lines = ["## Summary", ""]
     if at is None:
-        return lines + ["No estimator converged: there is no estimate to summarise (see "
-                        "Estimates below).", ""]  # fmt: skip
+        return lines + [
+            "No estimator converged: there is no estimate to summarise (see Estimates below).",
+            "",
+        ]
     what = "the posterior mode" if at == "B" else "B did not converge"
-    lines += [f"The elastic constants by {at} ({what}), with 94 % intervals: the "
-              f"{summary['interval']}.", ""]  # fmt: skip
+    lines += [
+        f"The elastic constants by {at} ({what}), with 94 % intervals: the {summary['interval']}.",
+        "",
+    ]
     ref = any(c["reference"] is not None for c in summary["constants"])
     head = ["constant", f"{at} ± sd", "94 % interval"] + (["reference"] if ref else [])
     rows = []
     for c in summary["constants"]:
-        row = [f"{c['name']} ({c['unit']})", _estimate_cell(c),
-               f"{_value(c, 'low')} to {_value(c, 'high')}"]  # fmt: skip
+        row = [
+            f"{c['name']} ({c['unit']})",
+            _estimate_cell(c),
+            f"{_value(c, 'low')} to {_value(c, 'high')}",
+        ]
         rows.append(row + ([_value(c, "reference")] if ref else []))
     lines += ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
     lines += ["| " + " | ".join(row) + " |" for row in rows] + [""]
@@ -157,8 +177,10 @@ def summary_lines(summary):
         says = "**the model fits**" if fit["fits"] else "**the model does not fit**"
         chi2, dof, p = _g(fit["chi2"], ".3g"), _g(fit["dof"], ".1f"), _g(fit["p_value"], ".2g")
         below = f"{summary['fit_threshold_p']:g}"
-        lines.append(f"- Fit: {says} the measured frequencies: chi-square {chi2} on {dof} "
-                     f"degrees of freedom, p {p} (rejected below p {below})")  # fmt: skip
+        lines.append(
+            f"- Fit: {says} the measured frequencies: chi-square {chi2} on {dof} "
+            f"degrees of freedom, p {p} (rejected below p {below})"
+        )
     status = summary["status"]
     lines.append(f"- Status of {at}: " + (status if status == "converged" else f"**{status}**"))
     lines += [f"  - **warning**: {w}" for w in summary["warnings"]]

@@ -86,10 +86,12 @@ def _measured_section(data, figures):
         rows.append(row)
     lines = ["### Measured frequencies", "", f"Pairing: {r['describe']}."]
     if r.get("checked"):
-        lines[-1] += (" The case has no measured mode shapes: each estimate, the posterior "
-                      "and diagnose check the order against the most probable assignment of "
-                      "the frequencies at their own answer, and say so where they set it "
-                      "aside.")  # fmt: skip
+        lines[-1] += (
+            " The case has no measured mode shapes: each estimate, the posterior "
+            "and diagnose check the order against the most probable assignment of "
+            "the frequencies at their own answer, and say so where they set it "
+            "aside."
+        )
     elif pairing.mac is None:
         lines[-1] += " The case has no measured mode shapes, so the pairing is not checked."
     lines += [""] + _table(head, rows) + [""]
@@ -135,10 +137,13 @@ def _estimates_section(data, figures):
     lines += _fit_lines(r, methods)
     scaled = [m for m in methods if r[m].get("error_scale")]
     if scaled:
-        lines += [f"- {m}: {r[m]['error_scale']['text']}; s_hat "
-                  f"{r[m]['error_scale']['s_hat']:.3g} at the estimate. The sd above are "
-                  f"widened by it (Student-t, {r[m]['error_scale']['dof']:.1f} degrees of "
-                  "freedom)." for m in scaled] + [""]  # fmt: skip
+        lines += [
+            f"- {m}: {r[m]['error_scale']['text']}; s_hat "
+            f"{r[m]['error_scale']['s_hat']:.3g} at the estimate. The sd above are "
+            f"widened by it (Student-t, {r[m]['error_scale']['dof']:.1f} degrees of "
+            "freedom)."
+            for m in scaled
+        ] + [""]
     if any(ch is not None for ch in checks):
         lines += [
             "The estimators iterated on the certified fast (reduced-basis) model; the full "
@@ -232,8 +237,7 @@ def _modes_section(data, figures):
             figures,
             "mode_shapes",
             f"The first {k} elastic mode shapes at the {at} "
-            "estimate (w, scaled to max |w| = 1); nodal lines in black"
-            + _tap_marks(data),
+            "estimate (w, scaled to max |w| = 1); nodal lines in black" + _tap_marks(data),
         ),
     ]
 
@@ -307,9 +311,15 @@ def _sample_lines(result):
 
 def _input_rows(result):
     """The declared inputs' posterior beside the case's values, and the linear model's check."""
-    rows = [[key, f"{r['declared']:#.4g} ± {r['declared_sd']:#.2g}",
-             f"{r['mean']:#.4g} ± {r['sd']:#.2g}", f"{r['hdi_3%']:#.4g} to {r['hdi_97%']:#.4g}"]
-            for key, r in (result.get("inputs_posterior") or {}).items()]  # fmt: skip
+    rows = [
+        [
+            key,
+            f"{r['declared']:#.4g} ± {r['declared_sd']:#.2g}",
+            f"{r['mean']:#.4g} ± {r['sd']:#.2g}",
+            f"{r['hdi_3%']:#.4g} to {r['hdi_97%']:#.4g}",
+        ]
+        for key, r in (result.get("inputs_posterior") or {}).items()
+    ]
     lines = []
     if rows:
         lines += [
@@ -406,8 +416,10 @@ def _diagnose_section(data, figures):
     # a consistent plate: the maps show how little any place would explain, not a defect
     nothing = ""
     if d["verdict"] == "consistent":
-        nothing = (": nothing found, the model fits without a local change, so the map shows "
-                   "where noise would be explained, not where a defect is")  # fmt: skip
+        nothing = (
+            ": nothing found, the model fits without a local change, so the map shows "
+            "where noise would be explained, not where a defect is"
+        )
     for name, caption in (
         ("diagnose_residuals", "Standardised residuals of the nominal fit (and of the refit)"),
         *((k, f"Where a {_located_name(k)} would explain the misfit{nothing}") for k in located),

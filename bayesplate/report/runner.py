@@ -26,8 +26,7 @@ __all__ = ["compute_report"]
 DIAGNOSE_STAGES = "diagnose-stages"
 
 
-def compute_report(case_file, options=None, cache_dir=None, progress=None, label=None,
-                   taps=None):  # fmt: skip
+def compute_report(case_file, options=None, cache_dir=None, progress=None, label=None, taps=None):
     """Run (or reuse) every step of the report of one case file.
 
     Parameters
@@ -136,10 +135,13 @@ class _Runner:
             f"estimate {method}",
             {"pairing": self.pairing_options},
             lambda: steps.estimate_step(
-                self.case, self.data.plate_model(), method, self.data.pairing_for_steps(),
+                self.case,
+                self.data.plate_model(),
+                method,
+                self.data.pairing_for_steps(),
                 self.data.fast_model(),
             ),
-        )  # fmt: skip
+        )
 
     def modes(self):
         data = self.data
@@ -154,12 +156,20 @@ class _Runner:
         )
 
     def _sample_options(self):
-        return {"seed": self.options.seed, "quick": self.options.quick,
-                "pairing": self.pairing_options}  # fmt: skip
+        return {
+            "seed": self.options.seed,
+            "quick": self.options.quick,
+            "pairing": self.pairing_options,
+        }
 
     def _sample(self):
-        return steps.sample_step(self.case, self.data.plate_model(), self.data.pairing_for_steps(),
-                                 self.options, self.data.fast_model())  # fmt: skip
+        return steps.sample_step(
+            self.case,
+            self.data.plate_model(),
+            self.data.pairing_for_steps(),
+            self.options,
+            self.data.fast_model(),
+        )
 
     def sample(self, compute=None, title="posterior sampling"):
         if not sampling_available():

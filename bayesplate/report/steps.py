@@ -112,14 +112,19 @@ def estimate_options(method, pairing, model):
     from ..run import EstimateOptions
 
     mesh = (model.mesh.nx, model.mesh.ny)
-    return EstimateOptions(method=method, mesh=mesh, pairing=pairing, forward="full",
-                           budget=method == "B")  # fmt: skip
+    return EstimateOptions(
+        method=method, mesh=mesh, pairing=pairing, forward="full", budget=method == "B"
+    )
 
 
 def _scale_data(summary):
     """A :class:`bayesplate.error_scale.ScaleSummary` as plain data (with its sentence)."""
-    return {"median": summary.median, "interval": list(summary.interval),
-            "status": summary.status, "text": str(summary)}  # fmt: skip
+    return {
+        "median": summary.median,
+        "interval": list(summary.interval),
+        "status": summary.status,
+        "text": str(summary),
+    }
 
 
 def _check_data(check):
@@ -193,8 +198,14 @@ def sample_step(case, model, pairing, options, fast=None):
     from ..laminate import engineering_from_stiffness
     from ..run import run_sample
 
-    done = run_sample(case, sample_options(options, pairing, model), options.seed,
-                      model=model, fast=fast, record_warnings=True)  # fmt: skip
+    done = run_sample(
+        case,
+        sample_options(options, pairing, model),
+        options.seed,
+        model=model,
+        fast=fast,
+        record_warnings=True,
+    )
     r = done.result
     scale = None if done.scale is None else _scale_data(done.scale)
     e = to_case_units(engineering_from_stiffness(r.samples_b))

@@ -88,6 +88,8 @@ def converged_budget(case, result, model=None):
     if not result.converged or not np.all(np.isfinite(result.covariance_b)):
         return None
     return estimate_budget(case, result, model)
+
+
 def scale_estimate(case, model, result):
     """An estimate (B, MVE, MVE-mod) with the case's error scale: ``s`` and the widened ``P``.
 
@@ -114,6 +116,7 @@ def scale_estimate(case, model, result):
     problem = GaussianProblem.from_case(case, model, result.pairing, observation)
     lin = linearised_at(problem, result.b, result.covariance_b)
     cov = engineering_covariance(result.constants, lin.covariance_b)
-    scaled = dataclasses.replace(result, covariance_b=lin.covariance_b, covariance=cov,
-                     sd=np.sqrt(np.diag(cov)))  # fmt: skip
+    scaled = dataclasses.replace(
+        result, covariance_b=lin.covariance_b, covariance=cov, sd=np.sqrt(np.diag(cov))
+    )
     return scaled, lin

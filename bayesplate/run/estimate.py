@@ -64,8 +64,12 @@ def run_estimate(case, options, *, model=None, fast=None):
 
     if model is None:
         model = PlateModel.from_case(case, mesh=options.mesh)
-    keywords = {"tol": options.tol, "max_iter": options.max_iter,
-                "convention": options.convention, "pairing": options.pairing}  # fmt: skip
+    keywords = {
+        "tol": options.tol,
+        "max_iter": options.max_iter,
+        "convention": options.convention,
+        "pairing": options.pairing,
+    }
     if fast is None:
         result = estimate(case, options.method, model=model, forward=options.forward, **keywords)
     else:

@@ -52,8 +52,9 @@ class SampleRun:
         return sampling_to_dict(self.result, self.case, self.mve, self.scale)
 
 
-def run_sample(case, options, seed, *, model=None, fast=None, pool=None, progress=False,
-               record_warnings=False):  # fmt: skip
+def run_sample(
+    case, options, seed, *, model=None, fast=None, pool=None, progress=False, record_warnings=False
+):
     """Sample the posterior of `case`: prepare, the chain, the error scale's draws, MVE.
 
     Parameters
@@ -92,19 +93,34 @@ def run_sample(case, options, seed, *, model=None, fast=None, pool=None, progres
     if inputs != "exact":
         fast = None
     with _recording(record_warnings) as recorded:
-        setup = prepare(case, model=model, forward=options.forward, rng=seeds.prepare,
-                        pairing=options.pairing, fast=fast, inputs=inputs)  # fmt: skip
-        result = sample(case, rng=seeds.chain, n_walkers=options.walkers,
-                        max_steps=options.max_steps, min_ess=options.min_ess,
-                        backend_path=options.backend, progress=progress, setup=setup,
-                        pool=pool)  # fmt: skip
+        setup = prepare(
+            case,
+            model=model,
+            forward=options.forward,
+            rng=seeds.prepare,
+            pairing=options.pairing,
+            fast=fast,
+            inputs=inputs,
+        )
+        result = sample(
+            case,
+            rng=seeds.chain,
+            n_walkers=options.walkers,
+            max_steps=options.max_steps,
+            min_ess=options.min_ess,
+            backend_path=options.backend,
+            progress=progress,
+            setup=setup,
+            pool=pool,
+        )
     noted = None if recorded is None else tuple(sorted({str(w.message) for w in recorded}))
     scale = None
     if case.measured.error_scale is not None:
         from ..error_scale import scale_from_draws
 
-        scale = scale_from_draws(setup.problem, result.samples_b, setup.sampling_forward(),
-                                 rng=seeds.error_scale)[0]  # fmt: skip
+        scale = scale_from_draws(
+            setup.problem, result.samples_b, setup.sampling_forward(), rng=seeds.error_scale
+        )[0]
     mve = setup.run_estimator("MVE") if options.mve else None
     return SampleRun(case, model, setup, result, seeds.seed, scale, mve, noted)
 

@@ -68,6 +68,8 @@ def run_seeds(seed):
     if seed is None:
         seed = int(np.random.SeedSequence().entropy) % _SEED_RANGE
     elif isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or seed < 0:
-        raise TypeError(f"seed = {seed!r}: a run takes a whole number >= 0 or None (a "
-                        "Generator would be split differently by each stage)")  # fmt: skip
+        raise TypeError(
+            f"seed = {seed!r}: a run takes a whole number >= 0 or None (a "
+            "Generator would be split differently by each stage)"
+        )
     return RunSeeds(int(seed))

@@ -92,8 +92,15 @@ class ReassignedLikelihood:
         ``B``, rad^2/s^2.
     """
 
-    def __init__(self, frequency_Hz, sigma_Hz, n_modes, observation="variance",
-                 p_unobserved=P_UNOBSERVED, p_spurious=P_SPURIOUS):  # fmt: skip
+    def __init__(
+        self,
+        frequency_Hz,
+        sigma_Hz,
+        n_modes,
+        observation="variance",
+        p_unobserved=P_UNOBSERVED,
+        p_spurious=P_SPURIOUS,
+    ):
         f = np.asarray(frequency_Hz, dtype=float)
         s = np.asarray(sigma_Hz, dtype=float)
         if f.ndim != 1 or f.shape != s.shape or f.size == 0:
@@ -217,12 +224,19 @@ def reassignment(pairing, frequency_Hz, sigma_Hz, observation, full_covariance, 
     """
     if pairing.how != "likelihood":
         return None, None
-    why = [text for flag, text in ((full_covariance, "the inputs are marginalised (V_Y is "
-                                    "full)"), (error_scale, "an error scale is inferred"))
-           if flag]  # fmt: skip
+    why = [
+        text
+        for flag, text in (
+            (full_covariance, "the inputs are marginalised (V_Y is full)"),
+            (error_scale, "an error scale is inferred"),
+        )
+        if flag
+    ]
     if why:
-        return None, ("assignment by likelihood kept as settled through the chain, not re-made "
-                      f"at every point: {' and '.join(why)}")  # fmt: skip
+        return None, (
+            "assignment by likelihood kept as settled through the chain, not re-made "
+            f"at every point: {' and '.join(why)}"
+        )
     n = int(np.max(pairing.modes)) + 1 + REASSIGN_EXTRA_MODES
     m = np.asarray(frequency_Hz).size
     return ReassignedLikelihood(frequency_Hz, sigma_Hz, n, observation), (

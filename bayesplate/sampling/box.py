@@ -72,5 +72,8 @@ def check_box(box, estimate):
         return
     sd = np.sqrt(np.diag(estimate.covariance_b))
     low, high = (estimate.b - box.lower) / sd, (box.upper - estimate.b) / sd
-    log.info("the MAP is %s (lower) / %s (upper) deviations from the fast model's box "
-             "edges", np.round(low, 1), np.round(high, 1))  # fmt: skip
+    log.info(
+        "the MAP is %s (lower) / %s (upper) deviations from the fast model's box edges",
+        np.round(low, 1),
+        np.round(high, 1),
+    )

@@ -156,8 +156,9 @@ class ScreenedDEMove(emcee.moves.DEMove):
         for split in range(self.nsplits):
             S1 = inds == split
             sets = [state.coords[inds == j] for j in range(self.nsplits)]
-            q, factors = self.get_proposal(sets[split], sets[:split] + sets[split + 1 :],
-                                           model.random)  # fmt: skip
+            q, factors = self.get_proposal(
+                sets[split], sets[:split] + sets[split + 1 :], model.random
+            )
             log_u = np.log(model.random.rand(len(q)))
             threshold = state.log_prob[S1] + log_u - factors
             need = ~(self.screen(q) < threshold)

@@ -192,8 +192,7 @@ def build_result(sampler, density, history, converged, wall, n_eval, forward0, s
     burn = burn_in(n_tune, tau_max, n)
     chain = sampler.get_chain(discard=burn)  # (draws, walkers, 6)
     pointwise, modes = density.split_blob(sampler.get_blobs(discard=burn))
-    idata = _inference_data(density, chain, sampler.get_log_prob(discard=burn), pointwise,
-                            settings)  # fmt: skip
+    idata = _inference_data(density, chain, sampler.get_log_prob(discard=burn), pointwise, settings)
     assignment = None
     if modes is not None:  # the best assignment stored at every draw (emcee's blobs)
         assignment = ChainAssignment.from_draws(

@@ -61,13 +61,17 @@ class Pair(Physics):
 
     def settings(self):
         """The components' settings, each key prefixed by its component's name."""
-        return {f"{c.name}.{k}": v for c in (self.first, self.second)
-                for k, v in c.settings().items()}  # fmt: skip
+        return {
+            f"{c.name}.{k}": v for c in (self.first, self.second) for k, v in c.settings().items()
+        }
 
     def parameters(self, model, b):
         """The first component's parameters, then the second's, names prefixed."""
-        return tuple(replace(p, name=f"{c.name}.{p.name}") for c in (self.first, self.second)
-                     for p in c.parameters(model, b))  # fmt: skip
+        return tuple(
+            replace(p, name=f"{c.name}.{p.name}")
+            for c in (self.first, self.second)
+            for p in c.parameters(model, b)
+        )
 
     def split(self, model, theta):
         """``(theta_first, theta_second)`` of a concatenated parameter vector.
@@ -111,8 +115,9 @@ class Pair(Physics):
 
         def matrices(theta):
             theta = np.asarray(theta, dtype=float)
-            return tuple(x + y - z for x, y, z in zip(ma(theta[:k]), mb(theta[k:]), nominal,
-                                                      strict=True))  # fmt: skip
+            return tuple(
+                x + y - z for x, y, z in zip(ma(theta[:k]), mb(theta[k:]), nominal, strict=True)
+            )
 
         def difference(theta, i, h):
             # the pair's matrices less its component's do not depend on that component's
@@ -167,16 +172,23 @@ class Pair(Physics):
         ta, tb = self.split(model, theta)
         images_a = [ta, *self.first.mirror_images(model, ta)]
         images_b = [tb, *self.second.mirror_images(model, tb)]
-        combos = [np.concatenate([images_a[i], images_b[j]])
-                  for i, j in itertools.product(range(len(images_a)), range(len(images_b)))
-                  if (i, j) != (0, 0)]  # fmt: skip
+        combos = [
+            np.concatenate([images_a[i], images_b[j]])
+            for i, j in itertools.product(range(len(images_a)), range(len(images_b)))
+            if (i, j) != (0, 0)
+        ]
         if not combos:
             return []
         check = _check_model(model)
         n = MIRROR_MODES
         want = self.apply(check, theta).solve(self.b, n).eigenvalues
-        return [t for t in combos if np.allclose(self.apply(check, t).solve(self.b, n).eigenvalues,
-                                                 want, rtol=1e-8, atol=0.0)]  # fmt: skip
+        return [
+            t
+            for t in combos
+            if np.allclose(
+                self.apply(check, t).solve(self.b, n).eigenvalues, want, rtol=1e-8, atol=0.0
+            )
+        ]
 
 
 #: The last plate checked for mirror images and its small mesh (kept out of the pairs'
@@ -230,7 +242,6 @@ def pairs_with(best, physics_list, ranked, model, scans, n_places=3):
         own = [c.fit.theta for c in ranked if c.fit.physics is second]
         scan = scans.get(second.name)
         places = [] if scan is None else scan.best(model, n_places)
-        starts = [np.concatenate([ta, np.asarray(t, dtype=float)])
-                  for t in [mean_b, *own, *places]]  # fmt: skip
+        starts = [np.concatenate([ta, np.asarray(t, dtype=float)]) for t in [mean_b, *own, *places]]
         out.append(Pair(first, second, best.fit.b, starts))
     return out

@@ -97,8 +97,9 @@ def discs_fractions(mesh, centres, diameter):
     wy = min(ny, int(np.ceil(2.0 * r / mesh.dy)) + 2)
     i0 = np.clip(np.floor((centres[:, 0] - r) / mesh.dx).astype(int), 0, nx - wx)
     j0 = np.clip(np.floor((centres[:, 1] - r) / mesh.dy).astype(int), 0, ny - wy)
-    window = ((j0[:, None, None] + np.arange(wy)[:, None]) * nx
-              + i0[:, None, None] + np.arange(wx)).reshape(len(centres), -1)  # fmt: skip
+    window = (
+        (j0[:, None, None] + np.arange(wy)[:, None]) * nx + i0[:, None, None] + np.arange(wx)
+    ).reshape(len(centres), -1)
     size = np.array([mesh.dx, mesh.dy])
     lo = (mesh.centroids - size / 2)[window] - centres[:, None]  # (c, wy wx, 2)
     hi = lo + size
@@ -172,11 +173,15 @@ class Cutout(Physics):
         if inside.size == 0:
             return model
         f = frac[inside, None, None]
-        removed = [model.assembler.element_data(inside, f * Ke[None])
-                   for Ke in model.element_stiffness_terms()]  # fmt: skip
+        removed = [
+            model.assembler.element_data(inside, f * Ke[None])
+            for Ke in model.element_stiffness_terms()
+        ]
         mass = model.assembler.element_data(inside, f * model.element_mass()[None])
-        return model.modified(stiffness_terms=model.stiffness_terms - np.array(removed),
-                              mass_data=model.mass_data - mass)  # fmt: skip
+        return model.modified(
+            stiffness_terms=model.stiffness_terms - np.array(removed),
+            mass_data=model.mass_data - mass,
+        )
 
     def ritz(self, model, b, basis, near=None):
         """``V^T K_j V - sum_e f_e V_e^T K_j^e V_e`` (and the same for M), cut elements only.
@@ -215,8 +220,7 @@ class Cutout(Physics):
     def scan(self, model, basis, b, Y, sigma, modes, projector):
         """Every ``scan_stride``-th element centre, diameters ``scan_diameters``."""
         diameters = _largest_mm(model) * np.asarray(self.scan_diameters)
-        return cutout_scan(model, basis, b, Y, sigma, modes, projector, diameters,
-                           self.scan_stride)  # fmt: skip
+        return cutout_scan(model, basis, b, Y, sigma, modes, projector, diameters, self.scan_stride)
 
 
 def _mass_energies(model, paired):
@@ -251,8 +255,14 @@ def cutout_map(model, result, b, residual_whitened, sigma_lambda, projector):
     stiffness = element_energies(model, result, np.asarray(b, dtype=float))
     kinetic = result.eigenvalues[:, None] * _mass_energies(model, result)
     mesh = model.mesh
-    return effect_map(kinetic - stiffness, sigma_lambda, residual_whitened, projector,
-                      1e3 * mesh.centroids, (mesh.ny, mesh.nx))  # fmt: skip
+    return effect_map(
+        kinetic - stiffness,
+        sigma_lambda,
+        residual_whitened,
+        projector,
+        1e3 * mesh.centroids,
+        (mesh.ny, mesh.nx),
+    )
 
 
 def cutout_scan(model, basis, b, Y, sigma, modes, projector, diameters_mm, stride=2):
@@ -292,8 +302,9 @@ def cutout_scan(model, basis, b, Y, sigma, modes, projector, diameters_mm, strid
     chunks = max(1, len(centres) * mesh.n_elements // _SCAN_CHUNK)
     thetas, chi2 = [], []
     for d_mm in np.asarray(diameters_mm, dtype=float):
-        F = (1.0 - RESIDUAL) * np.vstack([discs_fractions(mesh, chunk, 1e-3 * d_mm)
-                                          for chunk in np.array_split(centres, chunks)])
+        F = (1.0 - RESIDUAL) * np.vstack(
+            [discs_fractions(mesh, chunk, 1e-3 * d_mm) for chunk in np.array_split(centres, chunks)]
+        )
         A = np.diag(basis.eigenvalues) - (F @ red_k).reshape(-1, n, n)
         B = np.eye(n) - (F @ red_m).reshape(-1, n, n)
         Linv = np.linalg.inv(np.linalg.cholesky(0.5 * (B + B.transpose(0, 2, 1))))

@@ -110,8 +110,9 @@ class LocalStiffnessLoss(Physics):
 
         def fractions(theta):
             x, y, dx, dy, _ = theta
-            return area_fractions(model.mesh, 1e-3 * np.array([x, y]),
-                                  1e-3 * np.abs(np.array([dx, dy])))  # fmt: skip
+            return area_fractions(
+                model.mesh, 1e-3 * np.array([x, y]), 1e-3 * np.abs(np.array([dx, dy]))
+            )
 
         def matrices(theta):
             out = terms.copy()
@@ -145,8 +146,9 @@ class LocalStiffnessLoss(Physics):
         """Every ``scan_stride``-th element centre, ``scan_sizes`` and ``scan_factors``."""
         a_mm, b_mm = 1e3 * model.mesh.a, 1e3 * model.mesh.b
         sizes = [(a_mm * sx, b_mm * sy) for sx, sy in self.scan_sizes]
-        return stiffness_loss_scan(model, basis, b, Y, sigma, modes, projector, sizes,
-                                   self.scan_factors, self.scan_stride)  # fmt: skip
+        return stiffness_loss_scan(
+            model, basis, b, Y, sigma, modes, projector, sizes, self.scan_factors, self.scan_stride
+        )
 
 
 def element_energies(model, paired, weights):
@@ -195,12 +197,17 @@ def stiffness_loss_map(model, result, b, residual_whitened, sigma_lambda, projec
     weights = np.asarray(b, dtype=float) * np.array([0, 1, 1, 1, 1, 1])
     energy = element_energies(model, result, weights)
     mesh = model.mesh
-    return effect_map(-energy, sigma_lambda, residual_whitened, projector,
-                      1e3 * mesh.centroids, (mesh.ny, mesh.nx))  # fmt: skip
+    return effect_map(
+        -energy,
+        sigma_lambda,
+        residual_whitened,
+        projector,
+        1e3 * mesh.centroids,
+        (mesh.ny, mesh.nx),
+    )
 
 
-def stiffness_loss_scan(model, basis, b, Y, sigma, modes, projector, sizes_mm, factors,
-                        stride=2):  # fmt: skip
+def stiffness_loss_scan(model, basis, b, Y, sigma, modes, projector, sizes_mm, factors, stride=2):
     """Scan a patch that lost matrix-dominated stiffness over centres, sizes and factors.
 
     In the Ritz basis: ``(Lambda - (1 - factor) Phi^T K_loss Phi) q = lambda q``. The patch
@@ -239,8 +246,9 @@ def stiffness_loss_scan(model, basis, b, Y, sigma, modes, projector, sizes_mm, f
     table = np.zeros((mesh.ny + 1, mesh.nx + 1, n, n))  # summed-area table of the elements
     table[iy + 1, ix + 1] = reduced
     table = table.cumsum(axis=0).cumsum(axis=1)
-    cy, cx = np.meshgrid(np.arange(0, mesh.ny, stride), np.arange(0, mesh.nx, stride),
-                         indexing="ij")  # fmt: skip
+    cy, cx = np.meshgrid(
+        np.arange(0, mesh.ny, stride), np.arange(0, mesh.nx, stride), indexing="ij"
+    )
     cx, cy = cx.ravel(), cy.ravel()
     thetas, chi2 = [], []
     for dx_mm, dy_mm in sizes_mm:

@@ -78,8 +78,7 @@ class PointMass(Physics):
     def scan(self, model, basis, b, Y, sigma, modes, projector):
         """Every ``scan_stride``-th node, masses ``scan_mass_fractions`` of the plate's."""
         masses_g = self.scan_mass_fractions * _plate_mass_g(model)
-        return point_mass_scan(model, basis, Y, sigma, modes, projector, masses_g,
-                               self.scan_stride)  # fmt: skip
+        return point_mass_scan(model, basis, Y, sigma, modes, projector, masses_g, self.scan_stride)
 
 
 def point_mass_map(model, result, residual_whitened, sigma_lambda, projector):
@@ -96,8 +95,14 @@ def point_mass_map(model, result, residual_whitened, sigma_lambda, projector):
     w = result.vectors[model.mesh.dofs("w")]  # (n_nodes, m)
     derivatives = -(result.eigenvalues[:, None] * (w.T**2))
     mesh = model.mesh
-    return effect_map(derivatives, sigma_lambda, residual_whitened, projector,
-                      1e3 * mesh.nodes, (mesh.ny + 1, mesh.nx + 1))  # fmt: skip
+    return effect_map(
+        derivatives,
+        sigma_lambda,
+        residual_whitened,
+        projector,
+        1e3 * mesh.nodes,
+        (mesh.ny + 1, mesh.nx + 1),
+    )
 
 
 def point_mass_scan(model, basis, Y, sigma, modes, projector, masses_g, stride=2):

@@ -108,8 +108,9 @@ class PointSupport(Physics):
     def scan(self, model, basis, b, Y, sigma, modes, projector):
         """Every ``scan_stride``-th node, springs ``scan_stiffness`` times ``k_ref``."""
         springs = self.scan_stiffness * reference_stiffness(model, b)
-        return point_support_scan(model, basis, Y, sigma, modes, projector, springs,
-                                  self.scan_stride)  # fmt: skip
+        return point_support_scan(
+            model, basis, Y, sigma, modes, projector, springs, self.scan_stride
+        )
 
 
 def point_support_map(model, result, residual_whitened, sigma_lambda, projector):
@@ -125,8 +126,14 @@ def point_support_map(model, result, residual_whitened, sigma_lambda, projector)
     """
     w = result.vectors[model.mesh.dofs("w")]  # (n_nodes, m)
     mesh = model.mesh
-    return effect_map(w.T**2, sigma_lambda, residual_whitened, projector,
-                      1e3 * mesh.nodes, (mesh.ny + 1, mesh.nx + 1))  # fmt: skip
+    return effect_map(
+        w.T**2,
+        sigma_lambda,
+        residual_whitened,
+        projector,
+        1e3 * mesh.nodes,
+        (mesh.ny + 1, mesh.nx + 1),
+    )
 
 
 def point_support_scan(model, basis, Y, sigma, modes, projector, springs_N_m, stride=2):

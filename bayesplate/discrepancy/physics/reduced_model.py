@@ -291,8 +291,9 @@ class RegionProjection:
         short = [np.arange(start, stop) for start, stop in runs if stop - start < RUN_MIN]
         if short:
             short = np.concatenate(short)
-            row = scipy.sparse.csr_matrix((weights[short], short, [0, short.size]),
-                                          shape=(1, len(self.dofs)))  # fmt: skip
+            row = scipy.sparse.csr_matrix(
+                (weights[short], short, [0, short.size]), shape=(1, len(self.dofs))
+            )
             out = np.asarray(row @ flat).ravel()
         else:
             out = np.zeros(flat.shape[1])
@@ -391,8 +392,9 @@ class CandidatePencil:
         return self.solve(b, theta, n_modes)[0].eigenvalues
 
 
-def candidate_pencil(model, physics, b, thetas, n_modes, nominal_modes=None, earlier=(),
-                     local=False):  # fmt: skip
+def candidate_pencil(
+    model, physics, b, thetas, n_modes, nominal_modes=None, earlier=(), local=False
+):
     """A candidate's :class:`CandidatePencil` on ``model``, or None if it has no Ritz form.
 
     The basis holds the rigid-body motions, the nominal plate's lowest ``n_modes`` modes at
@@ -437,8 +439,9 @@ def candidate_pencil(model, physics, b, thetas, n_modes, nominal_modes=None, ear
     else:
         if nominal_modes is None:
             nominal_modes = model.solve(b, n_modes).vectors
-        solves = [physics.apply(model, np.asarray(t, dtype=float)).solve(b, n_modes)
-                  for t in thetas]  # fmt: skip
+        solves = [
+            physics.apply(model, np.asarray(t, dtype=float)).solve(b, n_modes) for t in thetas
+        ]
         blocks = [nominal_modes]
     snapshots = [*earlier, *(s.vectors for s in solves)]
     V = ritz_basis(model, blocks + snapshots)

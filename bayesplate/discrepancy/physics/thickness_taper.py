@@ -68,8 +68,7 @@ class ThicknessTaper(Physics):
         def features(theta):
             return np.polynomial.chebyshev.chebvander(np.atleast_1d(theta)[0] / half, 7)[0]
 
-        return interpolated_ritz(lambda t: self.apply(model, t), basis, nodes[:, None],
-                                 features)  # fmt: skip
+        return interpolated_ritz(lambda t: self.apply(model, t), basis, nodes[:, None], features)
 
     def image(self, model, theta, symmetry):
         """``-e`` when the symmetry turns the plate end for end along the taper, else ``e``."""

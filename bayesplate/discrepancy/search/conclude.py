@@ -18,21 +18,30 @@ from .verdict import basins_note, tie_text, ties, unsettled_notes, verdict
 
 __all__ = ["conclude"]
 
-_UNEXPLAINED = ("the recordings disagree with the model beyond their deviations and no "
-                "candidate physics explains the mismatch")  # fmt: skip
-_MIRRORS = ("the plate's symmetry makes the mirror images of the located region fit equally "
-            "well from frequencies alone")  # fmt: skip
+_UNEXPLAINED = (
+    "the recordings disagree with the model beyond their deviations and no "
+    "candidate physics explains the mismatch"
+)
+_MIRRORS = (
+    "the plate's symmetry makes the mirror images of the located region fit equally "
+    "well from frequencies alone"
+)
 
 
 def conclude(run, data, nominal_stage, located, searched):
     """The verdict of a pass and its :class:`~.result.Diagnosis` (every stage's result)."""
     o, s, check = run.options, searched, searched.check
-    probabilities = model_probabilities([(c.name, c.log_evidence_gain) for c in s.ranked],
-                                        o.prior_odds)  # fmt: skip
-    tied = (ties(s.best, s.ranked, probabilities, o.ambiguity_margin, o.prior_margin)
-            if s.warranted else [])  # fmt: skip
-    outcome, chosen = verdict(check.p_value, s.warranted, s.refit_p_value, o.alpha, s.best,
-                              tied=bool(tied))  # fmt: skip
+    probabilities = model_probabilities(
+        [(c.name, c.log_evidence_gain) for c in s.ranked], o.prior_odds
+    )
+    tied = (
+        ties(s.best, s.ranked, probabilities, o.ambiguity_margin, o.prior_margin)
+        if s.warranted
+        else []
+    )
+    outcome, chosen = verdict(
+        check.p_value, s.warranted, s.refit_p_value, o.alpha, s.best, tied=bool(tied)
+    )
     rival = tied[0][0] if outcome == "ambiguous" else None
     separation, notes = None, [*data.notes, *nominal_stage.notes]
     if outcome == "ambiguous":
@@ -44,19 +53,37 @@ def conclude(run, data, nominal_stage, located, searched):
         region, mirrors = None, []
     notes += _notes(outcome, chosen, check.fit, o.basin_margin, region is not None and mirrors)
     notes += unsettled_notes(check.fit, chosen, tied if rival else [], s.ranked)
-    run.say(f"verdict: {outcome}" + (f" ({chosen.name})" if chosen else "")
-            + "".join(f" or {c.name}" for c, _ in (tied if rival else [])))  # fmt: skip
+    run.say(
+        f"verdict: {outcome}"
+        + (f" ({chosen.name})" if chosen else "")
+        + "".join(f" or {c.name}" for c, _ in (tied if rival else []))
+    )
     return Diagnosis(
-        verdict=outcome, nominal=check.fit, dof=check.dof, p_value=check.p_value,
-        mode_p_values=check.mode_p_values, located_modes=located.located_modes,
-        mode_kinds=located.kinds, maps=located.maps, region_mm=region,
-        region_mirrors_mm=mirrors, candidates=s.ranked, chosen=chosen,
-        refit_dof=s.refit_dof, refit_p_value=s.refit_p_value, unidentified=s.unidentified,
-        sigma_Hz=data.sigma_Hz, mesh_error_Hz=data.mesh_error_Hz,
-        measured_Hz=data.measured.frequency_Hz, notes=notes, scans=located.fitting.scans,
-        probabilities=probabilities, rival=rival, separation=separation,
+        verdict=outcome,
+        nominal=check.fit,
+        dof=check.dof,
+        p_value=check.p_value,
+        mode_p_values=check.mode_p_values,
+        located_modes=located.located_modes,
+        mode_kinds=located.kinds,
+        maps=located.maps,
+        region_mm=region,
+        region_mirrors_mm=mirrors,
+        candidates=s.ranked,
+        chosen=chosen,
+        refit_dof=s.refit_dof,
+        refit_p_value=s.refit_p_value,
+        unidentified=s.unidentified,
+        sigma_Hz=data.sigma_Hz,
+        mesh_error_Hz=data.mesh_error_Hz,
+        measured_Hz=data.measured.frequency_Hz,
+        notes=notes,
+        scans=located.fitting.scans,
+        probabilities=probabilities,
+        rival=rival,
+        separation=separation,
         also_tied=[c for c, _ in tied[1:]] if rival else [],
-    )  # fmt: skip
+    )
 
 
 def _notes(outcome, chosen, nominal, basin_margin, mirrored):

@@ -64,8 +64,10 @@ def constants_anew(problem, fitted, coarse, polish, workers=1):
     physics, theta = problem.physics, np.asarray(fitted.theta, dtype=float)
     plate, coarse_plate = physics.apply(problem.model, theta), physics.apply(coarse, theta)
     n = int(problem.modes.max()) + 1
-    correction = (plate.solve(problem.mu_b, n).eigenvalues[problem.modes]
-                  / coarse_plate.solve(problem.mu_b, n).eigenvalues[problem.modes])  # fmt: skip
+    correction = (
+        plate.solve(problem.mu_b, n).eigenvalues[problem.modes]
+        / coarse_plate.solve(problem.mu_b, n).eigenvalues[problem.modes]
+    )
     V_b = problem.L @ problem.L.T
     rng = np.random.default_rng(ANEW_SEED)
     reduced = nominal_reduced(coarse_plate, problem.mu_b, V_b, n, rng)
@@ -74,8 +76,12 @@ def constants_anew(problem, fitted, coarse, polish, workers=1):
     rough = constants.on(reduced, correction)
     found = distinct(first_round(rough, rng, ANEW_STARTS, workers))[:ANEW_KEEP]
     z_theta = problem.pack(problem.mu_b, theta)[6:]
-    log.info("%s: constants searched again at theta %s: %s", physics.name, np.round(theta, 4),
-             ", ".join(f"{2 * r.cost:.4g}" for r in found))  # fmt: skip
+    log.info(
+        "%s: constants searched again at theta %s: %s",
+        physics.name,
+        np.round(theta, 4),
+        ", ".join(f"{2 * r.cost:.4g}" for r in found),
+    )
     again = settle(problem, polish, [np.concatenate([r.x, z_theta]) for r in found])
     if again.log_evidence <= fitted.log_evidence:
         return None

@@ -53,14 +53,25 @@ def deviations(run, pairing):
     sigma = 2.0 * Y * sigma_Hz / measured.frequency_Hz  # d lambda = 2 lambda df / f
     mu_b, V_b = run.prior
     problem = JointProblem(run.model, Y, sigma, mu_b, V_b, modes)
-    return Deviations(measured, modes, sigma_Hz, err, Y, sigma,
-                      (fine_lam / coarse_at_mean)[modes], problem, tuple(notes))  # fmt: skip
+    return Deviations(
+        measured,
+        modes,
+        sigma_Hz,
+        err,
+        Y,
+        sigma,
+        (fine_lam / coarse_at_mean)[modes],
+        problem,
+        tuple(notes),
+    )
 
 
 def _at_mean(run, n_solve):
     """Both meshes' lowest `n_solve` modes at the prior mean, solved once per run."""
     if n_solve not in run.at_mean:  # a second pass (another assignment) solves nothing again
         mu_b = run.prior[0]
-        run.at_mean[n_solve] = (run.model.solve(mu_b, n_solve),
-                                run.coarse.solve(mu_b, n_solve).eigenvalues)  # fmt: skip
+        run.at_mean[n_solve] = (
+            run.model.solve(mu_b, n_solve),
+            run.coarse.solve(mu_b, n_solve).eigenvalues,
+        )
     return run.at_mean[n_solve]

@@ -56,10 +56,16 @@ def local_fits(problem, starts, max_nfev, workers=1, tol=1e-8):
                 xtol=tol,
             )
         except np.linalg.LinAlgError as error:
-            log.warning("%s start %s: fit failed (%s: %s)", problem_name(problem),
-                        np.round(z0, 2), type(error).__name__, error)  # fmt: skip
-            failed = OptimizeResult(x=z0, cost=np.inf, success=False, status=-1,
-                                    message=f"failed: {error}")  # fmt: skip
+            log.warning(
+                "%s start %s: fit failed (%s: %s)",
+                problem_name(problem),
+                np.round(z0, 2),
+                type(error).__name__,
+                error,
+            )
+            failed = OptimizeResult(
+                x=z0, cost=np.inf, success=False, status=-1, message=f"failed: {error}"
+            )
             failed.n_solves = problem.n_solves - solves
             return failed
         log.info(

@@ -87,25 +87,41 @@ def locate(run, data, nominal_stage):
     n = int(modes.max()) + 1 + RITZ_EXTRA_MODES
     coarse_nominal = run.coarse.solve(nominal.b, n)
     ritz = model.solve(nominal.b, n)
-    scans = _scans(run.physics, model, nominal, modes, data.Y, sigma, P, ritz,
-                   run.options.workers)  # fmt: skip
+    scans = _scans(run.physics, model, nominal, modes, data.Y, sigma, P, ritz, run.options.workers)
     mu_b, V_b = run.prior
     fitting = Fitting(
-        model=model, coarse=run.coarse, Y=data.Y, sigma=sigma, mu_b=mu_b, V_b=V_b, modes=modes,
-        nominal=nominal, scans=scans, say=run.say, stages=nominal_stage.stages,
+        model=model,
+        coarse=run.coarse,
+        Y=data.Y,
+        sigma=sigma,
+        mu_b=mu_b,
+        V_b=V_b,
+        modes=modes,
+        nominal=nominal,
+        scans=scans,
+        say=run.say,
+        stages=nominal_stage.stages,
         scale=nominal.eigenvalues / coarse_nominal.eigenvalues[modes],
-        coarse_modes=coarse_nominal.vectors, ritz_modes=ritz.vectors, rough=nominal_stage.rough,
-        margin=run.options.refine_margin, workers=run.options.workers,
+        coarse_modes=coarse_nominal.vectors,
+        ritz_modes=ritz.vectors,
+        rough=nominal_stage.rough,
+        margin=run.options.refine_margin,
+        workers=run.options.workers,
         threshold=run.options.evidence_threshold,
-    )  # fmt: skip
+    )
     return Located(kinds, maps, region, mirrors, located, fitting)
 
 
 def paired(fit_, modes):
     """The fit's modal result restricted to the paired modes (measured order)."""
     modal = fit_.modal
-    return type(modal)(modal.b, modal.eigenvalues[modes], modal.vectors[:, modes],
-                       modal.sensitivities[modes], modal.rigid_eigenvalues)  # fmt: skip
+    return type(modal)(
+        modal.b,
+        modal.eigenvalues[modes],
+        modal.vectors[:, modes],
+        modal.sensitivities[modes],
+        modal.rigid_eigenvalues,
+    )
 
 
 def _maps(physics_list, model, nominal, modes, sigma, P):
@@ -129,7 +145,13 @@ def _scans(physics_list, model, nominal, modes, Y, sigma, P, ritz, workers=1):
     (:func:`bayesplate.parallel.fork_map`).
     """
     basis = RitzBasis.from_modes(model, ritz)
-    found = fork_map(lambda physics: physics.scan(model, basis, nominal.b, Y, sigma, modes, P),
-                     physics_list, workers)  # fmt: skip
-    return {physics.name: result for physics, result in zip(physics_list, found, strict=True)
-            if result is not None}  # fmt: skip
+    found = fork_map(
+        lambda physics: physics.scan(model, basis, nominal.b, Y, sigma, modes, P),
+        physics_list,
+        workers,
+    )
+    return {
+        physics.name: result
+        for physics, result in zip(physics_list, found, strict=True)
+        if result is not None
+    }

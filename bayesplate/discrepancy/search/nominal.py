@@ -76,8 +76,17 @@ def fit_nominal(problem, rough, rng, n_starts=N_STARTS, workers=1, keep=3):
     # a second round hops around the best first-round optimum (basins the prior's draws
     # seldom reach: on the measured Frederiksen plate the best one is two deviations off)
     starts = [r.x for r in first] + [first[0].x + rng.standard_normal(6) for _ in range(n_starts)]
-    return fit(problem, starts, rough=rough, keep=keep, workers=workers, distinct=True,
-               polish=nominal_polisher(problem), rough_nfev=200, tol=1e-8)  # fmt: skip
+    return fit(
+        problem,
+        starts,
+        rough=rough,
+        keep=keep,
+        workers=workers,
+        distinct=True,
+        polish=nominal_polisher(problem),
+        rough_nfev=200,
+        tol=1e-8,
+    )
 
 
 def first_round(rough, rng, n_starts, workers=1):
@@ -110,8 +119,7 @@ def nominal_polisher(problem):
 
     def polish(z, earlier=()):
         b = problem.unpack(z)[0]
-        return problem.on_pencil(candidate_pencil(problem.model, None, b, [], n,
-                                                  earlier=earlier))  # fmt: skip
+        return problem.on_pencil(candidate_pencil(problem.model, None, b, [], n, earlier=earlier))
 
     return polish
 
@@ -138,12 +146,14 @@ def nominal_reduced(coarse, mu_b, V_b, n_modes, rng, n_snapshots=8):
     ReducedModel
     """
     seed = int(rng.integers(2**31))
-    return ReducedModel.build(coarse, mu_b, V_b, n_modes + 2, n_snapshots=n_snapshots,
-                              margin=6, rng=seed)  # fmt: skip
+    return ReducedModel.build(
+        coarse, mu_b, V_b, n_modes + 2, n_snapshots=n_snapshots, margin=6, rng=seed
+    )
 
 
-def nominal_stage(problem, prior, coarse, correction, rng, n_starts, workers, fast=None,
-                  stages=None):  # fmt: skip
+def nominal_stage(
+    problem, prior, coarse, correction, rng, n_starts, workers, fast=None, stages=None
+):
     """Step 1 whole: the reduced model (unless `fast`) and :func:`fit_nominal`, or both stored.
 
     The stage's key (:mod:`.store`) adds the generator's state and ``n_starts`` to the
@@ -202,8 +212,9 @@ def check_fast(fast, nominal, modes, notes):
     error = float(np.max(np.abs(np.sqrt(lam / nominal.eigenvalues) - 1.0)))
     tolerance = fast.certificate.tolerance
     if error > tolerance:
-        log.error("the fast model is off by %.2g at the nominal fit (certified %.2g)",
-                  error, tolerance)  # fmt: skip
+        log.error(
+            "the fast model is off by %.2g at the nominal fit (certified %.2g)", error, tolerance
+        )
         notes.append(
             f"the shared fast model is off by {error:.2g} in frequency at the nominal fit, "
             f"beyond its certificate ({tolerance:.2g}); the full model was used"

@@ -24,20 +24,38 @@ def fit_nominal_stage(run, data, rng):
     the candidates and the fast model; the stages after it add the nominal fit.
     """
     mu_b, V_b = run.prior
-    context = digest(data.Y, data.sigma, data.measured.frequency_Hz, data.modes, mu_b, V_b,
-                     run.options.store_key(), plate_digest(run.model), run.physics,
-                     run.fast)  # fmt: skip
+    context = digest(
+        data.Y,
+        data.sigma,
+        data.measured.frequency_Hz,
+        data.modes,
+        mu_b,
+        V_b,
+        run.options.store_key(),
+        plate_digest(run.model),
+        run.physics,
+        run.fast,
+    )
     stages = Stages(run.store, context, run.say)
-    rough, nominal = nominal_stage(data.problem, run.prior, run.coarse, data.correction, rng,
-                                   run.options.n_starts, run.options.workers, run.fast,
-                                   stages)  # fmt: skip
+    rough, nominal = nominal_stage(
+        data.problem,
+        run.prior,
+        run.coarse,
+        data.correction,
+        rng,
+        run.options.n_starts,
+        run.options.workers,
+        run.fast,
+        stages,
+    )
     stages = stages.then("nominal", fit_digest(nominal))
     notes = []
     if run.fast is not None:
         check_fast(run.fast, nominal, data.modes, notes)
     check = check_nominal(run, data, nominal)
-    run.say(f"nominal fit: chi2 = {nominal.chi2:.1f} on {check.dof:.1f} dof, "
-            f"p = {check.p_value:.3g}")  # fmt: skip
+    run.say(
+        f"nominal fit: chi2 = {nominal.chi2:.1f} on {check.dof:.1f} dof, p = {check.p_value:.3g}"
+    )
     return NominalStage(check, rough, stages, tuple(notes))
 
 
@@ -46,6 +64,7 @@ def check_nominal(run, data, nominal):
     dof = max(data.m - nominal.effective_parameters, 1.0)
     p_value = float(chi2_dist.sf(nominal.chi2, dof))
     mode_p = predictive_p_values(nominal, data.problem)
-    loose = unidentified(nominal, run.prior[1], run.options.unidentified_ratio,
-                         run.options.basin_margin)  # fmt: skip
+    loose = unidentified(
+        nominal, run.prior[1], run.options.unidentified_ratio, run.options.basin_margin
+    )
     return NominalCheck(nominal, dof, p_value, mode_p, loose)

@@ -74,8 +74,10 @@ class DiagnoseOptions:
 
     def __post_init__(self):
         if self.mesh_error_part not in MESH_ERROR_PARTS:
-            raise ValueError(f"mesh_error_part = {self.mesh_error_part!r}: must be one of "
-                             f"{', '.join(MESH_ERROR_PARTS)}")  # fmt: skip
+            raise ValueError(
+                f"mesh_error_part = {self.mesh_error_part!r}: must be one of "
+                f"{', '.join(MESH_ERROR_PARTS)}"
+            )
 
     @classmethod
     def of(cls, options=None, **overrides):
@@ -93,9 +95,19 @@ class DiagnoseOptions:
 
     def store_key(self):
         """What of the options the stored stages depend on (:mod:`.store`), as before."""
-        key = (self.alpha, self.evidence_threshold, self.n_starts, self.unidentified_ratio,
-               self.mesh_error_ratio, self.refine_margin, self.basin_margin,
-               self.ambiguity_margin, self.prior_margin, self.pairs, self.prior_odds)  # fmt: skip
+        key = (
+            self.alpha,
+            self.evidence_threshold,
+            self.n_starts,
+            self.unidentified_ratio,
+            self.mesh_error_ratio,
+            self.refine_margin,
+            self.basin_margin,
+            self.ambiguity_margin,
+            self.prior_margin,
+            self.pairs,
+            self.prior_odds,
+        )
         if self.mesh_error_part != "whole":  # (the default keeps the stores' keys of before)
             key += (self.mesh_error_part,)
         return key

@@ -55,8 +55,16 @@ def diagnose_passes(run, pairing, rng, checked):
     if not run.options.reassign or not (checked or by_likelihood):
         return first  # by order, index or shapes as asked: kept
     settled = (lambda: _settled_by_likelihood(run)) if checked else None
-    return made_again(first, lambda p: one_pass(run, p, again), run.model, pairing,
-                      run.case.measured, run.prior, run.say, settled)  # fmt: skip
+    return made_again(
+        first,
+        lambda p: one_pass(run, p, again),
+        run.model,
+        pairing,
+        run.case.measured,
+        run.prior,
+        run.say,
+        settled,
+    )
 
 
 def _settled_by_likelihood(run):

@@ -74,8 +74,10 @@ def run_phase(stages, name, compute, items, results, hits, workers, say, then=No
         ):
             if failed:
                 failed += "; left out" if results[i] is None else "; the phase before kept"
-                say(f"{physics.name}{''.join(f' ({v})' for v in physics.settings().values())}"
-                    f": {failed}")  # fmt: skip
+                say(
+                    f"{physics.name}{''.join(f' ({v})' for v in physics.settings().values())}"
+                    f": {failed}"
+                )
                 if results[i] is not None:
                     results[i] = replace(results[i], failed=failed)
                 break

@@ -147,25 +147,49 @@ def rank(fitting, physics_list):
     stages, workers, say = fitting.stages, fitting.workers, fitting.say
     # the candidates with most parameters take longest: they go first to the workers
     model, b = fitting.model, fitting.nominal.b
-    order = sorted(range(len(physics_list)),
-                   key=lambda i: -len(physics_list[i].parameters(model, b)))  # fmt: skip
+    order = sorted(
+        range(len(physics_list)), key=lambda i: -len(physics_list[i].parameters(model, b))
+    )
     results = [None] * len(physics_list)
     hits = [[] for _ in physics_list]  # the phases of each taken from the store
     settled = partial(settled_stage, fitting)
     # phases 1 and 2 in one task per candidate: a worker refines its candidate while the
     # other still fits its rough one (the same results as one phase after the other)
-    run_phase(stages, "rough", partial(rough_stage, fitting),
-              [(i, physics_list[i], None) for i in order], results, hits, workers, say,
-              then=("settled", settled, partial(_refines_said, fitting.margin)))  # fmt: skip
+    run_phase(
+        stages,
+        "rough",
+        partial(rough_stage, fitting),
+        [(i, physics_list[i], None) for i in order],
+        results,
+        hits,
+        workers,
+        say,
+        then=("settled", settled, partial(_refines_said, fitting.margin)),
+    )
     kept = [i for i, r in enumerate(results) if r is not None]  # a failed rough fit: left out
     physics_list, results, hits = ([x[i] for i in kept] for x in (physics_list, results, hits))
     todo = _rivals(results, fitting.threshold)
-    run_phase(stages, "settled", settled, [(i, physics_list[i], results[i].fit) for i in todo],
-              results, hits, workers, say)  # fmt: skip
+    run_phase(
+        stages,
+        "settled",
+        settled,
+        [(i, physics_list[i], results[i].fit) for i in todo],
+        results,
+        hits,
+        workers,
+        say,
+    )
     todo = _unsettled_leaders(results)
-    run_phase(stages, "again", partial(again_stage, fitting),
-              [(i, physics_list[i], results[i].fit) for i in todo], results, hits, workers,
-              say)  # fmt: skip
+    run_phase(
+        stages,
+        "again",
+        partial(again_stage, fitting),
+        [(i, physics_list[i], results[i].fit) for i in todo],
+        results,
+        hits,
+        workers,
+        say,
+    )
     for r, hit, physics in zip(results, hits, physics_list, strict=True):
         say(_summary(r, hit, physics))
     return sorted(results, key=lambda r: -r.log_evidence_gain)
@@ -181,14 +205,16 @@ def rough_stage(fitting, physics):
     """Phase 1 of :func:`rank`: a candidate's rough fit (its reduced coarse model)."""
     model, nominal = fitting.model, fitting.nominal
     problem = candidate_problem(fitting, physics)
-    thetas = [problem.theta_mean, *physics.starting_points(model, nominal.b),
-              *_located_starts(physics, model, fitting.scans)]  # fmt: skip
+    thetas = [
+        problem.theta_mean,
+        *physics.starting_points(model, nominal.b),
+        *_located_starts(physics, model, fitting.scans),
+    ]
     lo, hi = problem.theta_lower, problem.theta_upper
     thetas = [np.clip(t, lo, hi) for t in thetas]
     rough = _reduced(fitting, problem, physics, thetas)
     if rough is not None and problem.k == 1:  # cheap there: a grid of sizes as well
-        thetas += [np.clip(problem.theta_mean + s * problem.theta_sd, lo, hi)
-                   for s in SIZE_GRID]  # fmt: skip
+        thetas += [np.clip(problem.theta_mean + s * problem.theta_sd, lo, hi) for s in SIZE_GRID]
     # from the nominal optimum, then the best of those from the other nominal basins:
     # the constants that fit best with an effect may lie in another basin than those
     # that fit best without
@@ -197,10 +223,16 @@ def rough_stage(fitting, physics):
     others = others[:OTHER_BASINS]
     if rough is None:  # no reduced form: the coarse mesh, refined here when promising
         starts = [problem.pack(b, t) for b in [nominal.b, *others] for t in thetas]
-        result = fit(problem, starts, max_nfev=25, coarse=fitting.coarse,
-                     scale=fitting.scale, keep=FINISHED, distinct=True,
-                     refine=lambda r: r.log_evidence - nominal.log_evidence
-                     > fitting.margin)  # fmt: skip
+        result = fit(
+            problem,
+            starts,
+            max_nfev=25,
+            coarse=fitting.coarse,
+            scale=fitting.scale,
+            keep=FINISHED,
+            distinct=True,
+            refine=lambda r: r.log_evidence - nominal.log_evidence > fitting.margin,
+        )
     else:
 
         def in_other_basins(optima):
@@ -219,8 +251,9 @@ def settled_stage(fitting, item):
     starts = list(rough.rough_optima)
     if fitting.coarse_modes is not None:  # the first rounds on the coarse mesh
         coarse = problem.on(fitting.coarse, fitting.scale)
-        polish = candidate_polisher(coarse, physics, fitting.coarse, fitting.coarse_modes,
-                                    fitting.scale)  # fmt: skip
+        polish = candidate_polisher(
+            coarse, physics, fitting.coarse, fitting.coarse_modes, fitting.scale
+        )
         # every distinct rough optimum: the coarse rounds, not a first pencil's promise,
         # say which basin is best (a pencil built far from a basin misjudges it)
         settled, _ = polish_and_finish(coarse, polish, starts, COARSE_ROUNDS, prune=False)
@@ -243,8 +276,12 @@ def again_stage(fitting, item):
 def _refines_said(margin, rough):
     """Phase 2's choice (:func:`_refines`), on the candidate's own rough fit alone, logged."""
     chosen = _refines(rough, margin)
-    log.debug("%s: rough gain %+.1f, %s", _label(rough), rough.log_evidence_gain,
-              "refined" if chosen else "not refined")  # fmt: skip
+    log.debug(
+        "%s: rough gain %+.1f, %s",
+        _label(rough),
+        rough.log_evidence_gain,
+        "refined" if chosen else "not refined",
+    )
     return chosen
 
 
@@ -259,8 +296,10 @@ def _summary(r, hit, physics):
     where += "".join(f" ({phase} fit taken from the store)" for phase in hit)
     where += f" ({r.failed})" if r.failed else ""
     variant = "".join(f" ({v})" for v in physics.settings().values())
-    return (f"{r.name}{variant}: chi2 = {r.fit.chi2:.1f}, evidence gain "
-            f"{r.log_evidence_gain:+.1f}{where}")  # fmt: skip
+    return (
+        f"{r.name}{variant}: chi2 = {r.fit.chi2:.1f}, evidence gain "
+        f"{r.log_evidence_gain:+.1f}{where}"
+    )
 
 
 def _label(result):
@@ -288,9 +327,11 @@ def _rivals(results, threshold):
     best = _best_refined(results)
     if best <= threshold:
         return []
-    return [i for i, r in enumerate(results)
-            if not r.fit.refined and not r.failed
-            and r.log_evidence_gain >= best - RIVAL_REACH]  # fmt: skip
+    return [
+        i
+        for i, r in enumerate(results)
+        if not r.fit.refined and not r.failed and r.log_evidence_gain >= best - RIVAL_REACH
+    ]
 
 
 def _unsettled_leaders(results):
@@ -302,9 +343,13 @@ def _unsettled_leaders(results):
     """
     refined = [i for i, r in enumerate(results) if r.fit.refined]
     best = _best_refined(results)
-    return [i for i in refined if results[i].fit.check is not None
-            and not results[i].fit.check.settled
-            and results[i].log_evidence_gain >= best - LEADERS]  # fmt: skip
+    return [
+        i
+        for i in refined
+        if results[i].fit.check is not None
+        and not results[i].fit.check.settled
+        and results[i].log_evidence_gain >= best - LEADERS
+    ]
 
 
 def candidate_result(physics, model, nominal, fitted):
@@ -329,8 +374,9 @@ def _refines(rough, margin):
     +2.6 on the working mesh, a point mass's +116 was +126), and its optima move with the
     round-off of its many starts; the refined fits do not.
     """
-    return (not rough.fit.refined and bool(rough.fit.rough_optima)
-            and rough.log_evidence_gain > margin)  # fmt: skip
+    return (
+        not rough.fit.refined and bool(rough.fit.rough_optima) and rough.log_evidence_gain > margin
+    )
 
 
 def candidate_polisher(problem, physics, model, modes, scale=None):
@@ -344,8 +390,9 @@ def candidate_polisher(problem, physics, model, modes, scale=None):
 
     def polish(z, earlier=()):
         b, theta = problem.unpack(z)
-        pencil = candidate_pencil(model, physics, b, [theta], n + 4, nominal_modes=modes,
-                                  earlier=earlier, local=True)  # fmt: skip
+        pencil = candidate_pencil(
+            model, physics, b, [theta], n + 4, nominal_modes=modes, earlier=earlier, local=True
+        )
         return problem.on_pencil(pencil, scale)
 
     return polish
@@ -363,8 +410,14 @@ def _reduced(fitting, problem, physics, thetas):
         for s in (-4.0, 4.0):
             t = problem.theta_mean + s * problem.theta_sd
             snapshots.append(np.clip(t, problem.theta_lower, problem.theta_upper))
-    pencil = candidate_pencil(fitting.coarse, physics, fitting.nominal.b, snapshots, n + 4,
-                              nominal_modes=fitting.coarse_modes)  # fmt: skip
+    pencil = candidate_pencil(
+        fitting.coarse,
+        physics,
+        fitting.nominal.b,
+        snapshots,
+        n + 4,
+        nominal_modes=fitting.coarse_modes,
+    )
     return None if pencil is None else problem.on_pencil(pencil, fitting.scale)
 
 

@@ -141,13 +141,15 @@ def fitted_assignment(model, fit, measured_Hz, sigma_Hz, n_modes, prior, start=N
     plate = model if fit.physics is None else fit.physics.apply(model, fit.theta)
     modal = plate.solve(fit.b, n_modes)
     mu_b, V_b = prior
-    found = most_probable(measured_Hz, sigma_Hz, modal.eigenvalues, modal.sensitivities, fit.b,
-                          mu_b, V_b, start=start)  # fmt: skip
+    found = most_probable(
+        measured_Hz, sigma_Hz, modal.eigenvalues, modal.sensitivities, fit.b, mu_b, V_b, start=start
+    )
     return found, modal.frequency_Hz
 
 
-def assignment_log_prior(modes, computed_Hz, band_Hz, p_unobserved=P_UNOBSERVED,
-                         p_spurious=P_SPURIOUS, measured_Hz=None):  # fmt: skip
+def assignment_log_prior(
+    modes, computed_Hz, band_Hz, p_unobserved=P_UNOBSERVED, p_spurious=P_SPURIOUS, measured_Hz=None
+):
     """The assignment's terms of ``ln p(all peaks | model, a)`` (module docstring), nats.
 
     :func:`bayesplate.assignment.assignment_terms` with the model's computed modes in the
@@ -269,11 +271,16 @@ def _passes(first, one_pass, model, pairing, measured, prior, say, settled):
                 break
             order = False
             again, peaks = _set_aside(settled(), best, used, f.size)
-            say(f"pairing by order set aside at {label}'s constants ({change.describe()}); "
-                "diagnosing again by likelihood")  # fmt: skip
+            say(
+                f"pairing by order set aside at {label}'s constants ({change.describe()}); "
+                "diagnosing again by likelihood"
+            )
         else:
-            if (not change.changed or len(passes) == MAX_PASSES
-                    or any(np.array_equal(best.modes, p[1]) for p in passes)):  # fmt: skip
+            if (
+                not change.changed
+                or len(passes) == MAX_PASSES
+                or any(np.array_equal(best.modes, p[1]) for p in passes)
+            ):
                 break
             again, peaks = pairing_of(best, "likelihood"), best.modes
             say(f"assignment made again: {change.describe()}; diagnosing again with it")
@@ -295,13 +302,14 @@ def _set_aside(settled, best, used, m):
 
 def _first_kept(first, label, change, best, used):
     """The one pass kept, with its note and its ``peak_modes``."""
-    note = (f"assignment made again at {label}'s constants: the most probable one is "
-            "the one used")  # fmt: skip
+    note = f"assignment made again at {label}'s constants: the most probable one is the one used"
     if change.changed:  # the order kept (one pass), its outliers named
         which = ", ".join(str(i + 1) for i in best.spurious)
-        note = (f"assignment made again at {label}'s constants: it pairs no peak with "
-                f"another mode than the order's (it would call peak(s) {which} spurious: "
-                "outliers of this fit, kept)")  # fmt: skip
+        note = (
+            f"assignment made again at {label}'s constants: it pairs no peak with "
+            f"another mode than the order's (it would call peak(s) {which} spurious: "
+            "outliers of this fit, kept)"
+        )
     return replace(first, notes=[*first.notes, note], peak_modes=used)
 
 
@@ -309,13 +317,18 @@ def _best_kept(passes, pairing, say):
     """The pass of the highest ``ln p(all peaks | model, a)``, with a note of them all."""
     k = int(np.argmax([p[2] for p in passes]))
     kept, peaks = passes[k][0], passes[k][1]
-    story = "; ".join(f"pass {i + 1} ({p[0].verdict}): ln p(all peaks) {p[2]:.1f}"
-                      for i, p in enumerate(passes))  # fmt: skip
+    story = "; ".join(
+        f"pass {i + 1} ({p[0].verdict}): ln p(all peaks) {p[2]:.1f}" for i, p in enumerate(passes)
+    )
     say(f"assignment: {story}; pass {k + 1} kept")
-    how = ("pairing by order set aside at the verdict's fit ({}) and diagnosed again by "
-           "likelihood" if pairing.how == "order" else
-           "assignment made again at the verdict's fit ({}) and diagnosed with it")  # fmt: skip
-    note = (f"{how.format(passes[0][3].describe())}, {len(passes)} passes in all; {story} "
-            f"(ln p(all peaks | the verdict's model, assignment)); pass {k + 1} kept (the best "
-            "of these assignments, not a sum over all)")  # fmt: skip
+    how = (
+        "pairing by order set aside at the verdict's fit ({}) and diagnosed again by likelihood"
+        if pairing.how == "order"
+        else "assignment made again at the verdict's fit ({}) and diagnosed with it"
+    )
+    note = (
+        f"{how.format(passes[0][3].describe())}, {len(passes)} passes in all; {story} "
+        f"(ln p(all peaks | the verdict's model, assignment)); pass {k + 1} kept (the best "
+        "of these assignments, not a sum over all)"
+    )
     return replace(kept, notes=[*kept.notes, note], peak_modes=peaks, passes=len(passes))

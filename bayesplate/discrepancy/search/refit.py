@@ -58,14 +58,16 @@ def refit(run, data, nominal_stage, located, ranked):
         fitting, ranked, best = _searched_again(fitting, ranked, best, refit_p)
         refit_dof, refit_p = refit_test(best.fit, m)
     if warranted and refit_p < o.alpha and o.pairs:  # two effects at once
-        top, two = two_effects(best, ranked, run.physics, fitting, o.evidence_threshold,
-                               o.alpha, m)  # fmt: skip
+        top, two = two_effects(best, ranked, run.physics, fitting, o.evidence_threshold, o.alpha, m)
         if top is not None:
             best = top
             refit_dof, refit_p = refit_test(best.fit, m)
         ranked = sorted(ranked + two, key=lambda r: -r.log_evidence_gain)
-    loose = (unidentified(best.fit, run.prior[1], o.unidentified_ratio) if warranted
-             else check.unidentified)  # fmt: skip
+    loose = (
+        unidentified(best.fit, run.prior[1], o.unidentified_ratio)
+        if warranted
+        else check.unidentified
+    )
     return Searched(check, ranked, best, warranted, refit_dof, refit_p, loose)
 
 
@@ -110,8 +112,7 @@ def _searched_again(fitting, ranked, best, refit_p):
         f"searched again: chi2 = {anew.fit.chi2:.1f}, evidence gain "
         f"{anew.log_evidence_gain:+.1f}"
     )
-    ranked = sorted([anew if c is best else c for c in ranked],
-                    key=lambda r: -r.log_evidence_gain)  # fmt: skip
+    ranked = sorted([anew if c is best else c for c in ranked], key=lambda r: -r.log_evidence_gain)
     return fitting, ranked, anew
 
 

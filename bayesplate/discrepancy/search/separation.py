@@ -66,12 +66,16 @@ class Separation:
         parts = []
         if self.mode is not None:
             f1, f2 = self.frequency_Hz
-            parts.append(f"measure mode {self.mode} ({a}: {f1:.1f} Hz, {b}: {f2:.1f} Hz, "
-                         f"{self.difference_sd:.1f} deviations apart)")  # fmt: skip
+            parts.append(
+                f"measure mode {self.mode} ({a}: {f1:.1f} Hz, {b}: {f2:.1f} Hz, "
+                f"{self.difference_sd:.1f} deviations apart)"
+            )
         x, y = self.point_mm
-        parts.append(f"measure the shape of mode {self.shape_mode} at x = {x:.0f} mm, "
-                     f"y = {y:.0f} mm (the shapes differ by {self.shape_difference:.2f} of "
-                     "their largest deflection)")  # fmt: skip
+        parts.append(
+            f"measure the shape of mode {self.shape_mode} at x = {x:.0f} mm, "
+            f"y = {y:.0f} mm (the shapes differ by {self.shape_difference:.2f} of "
+            "their largest deflection)"
+        )
         return f"to tell {a} from {b}: " + "; or ".join(parts)
 
 
@@ -101,8 +105,7 @@ def separate(model, first, second, modes, relative_sd):
     free = [i for i in range(n) if i not in paired]
     mode, freq, diff = None, (np.nan, np.nan), 0.0
     if free:
-        z = [abs(fa[i] - fb[i]) / (relative_sd * 0.5 * (fa[i] + fb[i]))
-             for i in free]  # fmt: skip
+        z = [abs(fa[i] - fb[i]) / (relative_sd * 0.5 * (fa[i] + fb[i])) for i in free]
         k = int(np.argmax(z))
         mode, freq, diff = free[k] + 1, (float(fa[free[k]]), float(fb[free[k]])), z[k]
 
@@ -120,5 +123,6 @@ def separate(model, first, second, modes, relative_sd):
         if d[j] > best[0]:
             best = (float(d[j]), int(i), j)
     point = tuple(float(v) for v in 1e3 * model.mesh.nodes[best[2]])
-    return Separation((first.name, second.name), mode, freq, float(diff), best[1] + 1, point,
-                      best[0])  # fmt: skip
+    return Separation(
+        (first.name, second.name), mode, freq, float(diff), best[1] + 1, point, best[0]
+    )

@@ -47,8 +47,16 @@ from scipy.optimize import OptimizeResult, least_squares
 
 from .local_fits import DISTINCT, problem_name
 
-__all__ = ["DECREMENT_TOL", "FINISH_MARGIN", "FitCheck", "MAX_ROUNDS", "STEP_TOL", "Settled",
-           "canonical", "polish_and_finish"]  # fmt: skip
+__all__ = [
+    "DECREMENT_TOL",
+    "FINISH_MARGIN",
+    "FitCheck",
+    "MAX_ROUNDS",
+    "STEP_TOL",
+    "Settled",
+    "canonical",
+    "polish_and_finish",
+]
 
 log = logging.getLogger("bayesplate.discrepancy.search.joint_fit")  # the fits' records, as before
 
@@ -173,8 +181,11 @@ def polish_and_finish(problem, polish, starts, rounds=None, prune=True):
     first = sorted((p for p in first if p is not None), key=lambda p: p.promise)
     settled, far, error = [], [], 0.0
     for state in first:
-        if prune and settled and state.promise > settled[0].check.full_objective \
-                + FINISH_MARGIN + error:  # fmt: skip
+        if (
+            prune
+            and settled
+            and state.promise > settled[0].check.full_objective + FINISH_MARGIN + error
+        ):
             far.append(state)
             continue
         if any(_same(problem, state.promise_z, s.result.x) for s in settled):
@@ -226,8 +237,9 @@ def _first(problem, polish, z, strict=False):
     except (ValueError, np.linalg.LinAlgError) as error:
         if strict:
             raise
-        log.warning("%s: rough optimum %s not polished (%s)", problem_name(problem), np.round(z, 2),
-                    error)  # fmt: skip
+        log.warning(
+            "%s: rough optimum %s not polished (%s)", problem_name(problem), np.round(z, 2), error
+        )
         return None
 
 
@@ -236,8 +248,14 @@ def _built(problem, pencil_problem, z, fast, radius, rounds, solves):
     full = pencil_problem.residuals(z)
     fast = full if fast is None else fast
     decrement = _decrement(full, pencil_problem.jacobian(z), z, *problem.bounds())
-    log.debug("%s: round %d: objective %.8g (reduced %.8g), decrement %.3g",
-              problem_name(problem), rounds + 1, full @ full, fast @ fast, decrement)  # fmt: skip
+    log.debug(
+        "%s: round %d: objective %.8g (reduced %.8g), decrement %.3g",
+        problem_name(problem),
+        rounds + 1,
+        full @ full,
+        fast @ fast,
+        decrement,
+    )
     own = pencil_problem.pencil.snapshots[-1]
     return _Round(pencil_problem, own, z, fast, full, decrement, radius, rounds + 1, solves + 1)
 
@@ -272,8 +290,15 @@ def _settled(problem, polish, state, max_rounds, strict=False, known=()):
             # the point's own snapshot and the newest others: the pencil stays exact at z
             others = [v for v in state.problem.pencil.snapshots if v is not state.own]
             earlier = [*others[len(others) - (SNAPSHOTS - 2) :], state.own]
-            trial = _built(problem, polish(z, earlier=earlier), z, fast, state.radius,
-                           state.rounds, state.solves)  # fmt: skip
+            trial = _built(
+                problem,
+                polish(z, earlier=earlier),
+                z,
+                fast,
+                state.radius,
+                state.rounds,
+                state.solves,
+            )
             actual = state.objective - trial.objective
             if predicted > 0 and actual >= ACCEPT * predicted:
                 grow = actual >= 0.75 * predicted and reach >= 0.9 * state.radius
@@ -291,33 +316,64 @@ def _settled(problem, polish, state, max_rounds, strict=False, known=()):
     except (ValueError, np.linalg.LinAlgError) as error:
         if strict:
             raise
-        log.warning("%s: polished optimum %s not settled (%s)", problem_name(problem),
-                    np.round(state.z, 2), error)  # fmt: skip
+        log.warning(
+            "%s: polished optimum %s not settled (%s)",
+            problem_name(problem),
+            np.round(state.z, 2),
+            error,
+        )
         return None
     m = problem.Y.size
     lam_fast = problem.Y - state.fast[:m] * problem.sigma
     lam_full = problem.Y - state.full[:m] * problem.sigma
     settled = state.decrement <= _tolerance(state) or step <= STEP_TOL
-    check = FitCheck(float(state.fast @ state.fast), state.objective,
-                     float(np.max(np.abs(lam_fast / lam_full - 1.0))), state.decrement,
-                     state.rounds, state.solves, settled)  # fmt: skip
+    check = FitCheck(
+        float(state.fast @ state.fast),
+        state.objective,
+        float(np.max(np.abs(lam_fast / lam_full - 1.0))),
+        state.decrement,
+        state.rounds,
+        state.solves,
+        settled,
+    )
     name = problem_name(problem)
     if settled:
-        log.info("%s: settled in %d rounds: objective %.6g (reduced %.6g), decrement %.2g",
-                 name, state.rounds, check.full_objective, check.fast_objective,
-                 state.decrement)  # fmt: skip
+        log.info(
+            "%s: settled in %d rounds: objective %.6g (reduced %.6g), decrement %.2g",
+            name,
+            state.rounds,
+            check.full_objective,
+            check.fast_objective,
+            state.decrement,
+        )
     elif max_rounds < MAX_ROUNDS:
-        log.info("%s: provisional after %d rounds: objective %.6g (reduced %.6g), decrement "
-                 "%.2g", name, state.rounds, check.full_objective, check.fast_objective,
-                 state.decrement)  # fmt: skip
+        log.info(
+            "%s: provisional after %d rounds: objective %.6g (reduced %.6g), decrement %.2g",
+            name,
+            state.rounds,
+            check.full_objective,
+            check.fast_objective,
+            state.decrement,
+        )
     else:
-        log.error("%s: not settled in %d rounds: the full model's objective %.6g could still "
-                  "fall by %.2g (reduced model %.6g)", name, state.rounds, check.full_objective,
-                  state.decrement, check.fast_objective)  # fmt: skip
-    result = OptimizeResult(x=state.z, cost=0.5 * check.full_objective, success=settled,
-                            message=f"settled in {state.rounds} rounds" if settled
-                            else f"not settled in {state.rounds} rounds",
-                            n_solves=state.solves)  # fmt: skip
+        log.error(
+            "%s: not settled in %d rounds: the full model's objective %.6g could still "
+            "fall by %.2g (reduced model %.6g)",
+            name,
+            state.rounds,
+            check.full_objective,
+            state.decrement,
+            check.fast_objective,
+        )
+    result = OptimizeResult(
+        x=state.z,
+        cost=0.5 * check.full_objective,
+        success=settled,
+        message=f"settled in {state.rounds} rounds"
+        if settled
+        else f"not settled in {state.rounds} rounds",
+        n_solves=state.solves,
+    )
     return Settled(result, state.problem, check)
 
 
@@ -357,9 +413,18 @@ def _tight(problem, z, bounds=None):
     """
     lo, hi = problem.bounds() if bounds is None else bounds
     z0 = np.clip(np.asarray(z, dtype=float), lo + 1e-12, hi - 1e-12)
-    res = least_squares(problem.residuals, z0, jac=problem.jacobian, bounds=(lo, hi),
-                        method="trf", x_scale="jac", max_nfev=PENCIL_NFEV, ftol=PENCIL_TOL,
-                        xtol=PENCIL_TOL, gtol=PENCIL_TOL)  # fmt: skip
+    res = least_squares(
+        problem.residuals,
+        z0,
+        jac=problem.jacobian,
+        bounds=(lo, hi),
+        method="trf",
+        x_scale="jac",
+        max_nfev=PENCIL_NFEV,
+        ftol=PENCIL_TOL,
+        xtol=PENCIL_TOL,
+        gtol=PENCIL_TOL,
+    )
     z = res.x
     r = problem.residuals(z)
     cost = float(r @ r)
@@ -387,7 +452,8 @@ def canonical(problem, z):
     images = problem.physics.mirror_images(problem.model, theta)
     if not images:
         return np.asarray(z, dtype=float)
-    chosen = min([np.asarray(theta, dtype=float), *[np.asarray(t, dtype=float) for t in images]],
-                 key=tuple)  # fmt: skip
+    chosen = min(
+        [np.asarray(theta, dtype=float), *[np.asarray(t, dtype=float) for t in images]], key=tuple
+    )
     lo, hi = problem.bounds()
     return np.clip(problem.pack(b, chosen), lo, hi)

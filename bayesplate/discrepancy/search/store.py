@@ -135,17 +135,33 @@ def digest(*parts):
 
 def fit_digest(fit):
     """The part of a :class:`.joint_fit.JointFit` later stages build on (its optimum and value)."""
-    return digest(fit.b, fit.theta, fit.chi2, fit.chi2_prior, fit.log_evidence, fit.refined,
-                  [(b, v) for b, v in fit.alternatives])  # fmt: skip
+    return digest(
+        fit.b,
+        fit.theta,
+        fit.chi2,
+        fit.chi2_prior,
+        fit.log_evidence,
+        fit.refined,
+        [(b, v) for b, v in fit.alternatives],
+    )
 
 
 def plate_digest(model):
     """The plate a :class:`~bayesplate.model.PlateModel` stands for: geometry, layup, mesh."""
     mesh = model.mesh
-    return digest(type(model).__qualname__, mesh.a, mesh.b, mesh.nx, mesh.ny, model.thickness,
-                  model.density, model.layup_deg, model.ply_thickness,
-                  getattr(model, "boundary", None),
-                  getattr(getattr(model, "element", None), "shear_order", None))  # fmt: skip
+    return digest(
+        type(model).__qualname__,
+        mesh.a,
+        mesh.b,
+        mesh.nx,
+        mesh.ny,
+        model.thickness,
+        model.density,
+        model.layup_deg,
+        model.ply_thickness,
+        getattr(model, "boundary", None),
+        getattr(getattr(model, "element", None), "shear_order", None),
+    )
 
 
 class Stages:

@@ -49,9 +49,18 @@ def finish(problem, res, max_nfev):
     solves = problem.n_solves
     lo, hi = problem.bounds()
     z0 = np.clip(np.asarray(res.x, dtype=float), lo + 1e-12, hi - 1e-12)
-    tight = least_squares(problem.residuals, z0, jac=problem.jacobian, bounds=(lo, hi),
-                          method="trf", x_scale="jac", max_nfev=max_nfev, ftol=FINISH_TOL,
-                          xtol=FINISH_TOL, gtol=FINISH_TOL)  # fmt: skip
+    tight = least_squares(
+        problem.residuals,
+        z0,
+        jac=problem.jacobian,
+        bounds=(lo, hi),
+        method="trf",
+        x_scale="jac",
+        max_nfev=max_nfev,
+        ftol=FINISH_TOL,
+        xtol=FINISH_TOL,
+        gtol=FINISH_TOL,
+    )
     z = _gauss_newton(problem, tight.x)
     z = _canonical(problem, z)
     out = copy.copy(tight)

@@ -70,12 +70,16 @@ def two_effects(best, ranked, physics, fitting, threshold, alpha, m, leaders=Non
         names.append(leader.name)
         if len(names) > 1:
             fitting.say(f"no pair with {names[0]} explains: {leader.name} paired as well")
-        todo = [p for p in pairs_with(leader, physics, ranked, fitting.model, fitting.scans)
-                if _key(p) not in done]  # fmt: skip
+        todo = [
+            p
+            for p in pairs_with(leader, physics, ranked, fitting.model, fitting.scans)
+            if _key(p) not in done
+        ]
         done |= {_key(p) for p in todo}
         fitted += rank(fitting=fitting, physics_list=todo)
-        top = max((c for c in fitted if c.fit.refined), default=None,
-                  key=lambda c: c.log_evidence_gain)  # fmt: skip
+        top = max(
+            (c for c in fitted if c.fit.refined), default=None, key=lambda c: c.log_evidence_gain
+        )
         if top is not None and top.log_evidence_gain > best.log_evidence_gain + threshold:
             chosen = top
     return chosen, sorted(fitted, key=lambda c: -c.log_evidence_gain)

@@ -142,17 +142,23 @@ def _gap(best, c, probabilities):
 def tie_text(best, tied, probabilities):
     """The note's sentence on why ``best`` and the candidates ``tied`` (:func:`ties`) tie."""
     rival, tie = tied[0]
-    odds = (f"posterior probabilities {probabilities[best.name]:.2f} and "
-            f"{probabilities[rival.name]:.2f}")  # fmt: skip
+    odds = (
+        f"posterior probabilities {probabilities[best.name]:.2f} and "
+        f"{probabilities[rival.name]:.2f}"
+    )
     if tie == "fit":
-        text = (f"{best.name} and {rival.name} fit the recordings about equally well (chi2 "
-                f"{best.fit.chi2:.1f} and {rival.fit.chi2:.1f}); {best.name} is the more "
-                f"probable ({odds}) by its prior volume alone, not by the recordings")  # fmt: skip
+        text = (
+            f"{best.name} and {rival.name} fit the recordings about equally well (chi2 "
+            f"{best.fit.chi2:.1f} and {rival.fit.chi2:.1f}); {best.name} is the more "
+            f"probable ({odds}) by its prior volume alone, not by the recordings"
+        )
     else:
         text = f"{best.name} and {rival.name} fit about equally well ({odds})"
     if len(tied) > 1:
-        more = ", ".join(f"{c.name} (chi2 {c.fit.chi2:.1f}, probability "
-                         f"{probabilities[c.name]:.2f})" for c, _ in tied[1:])  # fmt: skip
+        more = ", ".join(
+            f"{c.name} (chi2 {c.fit.chi2:.1f}, probability {probabilities[c.name]:.2f})"
+            for c, _ in tied[1:]
+        )
         text += f"; so {'does' if len(tied) == 2 else 'do'} {more}"
     return text + ": "
 
@@ -230,8 +236,11 @@ def basins_note(fit_, margin):
     if not rivals:
         return None
     e, objective, differs = rivals[0]
-    values = ", ".join(f"{n} {_case_units(n, fit_.constants)} vs {_case_units(n, e)}"
-                       for n, d in zip(ENGINEERING_NAMES, differs, strict=True) if d)  # fmt: skip
+    values = ", ".join(
+        f"{n} {_case_units(n, fit_.constants)} vs {_case_units(n, e)}"
+        for n, d in zip(ENGINEERING_NAMES, differs, strict=True)
+        if d
+    )
     return (
         f"the nominal fit has a second optimum that fits about as well (objective "
         f"{fit_.chi2 + fit_.chi2_prior:.2f} vs {objective:.2f}): {values}; these "
