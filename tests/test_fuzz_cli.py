@@ -224,12 +224,11 @@ def test_the_parser_mesh_limit_is_the_case_files():
 
 
 def test_the_parser_chain_minimum_is_the_samplers():
-    import inspect
-
     from bayesplate.cli.options import MIN_CHAIN_STEPS
-    from bayesplate.sampling.chain import TUNE_ROUNDS, TUNE_STEPS, sample_problem
+    from bayesplate.sampling import ChainOptions
+    from bayesplate.sampling.chain import TUNE_ROUNDS, TUNE_STEPS
 
-    check_every = inspect.signature(sample_problem).parameters["check_every"].default
+    check_every = ChainOptions().check_every
     assert MIN_CHAIN_STEPS == TUNE_ROUNDS * TUNE_STEPS + check_every
 
 

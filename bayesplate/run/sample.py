@@ -84,7 +84,7 @@ def run_sample(
     SampleRun
     """
     from ..model import PlateModel
-    from ..sampling import prepare, resolve_inputs, sample
+    from ..sampling import ChainOptions, SetupOptions, prepare, resolve_inputs, sample
 
     seeds = run_seeds(seed)
     if model is None:
@@ -92,27 +92,19 @@ def run_sample(
     inputs = resolve_inputs(case, options.inputs)
     if inputs != "exact":
         fast = None
+    setup_options = SetupOptions(
+        forward=options.forward, pairing=options.pairing, fast=fast, inputs=inputs
+    )
+    chain = ChainOptions(
+        n_walkers=options.walkers,
+        max_steps=options.max_steps,
+        min_ess=options.min_ess,
+        backend_path=options.backend,
+        progress=progress,
+    )
     with _recording(record_warnings) as recorded:
-        setup = prepare(
-            case,
-            model=model,
-            forward=options.forward,
-            rng=seeds.prepare,
-            pairing=options.pairing,
-            fast=fast,
-            inputs=inputs,
-        )
-        result = sample(
-            case,
-            rng=seeds.chain,
-            n_walkers=options.walkers,
-            max_steps=options.max_steps,
-            min_ess=options.min_ess,
-            backend_path=options.backend,
-            progress=progress,
-            setup=setup,
-            pool=pool,
-        )
+        setup = prepare(case, model=model, rng=seeds.prepare, options=setup_options)
+        result = sample(case, rng=seeds.chain, options=chain, setup=setup, pool=pool)
     noted = None if recorded is None else tuple(sorted({str(w.message) for w in recorded}))
     scale = None
     if case.measured.error_scale is not None:

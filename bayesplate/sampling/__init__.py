@@ -77,12 +77,15 @@ Output
 
 Modules
     :mod:`~bayesplate.sampling.density` (the target), :mod:`~bayesplate.sampling.moves`,
-    :mod:`~bayesplate.sampling.setup` (problem, pilot, box, fast model, MAP),
+    :mod:`~bayesplate.sampling.setup` (problem, pilot, box, fast model, MAP; on
+    :mod:`~bayesplate.sampling.pilot` and :mod:`~bayesplate.sampling.map_estimate`),
     :mod:`~bayesplate.sampling.chain` (walkers, tuning, run loop),
     :mod:`~bayesplate.sampling.stopping`, :mod:`~bayesplate.sampling.storage` (HDF backend),
     :mod:`~bayesplate.sampling.result`, :mod:`~bayesplate.sampling.pipeline` (:func:`sample`),
     :mod:`~bayesplate.sampling.checks` (the linearised covariance against the posterior),
     :mod:`~bayesplate.sampling.seeding` (the ``rng`` argument),
+    :mod:`~bayesplate.sampling.options` (:class:`ChainOptions`, :class:`SetupOptions`: the
+    chain's and the setup's settings, each in one frozen object),
     :mod:`~bayesplate.sampling.assigned` (the assignment re-made in the chain),
     :mod:`~bayesplate.sampling.box` (the fast model's box); several plates of one material:
     :mod:`~bayesplate.sampling.stacked` (their stacked problem),
@@ -106,6 +109,7 @@ from .joint import (
     sample_plates,
 )
 from .moves import LaplaceMove, ScreenedDEMove, default_moves
+from .options import ChainOptions, SetupOptions
 from .pipeline import sample
 from .plate_checks import PlateCheck, plate_checks, predictive_check
 from .plate_laplace import PlateFit, PlateLaplace, fit_plate
@@ -116,6 +120,7 @@ from .stacked import JointForward, joint_estimate, joint_problem
 __all__ = [
     "CASE_UNITS",
     "HDI_PROB",
+    "ChainOptions",
     "EigenvalueForward",
     "HierarchicalResult",
     "JointForward",
@@ -129,6 +134,7 @@ __all__ = [
     "SamplingResult",
     "SamplingSetup",
     "ScreenedDEMove",
+    "SetupOptions",
     "WhitenedLogPosterior",
     "check_plates",
     "covariance_agreement",

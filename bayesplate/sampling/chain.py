@@ -16,7 +16,7 @@ import logging
 import signal
 import threading
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import emcee
 import numpy as np
@@ -25,18 +25,15 @@ from threadpoolctl import threadpool_limits
 from .. import laminate
 from .density import EigenvalueForward, WhitenedLogPosterior
 from .moves import InBox, LaplaceMove, RitzScreen, ScreenedDEMove, default_moves, moves_and_weights
+from .options import TUNE_ROUNDS, TUNE_STEPS, ChainOptions
 from .result import build_result
 from .seeding import generator, resolve_rng
 from .stopping import StoppingRule, autocorr_time
 from .storage import commit, open_backend, restore_tuning, store_tuning
 
-__all__ = ["TUNE_ROUNDS", "TUNE_STEPS", "sample_problem"]
+__all__ = ["TUNE_ROUNDS", "TUNE_STEPS", "ChainOptions", "sample_problem"]
 
 log = logging.getLogger(__name__)
-
-#: Tuning of the Laplace proposal: rounds and steps per round (discarded afterwards).
-TUNE_ROUNDS = 3
-TUNE_STEPS = 30
 
 
 def _initial_walkers(density, n_walkers, rng, box=None, tries=1000):
@@ -158,24 +155,19 @@ def sample_problem(
     covariance,
     *,
     rng=None,
-    n_walkers=32,
-    max_steps=5000,
-    target_tau_factor=50.0,
-    min_ess=2000.0,
-    max_rhat=1.01,
-    check_every=20,
-    tune_rounds=TUNE_ROUNDS,
-    tune_steps=TUNE_STEPS,
+    options=None,
     pool=None,
-    backend_path=None,
-    progress=True,
-    moves=None,
     forward=None,
     box=None,
-    seed=None,
     assigned=None,
+    seed=None,
+    **settings,
 ):
     """Sample ``ln f(b | Y)`` of a Gaussian problem with emcee, whitened around ``center``.
+
+    The stages: the start (:func:`_start`: backend, moves, initial walkers or the resumed
+    state), the tuning and the run to the stopping rule (:func:`_walk`), the result
+    (:func:`_finish`).
 
     Parameters
     ----------
@@ -187,120 +179,172 @@ def sample_problem(
     rng : int, numpy.random.Generator or None
         Seeds the initial walkers and emcee's random state (a ``RandomState`` seeded with
         an integer drawn from it): the same seed gives the same chain.
-    n_walkers : int
-        Walkers (at least 12).
-    max_steps : int
-        Cap on the chain length (steps in the backend, resumed ones included).
-    target_tau_factor : float
-        Stop once the chain after tuning is longer than this many autocorrelation times...
-    min_ess : float
-        ... and the smallest bulk ESS of the constants after burn-in reaches this...
-    max_rhat : float
-        ... and the largest R-hat (walkers as chains) is below this.
-    check_every : int
-        Steps between checks of the stopping rule.
-    tune_rounds, tune_steps : int
-        Tuning: rounds of ``tune_steps`` steps after each of which the
-        :class:`LaplaceMove` proposes from the mean and covariance of the ensemble over the
-        round's second half; then the proposal is frozen and the tuning steps discarded.
-        Without a :class:`LaplaceMove` among the moves there is no tuning.
+    options : ChainOptions, optional
+        Size, stopping rule, tuning, moves, progress bar, file (default ``ChainOptions()``).
     pool : object with ``map``, optional
-        E.g. a ``multiprocessing.Pool``; the log-density (problem and model) is pickled
-        with every batch of proposals, which pays for slow models only.
-    backend_path : path, optional
-        HDF5 file (emcee ``HDFBackend`` layout) holding the chain, written whole at every
-        check (:mod:`.storage`); if it holds one of the same problem, the run continues it
-        from its last check (same coordinates, proposal and random state).
-    progress : bool
-        Progress bar (tqdm) with the current ``tau`` and ESS.
-    moves : list, optional
-        emcee moves; default :func:`default_moves`.
+        E.g. a ``multiprocessing.Pool``; the log-density (problem and model) is pickled with
+        every batch of proposals, which pays for slow models only.
     forward : callable, optional
         ``forward(b, n_modes)`` replacing the problem's (e.g. an eigenvalues-only path).
     box : Box, optional
         The fast model's box: initial walkers and the Laplace proposals (default moves)
         are drawn inside it, and DE proposals outside it are screened (when ``forward`` is
         an :class:`~bayesplate.sampling.density.EigenvalueForward` holding a reduced model).
-    seed : int, numpy.random.Generator or None
-        Deprecated name of ``rng`` (a DeprecationWarning; removed in the next release).
     assigned : bayesplate.sampling.assigned.ReassignedLikelihood, optional
         The likelihood of all measured peaks with the assignment re-made at every point
         (pairing by likelihood); the result then carries what the chain did
         (``assignment``). None: the problem's fixed pairing.
+    seed : int, numpy.random.Generator or None
+        Deprecated name of ``rng`` (a DeprecationWarning; removed in the next release).
+    **settings
+        Any field of :class:`ChainOptions` by name (``n_walkers=16``, ``min_ess=500``, ...),
+        over `options`.
 
     Returns
     -------
     SamplingResult
         Without ``estimate``, ``certificate`` and fast-model counts (see :func:`sample`).
     """
-    if n_walkers < 12:
-        raise ValueError(f"n_walkers = {n_walkers}: need at least 12 (twice the dimension)")
-    if max_steps < tune_rounds * tune_steps + check_every:
-        raise ValueError(
-            f"max_steps = {max_steps}: need at least {tune_rounds * tune_steps + check_every} "
-            f"(the {tune_rounds} x {tune_steps} tuning steps and one check of the stopping rule)"
-        )
+    options = ChainOptions.of(options, "sample_problem", **settings)
     entropy, rng = generator(resolve_rng(rng, seed, "sample_problem"))
     density = WhitenedLogPosterior(problem, center, covariance, forward, assigned)
-    backend, stored = open_backend(backend_path, density, n_walkers)
+    start = _start(density, options, rng, pool, forward, box)
+    state, n_tune, history, converged = _walk(start, options)
+    return _finish(start, options, entropy, n_tune, history, converged)
+
+
+@dataclass(frozen=True, eq=False)
+class _Start:
+    """The chain before its first step: what :func:`_walk` runs and :func:`_finish` reads.
+
+    ``state`` is the initial walkers' or the resumed chain's last; ``stored`` what the
+    backend held (None: a new chain); ``moves`` and ``weights`` our own references to the
+    moves (emcee keeps its copy private); ``laplace`` the one tuned, or None; ``started``,
+    ``steps0`` and ``forward0`` the clock, the steps and the forward solves at the start.
+    """
+
+    density: WhitenedLogPosterior
+    sampler: emcee.EnsembleSampler
+    state: emcee.State
+    stored: object
+    moves: list
+    weights: list
+    laplace: LaplaceMove | None
+    emcee_seed: int
+    started: float
+    steps0: int
+    forward0: int
+
+
+def _start(density, options, rng, pool, forward, box):
+    """The sampler on its backend, the moves, and its state: new walkers or the chain resumed.
+
+    The integer seeding emcee's random state is drawn from `rng` first, then the initial
+    walkers (a resumed chain draws none and keeps its stored random state).
+    """
+    backend, stored = open_backend(options.backend_path, density, options.n_walkers)
+    moves = options.moves
     if moves is None:
-        inside = None if box is None else InBox(density, box)
-        reduced = forward.reduced if isinstance(forward, EigenvalueForward) else None
-        screen = None if box is None or reduced is None else RitzScreen(density, reduced, box)
-        moves = default_moves(inside, screen)
-    # our own references to the moves (emcee keeps its copy private); emcee gets ``moves``
+        moves = _default_moves(density, forward, box)
     move_objects, move_weights = moves_and_weights(moves)
-    laplace = _laplace_move(move_objects)
-    sampler = emcee.EnsembleSampler(n_walkers, 6, density, pool=pool, moves=moves, backend=backend)
+    sampler = emcee.EnsembleSampler(
+        options.n_walkers, 6, density, pool=pool, moves=moves, backend=backend
+    )
     emcee_seed = int(rng.integers(2**32))
-    resumed = stored is not None
-    if resumed:
+    if stored is not None:
         state = backend.get_last_sample()
-        log.info("resuming %s at step %d", backend_path, backend.iteration)
+        log.info("resuming %s at step %d", options.backend_path, backend.iteration)
     else:
         sampler.random_state = np.random.RandomState(emcee_seed).get_state()
-        state = emcee.State(_initial_walkers(density, n_walkers, rng, box))
-    started, steps0, forward0 = time.perf_counter(), sampler.iteration, density.n_forward
-    bar = _progress_bar(progress, max_steps, sampler.iteration)
-    # the reduced model solves small dense eigenproblems: BLAS threads only slow them down
-    # (up to ten times on a busy machine, reports/benchmark_reduced.md)
+        state = emcee.State(_initial_walkers(density, options.n_walkers, rng, box))
+    return _Start(
+        density=density,
+        sampler=sampler,
+        state=state,
+        stored=stored,
+        moves=move_objects,
+        weights=move_weights,
+        laplace=_laplace_move(move_objects),
+        emcee_seed=emcee_seed,
+        started=time.perf_counter(),
+        steps0=sampler.iteration,
+        forward0=density.n_forward,
+    )
+
+
+def _default_moves(density, forward, box):
+    """:func:`default_moves` inside `box`, screened with the reduced model `forward` holds."""
+    inside = None if box is None else InBox(density, box)
+    reduced = forward.reduced if isinstance(forward, EigenvalueForward) else None
+    screen = None if box is None or reduced is None else RitzScreen(density, reduced, box)
+    return default_moves(inside, screen)
+
+
+def _walk(start, options):
+    """The tuning (or the resumed chain's, restored) and the run to the stopping rule.
+
+    Returns the last state, the tuning steps (the burn-in), the history of ``tau`` and
+    whether the rule was met. BLAS runs on one thread meanwhile: the reduced model solves
+    small dense eigenproblems, which more threads only slow down (up to ten times on a busy
+    machine, reports/benchmark_reduced.md).
+    """
+    sampler, laplace, state = start.sampler, start.laplace, start.state
+    bar = _progress_bar(options.progress, options.max_steps, sampler.iteration)
     limits = threadpool_limits(limits=1, user_api="blas")
     try:
         with _Interrupt() as interrupt:
-            n_tune = restore_tuning(stored, laplace)
+            n_tune = restore_tuning(start.stored, laplace)
             if n_tune is None:
-                rounds = tune_rounds if laplace is not None else 0
+                rounds = options.tune_rounds if laplace is not None else 0
                 state, n_tune = _tune(
-                    sampler, state, laplace, rounds, tune_steps, max_steps, bar, interrupt
+                    sampler,
+                    state,
+                    laplace,
+                    rounds,
+                    options.tune_steps,
+                    options.max_steps,
+                    bar,
+                    interrupt,
                 )
-                store_tuning(backend, laplace, n_tune)
-            stop = StoppingRule(density, n_tune, target_tau_factor, min_ess, max_rhat)
+                store_tuning(sampler.backend, laplace, n_tune)
+            stop = StoppingRule(
+                start.density, n_tune, options.target_tau_factor, options.min_ess, options.max_rhat
+            )
             state, history, converged = _run_chain(
-                sampler, state, max_steps, check_every, stop, bar, n_tune, interrupt
+                sampler, state, options.max_steps, options.check_every, stop, bar, n_tune, interrupt
             )
     finally:
         limits.restore_original_limits()
         if bar is not None:
             bar.close()
-    wall = time.perf_counter() - started
-    n_eval = n_walkers * (sampler.iteration - steps0 + (0 if resumed else 1))
+    return state, n_tune, history, converged
+
+
+def _finish(start, options, entropy, n_tune, history, converged):
+    """The :class:`SamplingResult`, its settings and its counts of evaluations and screens."""
+    sampler, density, resumed = start.sampler, start.density, start.stored is not None
+    wall = time.perf_counter() - start.started
+    n_eval = options.n_walkers * (sampler.iteration - start.steps0 + (0 if resumed else 1))
+    path = options.backend_path
     settings = {
         "seed_entropy": entropy,
-        "emcee_seed": None if resumed else emcee_seed,
-        "n_walkers": n_walkers,
-        "max_steps": max_steps,
-        "target_tau_factor": target_tau_factor,
-        "min_ess": min_ess,
-        "max_rhat": max_rhat,
-        "check_every": check_every,
+        "emcee_seed": None if resumed else start.emcee_seed,
+        "n_walkers": options.n_walkers,
+        "max_steps": options.max_steps,
+        "target_tau_factor": options.target_tau_factor,
+        "min_ess": options.min_ess,
+        "max_rhat": options.max_rhat,
+        "check_every": options.check_every,
         "n_tune": n_tune,
-        "moves": [type(m).__name__ for m in move_objects],
-        "move_weights": list(map(float, move_weights)),
-        "backend": None if backend_path is None else str(backend_path),
+        "moves": [type(m).__name__ for m in start.moves],
+        "move_weights": list(map(float, start.weights)),
+        "backend": None if path is None else str(path),
         "resumed": resumed,
         "center_b": density.center,
         "chol_b": density.chol,
     }
-    result = build_result(sampler, density, history, converged, wall, n_eval, forward0, settings)
-    screened = sum(m.n_screened for m in move_objects if isinstance(m, ScreenedDEMove))
+    result = build_result(
+        sampler, density, history, converged, wall, n_eval, start.forward0, settings
+    )
+    screened = sum(m.n_screened for m in start.moves if isinstance(m, ScreenedDEMove))
     return replace(result, n_screened=screened, n_evaluations=n_eval - screened)

@@ -21,12 +21,17 @@ The setup keeps the readings' conditional given ``b`` (``input_model``: the samp
 inputs from it after the chain, :mod:`bayesplate.inputs_posterior`) and the linear input
 model's certificate at the MAP (``input_certificate``: full solves at +- 2 sd of each
 declared reading).
+
+:func:`prepare` is a row of stages, module functions handing on a small frozen state
+(``_Start``) and the :class:`SamplingSetup` as it grows; its options are one
+:class:`~bayesplate.sampling.options.SetupOptions`. The pilot's model, the box placed from it
+and the inputs' marginal problem are :mod:`~bayesplate.sampling.pilot`'s; the MAP's B runs
+:mod:`~bayesplate.sampling.map_estimate`'s.
 """
 
 from __future__ import annotations
 
 import logging
-import math
 import time
 from dataclasses import dataclass, field, replace
 
@@ -34,8 +39,8 @@ import numpy as np
 
 from ..checked_order import assignment_at, checks_order, refuted_order
 from ..estimators import resolve_conventions, run, settle_pairing
-from ..inputs import input_jacobian, input_sources
-from ..inputs_posterior import declared_readings, input_conditional, linear_input_certificate
+from ..inputs import input_sources
+from ..inputs_posterior import linear_input_certificate
 from ..model import PlateModel
 from ..pairing import Pairing
 from ..posterior import INPUT_TREATMENTS, GaussianProblem, prior_in_stiffness
@@ -44,6 +49,9 @@ from .assigned import reassignment
 from .box import check_box as _check_box
 from .box import posterior_box
 from .density import EigenvalueForward
+from .map_estimate import MAP_TOL, map_estimate, run_on_fast, scaled_map
+from .options import SetupOptions
+from .pilot import PILOT_MAX_ELEMENTS, marginal, mesh_text, pilot_model, place_box
 from .seeding import resolve_rng
 
 __all__ = [
@@ -52,6 +60,7 @@ __all__ = [
     "PILOT_MAX_ELEMENTS",
     "PILOT_TOL",
     "SamplingSetup",
+    "SetupOptions",
     "posterior_box",
     "prepare",
     "resolve_inputs",
@@ -59,14 +68,9 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-#: Meshes above this many elements get a pilot B run on a mesh halved in each direction.
-PILOT_MAX_ELEMENTS = 400
 #: Pilot B: a relative change of 1e-2 leaves it within ~0.1 deviations of the converged
 #: estimate (Frederiksen plate: 0.12 after 5 iterations), far inside a 6-deviation box.
 PILOT_TOL = 1e-2
-#: B to this relative change is the MAP to ~1e-6 posterior deviations (linear convergence,
-#: ratio ~0.37 per iteration on the bundled plates).
-MAP_TOL = 1e-7
 #: Default fast-model settings for a posterior box: 10 design points besides the centre
 #: (6 needed a second round on the Frederiksen plate, 10 passed in one: 17 full solves),
 #: rounds of 4 random + 2 probe held-out points (see :func:`bayesplate.reduced.fast_model`).
@@ -162,19 +166,7 @@ class SamplingSetup:
         Iterates outside the certified box use the reduced model uncertified; the result is
         recomputed with the full-model fallback if it ends outside the box.
         """
-        return _run_on_fast(self, method, tol, **kwargs)
-
-
-def _pilot_model(case, model, pilot_mesh):
-    """The model of the pilot B run: the model itself, or the case on a coarser mesh."""
-    if pilot_mesh is None:
-        return model
-    if pilot_mesh == "auto":
-        mesh = model.mesh
-        if mesh.nx * mesh.ny <= PILOT_MAX_ELEMENTS:
-            return model
-        pilot_mesh = (math.ceil(mesh.nx / 2), math.ceil(mesh.ny / 2))
-    return PlateModel.from_case(case, mesh=tuple(pilot_mesh))
+        return run_on_fast(self, method, tol, **kwargs)
 
 
 def _reassignment(case, pairing, inputs, observation):
@@ -207,271 +199,242 @@ def resolve_inputs(case, inputs="auto"):
     return inputs
 
 
-def _marginal(case, model, problem, at):
-    """The problem with the inputs marginalised (``J_p`` at `at`), full solves, conditional.
-
-    The conditional is the readings' :class:`~bayesplate.inputs_posterior.InputConditional`
-    (None when every deviation is 0). ``V_Y + B B^T`` with ``B = J_p A``: the arithmetic of
-    :func:`bayesplate.inputs.input_covariance`, to the bit.
-    """
-    names, A = input_sources(case.plate)
-    modes = problem.pairing.modes
-    if not np.any(A):
-        return problem.with_observation_covariance(problem.V_Y + 0.0), 0, None
-    J = input_jacobian(case, at, modes, mesh=(model.mesh.nx, model.mesh.ny)).J
-    B = J @ A
-    marginal = problem.with_observation_covariance(problem.V_Y + B @ B.T)
-    _, value, sd = declared_readings(case.plate)
-    conditional = input_conditional(J, A, problem.V_Y, names, value, sd, at)
-    return marginal, 7, conditional  # the nominal solve and 3 central differences
-
-
-def _place_box(case, model, problem, pilot, inputs, box_sigma):
-    """The (marginal) problem and the fast model's box from the pilot; full solves spent.
-
-    With the inputs marginalised, the box is placed with ``P`` of the marginal problem at the
-    pilot's ``b`` (one more full solve for the sensitivities): the pilot's own ``P`` ignores
-    the inputs and would leave a box a few marginal deviations wide.
-    """
-    if inputs != "marginal":
-        placed, spent = _widened(problem, pilot)
-        return problem, posterior_box(placed, problem.mu_b, problem.V_b, box_sigma), spent, None
-    problem, spent, conditional = _marginal(case, model, problem, pilot.b)
-    S = problem.predict(pilot.b).S
-    info = S.T @ np.linalg.solve(problem.V_Y, S) + np.linalg.inv(problem.V_b)
-    placed, more = _widened(problem, replace(pilot, covariance_b=np.linalg.inv(info)))
-    box = posterior_box(placed, problem.mu_b, problem.V_b, box_sigma)
-    return problem, box, spent + 1 + more, conditional
-
-
-def _widened(problem, pilot):
-    """The pilot with ``P`` widened by an inferred error scale (linearised), full solves spent.
-
-    With ``s`` unknown the posterior is ``s_hat`` times wider than ``P`` at ``s = 1``
-    (:func:`bayesplate.error_scale.linearised_scale`); a box placed with ``P`` would leave
-    most walkers to the full model's fallback when the misfit is large.
-    """
-    if problem.error_scale is None:
-        return pilot, 0
-    from ..error_scale import linearised_at
-
-    return replace(pilot, covariance_b=linearised_at(problem, pilot.b).covariance_b), 1
-
-
-def prepare(
-    case,
-    *,
-    model=None,
-    forward="reduced",
-    rng=None,
-    convention="paper",
-    prior_mean=None,
-    prior_sd=None,
-    pairing="auto",
-    box_sigma=6.0,
-    box=None,
-    pilot_mesh="auto",
-    fast=None,
-    fast_options=None,
-    seed=None,
-    inputs="auto",
-):
+def prepare(case, *, model=None, rng=None, options=None, seed=None, **settings):
     """The sampler's problem, fast model and MAP for a case.
+
+    The stages: the problem and its pairing (:func:`_start`), the pilot B run, the box and
+    the fast model (:func:`_with_fast_model`), B to the MAP (:func:`_with_map`), pairing by
+    order checked there (:func:`_order_holds`; the setup made again by likelihood where the
+    data refute it), the linear input model's certificate (:func:`_with_input_certificate`).
 
     Parameters
     ----------
     case : bayesplate.io.Case
     model : PlateModel, optional
         Full model; default ``PlateModel.from_case(case)``.
-    forward : {"reduced", "full"}
-        Sample with the certified fast model (falling back to the full one where it is not
-        certified) or with the full model throughout.
     rng : int, numpy.random.Generator or None
         Seed of the fast model's designs.
-    convention : str or Conventions
-        As for :func:`bayesplate.estimators.estimate` (default ``"paper"``).
-    prior_mean, prior_sd : array_like, shape (6,), optional
-        Engineering prior (SI) replacing the case's.
-    pairing : {"auto", "mac", "likelihood", "index", "order"} or Pairing
-        As for :func:`bayesplate.estimators.estimate` (:func:`bayesplate.pairing.pair_measured`
-        at the prior mean; ``"likelihood"``: the assignment B settles on, on the working
-        model, placing the box and the MAP; the chain re-makes it at every point unless
-        the inputs are marginalised or an error scale is inferred (:func:`.assigned.\
-reassignment`); any other pairing stays fixed, no modes computed beyond the paired ones.
-    box_sigma : float
-        Half-width of the posterior box in deviations of the pilot B estimate.
-    box : Box, optional
-        Explicit box for the fast model (no pilot run).
-    pilot_mesh : "auto", None or (nx, ny)
-        Mesh of the pilot B run: ``"auto"`` halves meshes above 400 elements (only when the
-        model is the case's own); None runs it on ``model``.
-    fast : bayesplate.reduced.CertifiedModel, optional
-        A fast model already built (e.g. shared by several priors); no pilot, no build.
-    fast_options : dict, optional
-        Keywords of :func:`bayesplate.reduced.fast_model` (default ``FAST_DEFAULTS``).
+    options : SetupOptions, optional
+        The forward model, conventions, prior, pairing, box, pilot mesh, fast model and the
+        treatment of the inputs (default ``SetupOptions()``).
     seed : int, numpy.random.Generator or None
         Deprecated name of ``rng`` (a DeprecationWarning; removed in the next release).
-    inputs : {"auto", "exact", "marginal"}
-        The plate's measured inputs as exact numbers or with the case's deviations
-        marginalised (:meth:`GaussianProblem.from_case`); ``"auto"``: marginal when the case
-        gives any ``plate.*_sd``. ``J_p`` is evaluated at the pilot (or settling) B estimate,
-        else at the prior mean; with a fast model built here, its box is placed with the
-        marginal problem's ``P`` there (one more full solve); then ``J_p`` again at the
-        marginal MAP, which is found again with it (module docstring). A `fast` model or a `box`
-        given is kept as it is: if it was placed for the exact posterior, walkers beyond it
-        use the full model (counted in the result).
+    **settings
+        Any field of :class:`SetupOptions` by name (``pairing="order"``, ``box_sigma=5``,
+        ...), over `options`.
 
     Returns
     -------
     SamplingSetup
     """
     rng = resolve_rng(rng, seed, "prepare")
-    inputs = resolve_inputs(case, inputs)
-    if forward not in ("reduced", "full"):
-        raise ValueError(f"forward = {forward!r}: must be 'reduced' or 'full'")
-    conventions = resolve_conventions(convention)
-    own_model = model is None
+    options = SetupOptions.of(options, "prepare", **settings)
+    start = _start(case, model, options)
+    setup = _with_map(start, _with_fast_model(start, rng))
+    if start.checked and not _order_holds(start, setup):
+        again = replace(start.options, pairing="likelihood", fast=None)
+        return prepare(case, model=start.model, rng=rng, options=again)
+    if not setup.estimate.converged:
+        log.warning("B (the MAP) did not converge: %s", setup.estimate.message)
+    _check_box(setup.box, setup.estimate)
+    return _with_input_certificate(start, setup)
+
+
+@dataclass(frozen=True, eq=False)
+class _Start:
+    """What the stages of :func:`prepare` share: the case's problem before any fast model.
+
+    ``options`` has its ``inputs`` resolved (``"exact"`` or ``"marginal"``) and its
+    ``pilot_mesh`` None with a model given (the pilot runs on it then); ``pair`` is the
+    pairing without extra modes; ``settled`` B's run that settled a pairing by name (None
+    for a :class:`Pairing` given); ``exact`` the problem with the inputs exact; ``checked``
+    whether the pairing is by order, to check at the MAP.
+    """
+
+    case: object
+    model: PlateModel
+    options: SetupOptions
+    conventions: object
+    mean: np.ndarray
+    sd: np.ndarray
+    pair: Pairing
+    settled: object
+    exact: GaussianProblem
+    assigned: object
+    assignment: str | None
+    checked: bool
+
+    @property
+    def n_modes(self):
+        """Modes the fast model computes: the paired ones, or the re-assignment's."""
+        return self.pair.n_modes() if self.assigned is None else self.assigned.n
+
+
+def _start(case, model, options):
+    """The model, prior, conventions and pairing (settled by B when given by name).
+
+    By likelihood, B settles the assignment on the working model (a coarser mesh's error in
+    the upper modes would call their peaks spurious), and that B run is the pilot too (the
+    pilot mesh may number the upper modes otherwise).
+    """
+    inputs = resolve_inputs(case, options.inputs)
+    conventions = resolve_conventions(options.convention)
+    pilot_mesh = options.pilot_mesh if model is None else None
+    options = replace(options, inputs=inputs, pilot_mesh=pilot_mesh)
     model = model or PlateModel.from_case(case)
-    mean = np.asarray(case.prior.mean if prior_mean is None else prior_mean, dtype=float)
-    sd = np.asarray(case.prior.sd if prior_sd is None else prior_sd, dtype=float)
-    settled = None
-    checked = checks_order(case.measured, pairing)
-    if checked:  # the arguments, to begin again by likelihood if the order is set aside
-        again = dict(model=model, forward=forward, rng=rng, convention=convention,
-                     prior_mean=prior_mean, prior_sd=prior_sd, pairing="likelihood",
-                     box_sigma=box_sigma, box=box, pilot_mesh=pilot_mesh if own_model else None,
-                     fast=None, fast_options=fast_options, inputs=inputs)  # fmt: skip
+    mean = np.asarray(
+        case.prior.mean if options.prior_mean is None else options.prior_mean, dtype=float
+    )
+    sd = np.asarray(case.prior.sd if options.prior_sd is None else options.prior_sd, dtype=float)
+    checked = checks_order(case.measured, options.pairing)
+    pairing, settled = options.pairing, None
     if not isinstance(pairing, Pairing):
-        # by likelihood, B settles the assignment on the working model (a coarser mesh's
-        # error in the upper modes would call their peaks spurious), and that B run is the
-        # pilot too (the pilot mesh may number the upper modes otherwise)
-        pairing, settled = settle_pairing(case, model, pairing, tol=PILOT_TOL,
-                                          convention=conventions, prior_mean=mean,
-                                          prior_sd=sd, fast=fast)  # fmt: skip
+        pairing, settled = settle_pairing(
+            case,
+            model,
+            pairing,
+            tol=PILOT_TOL,
+            convention=conventions,
+            prior_mean=mean,
+            prior_sd=sd,
+            fast=options.fast,
+        )
     pair = replace(pairing, extra=0)
-    problem = GaussianProblem.from_case(
+    exact = GaussianProblem.from_case(
         case, model, pair, conventions.observation, conventions.prior, mean, sd
     )
-    assigned, assignment = _reassignment(case, pairing, inputs, conventions.observation)
-    n_modes = pair.n_modes() if assigned is None else assigned.n
-    exact = problem
+    reassigned = _reassignment(case, pairing, options.inputs, conventions.observation)
+    return _Start(
+        case, model, options, conventions, mean, sd, pair, settled, exact, *reassigned, checked
+    )
+
+
+def _with_fast_model(start, rng):
+    """The setup before its MAP: the pilot, the box and the fast model; the inputs' problem.
+
+    A fast model is built over the posterior box only with ``forward="reduced"`` and none
+    given. With the inputs marginalised and no pilot to place a box, ``J_p`` is taken at the
+    settling B estimate, else at the prior mean.
+    """
+    o, case, model = start.options, start.case, start.model
     timings = {"pilot": 0.0, "build": 0.0, "map": 0.0}
-    pilot, solves, conditional = None, 0, None
-    if forward == "reduced" and fast is None:
-        if box is None and settled is not None:
-            pilot, solves = settled, settled.n_solves
-            problem, box, spent, conditional = _place_box(case, model, problem, pilot, inputs,
-                                                          box_sigma)  # fmt: skip
-            solves += spent
-        if box is None:
-            started = time.perf_counter()
-            pilot_model = _pilot_model(case, model, pilot_mesh if own_model else None)
-            pilot_problem = GaussianProblem.from_case(
-                case, pilot_model, pair, conventions.observation, conventions.prior, mean, sd
-            )
-            pilot = run(pilot_problem, "B", tol=PILOT_TOL, conventions=conventions)
-            solves += pilot.n_solves if pilot_model is model else 0
-            problem, box, spent, conditional = _place_box(case, model, problem, pilot, inputs,
-                                                          box_sigma)  # fmt: skip
-            solves += spent
-            timings["pilot"] = time.perf_counter() - started
-            log.info("pilot B (%s): %s", _mesh_text(pilot_model), pilot.message)
+    problem, fast, pilot, solves, conditional = start.exact, o.fast, None, 0, None
+    if o.forward == "reduced" and fast is None:
+        problem, box, pilot, solves, conditional = _pilot_and_box(start, timings)
         started = time.perf_counter()
-        options = {**FAST_DEFAULTS, **(fast_options or {})}
+        settings = {**FAST_DEFAULTS, **(o.fast_options or {})}
         center = box.center if pilot is None else pilot.b
-        fast = fast_model(model, center, box, n_modes, rng=rng, **options)
+        fast = fast_model(model, center, box, start.n_modes, rng=rng, **settings)
         timings["build"] = time.perf_counter() - started
         solves += fast.build_solves
         log.info("fast model: %s", fast.certificate)
-    if inputs == "marginal" and problem is exact:  # no pilot here: J_p at the settling B
-        at = problem.mu_b if settled is None else settled.b
-        problem, spent, conditional = _marginal(case, model, problem, at)
+    if o.inputs == "marginal" and problem is start.exact:
+        at = problem.mu_b if start.settled is None else start.settled.b
+        problem, spent, conditional = marginal(case, model, problem, at)
         solves += spent
-    setup = SamplingSetup(problem, model, fast if forward == "reduced" else None, None,
-                          pilot, None if fast is None else fast.box, timings, solves,
-                          inputs, conditional, assigned=assigned,
-                          assignment=assignment)  # fmt: skip
+    return SamplingSetup(
+        problem,
+        model,
+        fast if o.forward == "reduced" else None,
+        None,
+        pilot,
+        None if fast is None else fast.box,
+        timings,
+        solves,
+        o.inputs,
+        conditional,
+        assigned=start.assigned,
+        assignment=start.assignment,
+    )
+
+
+def _pilot_and_box(start, timings):
+    """The box given, or placed from the settling B run or else a pilot B run (timed).
+
+    Returns the problem (marginal where the inputs are), the box, the pilot (None with a box
+    given), the full solves spent and the inputs' conditional (or None).
+    """
+    o = start.options
+    if o.box is not None:
+        return start.exact, o.box, None, 0, None
     started = time.perf_counter()
-    # B from the settled assignment's estimate (B's fixed point from the prior mean may be
-    # another optimum with a pairing that skips modes); from the prior mean otherwise
-    estimate = _map(setup, conventions, None if settled is None else settled.b)
-    estimate = _scaled_map(setup, estimate)
-    if conditional is not None and estimate.converged:  # J_p again, at the marginal MAP
-        problem, spent, conditional = _marginal(case, model, exact, estimate.b)
-        solves += spent
-        setup = replace(setup, problem=problem, input_model=conditional, n_full_solves=solves)
-        estimate = _scaled_map(setup, _map(setup, conventions, estimate.b))
-    timings["map"] = time.perf_counter() - started
-    if checked:  # pairing by order, checked at the MAP on the sampler's model
-        found = assignment_at(case, setup.fast or model, estimate.b,
-                              prior_in_stiffness(mean, sd, "full")[1], pair)  # fmt: skip
-        if not found.keeps_order:
-            log.warning("%s: the sampler's setup is made again", refuted_order(found))
-            return prepare(case, **again)
-        log.info("pairing by order checked at the MAP: the most probable assignment")
-    if not estimate.converged:
-        log.warning("B (the MAP) did not converge: %s", estimate.message)
-    _check_box(setup.box, estimate)
-    certificate = None
-    if conditional is not None:  # the linear input model against full solves at the MAP
-        started = time.perf_counter()
-        certificate = linear_input_certificate(
-            case,
-            estimate.b,
-            conditional.B,
-            pair.modes,
-            np.sqrt(np.diag(exact.V_Y)),
-            mesh=(model.mesh.nx, model.mesh.ny),
+    pilot, solves = _pilot(start)
+    problem, box, spent, conditional = place_box(
+        start.case, start.model, start.exact, pilot, o.inputs, o.box_sigma
+    )
+    if start.settled is None:
+        timings["pilot"] = time.perf_counter() - started
+    return problem, box, pilot, solves + spent, conditional
+
+
+def _pilot(start):
+    """The settling B run, else B to :data:`PILOT_TOL` on the pilot model; full solves spent.
+
+    Only solves on the case's mesh count as full solves (a pilot on a coarser mesh is none).
+    """
+    if start.settled is not None:
+        return start.settled, start.settled.n_solves
+    o, c = start.options, start.conventions
+    coarse = pilot_model(start.case, start.model, o.pilot_mesh)
+    pilot_problem = GaussianProblem.from_case(
+        start.case, coarse, start.pair, c.observation, c.prior, start.mean, start.sd
+    )
+    pilot = run(pilot_problem, "B", tol=PILOT_TOL, conventions=c)
+    log.info("pilot B (%s): %s", mesh_text(coarse), pilot.message)
+    return pilot, pilot.n_solves if coarse is start.model else 0
+
+
+def _with_map(start, setup):
+    """B to the MAP on the sampler's model, ``P`` widened by an inferred error scale.
+
+    B starts from the settled assignment's estimate (B's fixed point from the prior mean may
+    be another optimum with a pairing that skips modes), from the prior mean otherwise. With
+    the inputs marginalised, ``J_p`` is evaluated again at that MAP and the MAP found again.
+    """
+    started = time.perf_counter()
+    conventions, settled = start.conventions, start.settled
+    estimate = map_estimate(setup, conventions, None if settled is None else settled.b)
+    estimate = scaled_map(setup, estimate)
+    if setup.input_model is not None and estimate.converged:
+        problem, spent, conditional = marginal(start.case, start.model, start.exact, estimate.b)
+        setup = replace(
+            setup,
+            problem=problem,
+            input_model=conditional,
+            n_full_solves=setup.n_full_solves + spent,
         )
-        solves += certificate.n_solves
-        timings["input_certificate"] = time.perf_counter() - started
-    return replace(setup, estimate=estimate, n_full_solves=solves,
-                   input_certificate=certificate)  # fmt: skip
+        estimate = scaled_map(setup, map_estimate(setup, conventions, estimate.b))
+    timings = {**setup.timings, "map": time.perf_counter() - started}
+    return replace(setup, estimate=estimate, timings=timings)
 
 
-def _map(setup, conventions, start=None):
-    """B to ``MAP_TOL`` on the sampler's model: the MAP and ``P`` (eq. 9)."""
-    return _run_on_fast(setup, "B", MAP_TOL, conventions=conventions, start=start)
+def _order_holds(start, setup):
+    """Pairing by order, checked at the MAP on the sampler's model: whether it stands."""
+    prior_V_b = prior_in_stiffness(start.mean, start.sd, "full")[1]
+    found = assignment_at(
+        start.case, setup.fast or start.model, setup.estimate.b, prior_V_b, start.pair
+    )
+    if not found.keeps_order:
+        log.warning("%s: the sampler's setup is made again", refuted_order(found))
+        return False
+    log.info("pairing by order checked at the MAP: the most probable assignment")
+    return True
 
 
-def _scaled_map(setup, estimate):
-    """B's estimate with ``P`` widened by an inferred error scale (linearised; none: as is).
-
-    The walkers' coordinates are whitened with ``P`` and the default moves propose from a
-    Student-t of that shape (:mod:`bayesplate.sampling.moves`): with ``s`` unknown the
-    posterior is ``s_hat`` times wider than ``P`` at ``s = 1``, and proposals that narrow
-    mix slowly. The estimate stays B's (``s = 1`` weights).
-    """
-    if setup.problem.error_scale is None:
-        return estimate
-    from ..error_scale import linearised_at
-    from ..quantities import engineering_covariance
-
-    cov_b = linearised_at(setup.problem_on_fast_model(), estimate.b).covariance_b
-    cov = engineering_covariance(estimate.constants, cov_b)
-    return replace(estimate, covariance_b=cov_b, covariance=cov, sd=np.sqrt(np.diag(cov)))
-
-
-def _run_on_fast(setup, method, tol, **kwargs):
-    """B or MVE on the sampler's model, early iterates on the reduced model even off-box.
-
-    The estimators start from the prior mean, outside the posterior box; their early
-    iterates only set the path, not the fixed point, so they use the reduced model beyond
-    its certified box too (no full solves, no warnings). The fixed point is then checked to
-    lie in the box; if it does not, the run is repeated with the full-model fallback.
-    """
-    fast = setup.fast
-    if fast is None or not fast.certified:
-        return run(setup.problem_on_fast_model(), method, tol=tol, **kwargs)
-    p = setup.problem
-    free = p.with_forward(fast.reduced.solve)
-    result = run(free, method, tol=tol, **kwargs)
-    if fast.box.contains(result.b) and result.status != "solve_failed":
-        return result
-    log.warning("%s ends outside the fast model's box (%s); again with the full fallback",
-                method, result.message)  # fmt: skip
-    return run(setup.problem_on_fast_model(), method, tol=tol, **kwargs)
-
-
-def _mesh_text(model):
-    return f"{model.mesh.nx} x {model.mesh.ny} mesh"
+def _with_input_certificate(start, setup):
+    """The linear input model against full solves at the MAP (as it is: exact inputs)."""
+    if setup.input_model is None:
+        return setup
+    started = time.perf_counter()
+    model = start.model
+    certificate = linear_input_certificate(
+        start.case,
+        setup.estimate.b,
+        setup.input_model.B,
+        start.pair.modes,
+        np.sqrt(np.diag(start.exact.V_Y)),
+        mesh=(model.mesh.nx, model.mesh.ny),
+    )
+    timings = {**setup.timings, "input_certificate": time.perf_counter() - started}
+    solves = setup.n_full_solves + certificate.n_solves
+    return replace(setup, input_certificate=certificate, n_full_solves=solves, timings=timings)
