@@ -36,7 +36,8 @@ Collapsed (Rao-Blackwellised) sampling
     same mean and covariance ``s^2 C``.
 
 Readings reported are those the case declares (a deviation above 0), in case units (mm, g,
-kg/m^3); a reading with no deviation has ``B`` column 0 and stays at its value.
+kg/m^3; :mod:`bayesplate.input_summary`); a reading with no deviation has ``B`` column 0 and
+stays at its value.
 
 Certificate
     :func:`linear_input_certificate`: at the estimate ``b``, each declared reading moved by
@@ -55,7 +56,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .inputs import READING_UNITS, input_sd, input_sources
+from .input_summary import summarise_inputs
+from .inputs import input_sd, input_sources
 from .model import DEFAULT_MESH, PlateModel
 from .pairing import track
 
@@ -64,14 +66,11 @@ __all__ = [
     "CERTIFICATE_SD",
     "InputCertificate",
     "InputConditional",
-    "InputPosterior",
     "declared_readings",
     "draw_inputs",
-    "highest_density_interval",
     "input_conditional",
     "inputs_from_chain",
     "linear_input_certificate",
-    "summarise_inputs",
 ]
 
 log = logging.getLogger(__name__)
@@ -82,7 +81,6 @@ log = logging.getLogger(__name__)
 CERTIFICATE_FRACTION = 0.25
 #: How far each reading moves in the certificate: +- 2 deviations hold 95 % of its prior.
 CERTIFICATE_SD = 2.0
-_PROB = 0.94  # the 94 % HDI, as the constants' (bayesplate.sampling.HDI_PROB)
 _EXTRA_MODES = 4  # computed beyond the highest paired mode, so MAC can follow a crossing
 
 
@@ -172,8 +170,15 @@ def input_conditional(J, A, V_Y, names, value, sd, at=None) -> InputConditional:
     C = np.linalg.inv(np.eye(B.shape[1]) + B.T @ WB)
     C = 0.5 * (C + C.T)  # symmetric to round-off, for the Cholesky factor
     at = None if at is None else np.asarray(at, dtype=float)
-    return InputConditional(tuple(names), np.asarray(value, dtype=float),
-                            np.asarray(sd, dtype=float), B, C @ WB.T, C, at)  # fmt: skip
+    return InputConditional(
+        tuple(names),
+        np.asarray(value, dtype=float),
+        np.asarray(sd, dtype=float),
+        B,
+        C @ WB.T,
+        C,
+        at,
+    )
 
 
 def draw_inputs(conditional, residuals, rng, s=None):
@@ -204,84 +209,6 @@ def draw_inputs(conditional, residuals, rng, s=None):
     return conditional.value[None, :] + conditional.sd[None, :] * z
 
 
-def highest_density_interval(x, prob=_PROB):
-    """The shortest interval holding a fraction `prob` of the draws `x` (as ArviZ's ``hdi``).
-
-    Returns
-    -------
-    (float, float)
-    """
-    x = np.sort(np.asarray(x, dtype=float))
-    n = x.size
-    inside = int(np.floor(prob * n))
-    width = x[inside:] - x[: n - inside]
-    i = int(np.argmin(width))
-    return float(x[i]), float(x[i + inside])
-
-
-@dataclass(frozen=True)
-class InputPosterior:
-    """The declared readings' posterior, from one conditional draw per kept draw of ``b``.
-
-    Attributes
-    ----------
-    names : tuple of str
-        Declared readings (a deviation above 0), e.g. ``("thickness", "mass")``.
-    keys : tuple of str
-        Their case keys with units: ``"thickness_mm"``, ``"mass_g"``, ``"density_kg_m3"``...
-    declared, declared_sd : numpy.ndarray, shape (k,)
-        The case's value and deviation (the prior), SI.
-    mean, sd : numpy.ndarray, shape (k,)
-        Posterior mean and deviation, SI.
-    hdi : numpy.ndarray, shape (2, k)
-        94 % highest-density interval, SI.
-    draws : numpy.ndarray, shape (n, k)
-        The draws, SI (row i goes with kept draw ``rows[i]`` of the chain).
-    rows : numpy.ndarray of int, shape (n,)
-        Which kept draws of ``b`` they were drawn with.
-    """
-
-    names: tuple
-    keys: tuple
-    declared: np.ndarray
-    declared_sd: np.ndarray
-    mean: np.ndarray
-    sd: np.ndarray
-    hdi: np.ndarray
-    draws: np.ndarray = field(repr=False)
-    rows: np.ndarray = field(repr=False)
-
-    def table(self):
-        """``{"thickness_mm": {"declared", "declared_sd", "mean", "sd", "hdi_3%", "hdi_97%"}}``.
-
-        Case units (mm, g, kg/m^3), floats.
-        """
-        out = {}
-        for j, (name, key) in enumerate(zip(self.names, self.keys, strict=True)):
-            k = READING_UNITS[name][0]
-            values = (self.declared[j], self.declared_sd[j], self.mean[j], self.sd[j],
-                      self.hdi[0, j], self.hdi[1, j])  # fmt: skip
-            fields = ("declared", "declared_sd", "mean", "sd", "hdi_3%", "hdi_97%")
-            out[key] = {f: float(v * k) for f, v in zip(fields, values, strict=True)}
-        return out
-
-
-def _case_key(name):
-    unit = READING_UNITS[name][1]
-    return f"{name}_{'kg_m3' if unit == 'kg/m^3' else unit}"
-
-
-def summarise_inputs(conditional, draws, rows):
-    """An :class:`InputPosterior` of the declared readings from draws (n, 4), SI."""
-    keep = conditional.declared
-    names = tuple(conditional.names[j] for j in keep)
-    d = np.asarray(draws, dtype=float)[:, keep]
-    hdi = np.array([highest_density_interval(d[:, j]) for j in range(keep.size)]).T
-    return InputPosterior(names, tuple(_case_key(n) for n in names), conditional.value[keep],
-                          conditional.sd[keep], d.mean(axis=0), d.std(axis=0, ddof=1),
-                          hdi.reshape(2, keep.size), d, np.asarray(rows))  # fmt: skip
-
-
 def inputs_from_chain(problem, samples_b, forward, conditional, rng, max_draws=4000):
     """The readings' posterior from a chain of the marginal problem (module docstring).
 
@@ -307,8 +234,7 @@ def inputs_from_chain(problem, samples_b, forward, conditional, rng, max_draws=4
     n = len(samples_b)
     rows = np.sort(rng.choice(n, max_draws, replace=False)) if n > max_draws else np.arange(n)
     n_modes, modes = problem.pairing.n_modes(), problem.pairing.modes
-    lam = np.array([np.asarray(forward(b, n_modes).eigenvalues)[modes]
-                    for b in samples_b[rows]])  # fmt: skip
+    lam = np.array([np.asarray(forward(b, n_modes).eigenvalues)[modes] for b in samples_b[rows]])
     residuals = problem.Y[None, :] - lam
     s = None
     if problem.error_scale is not None:
@@ -378,13 +304,18 @@ class InputCertificate:
         if not self.names:
             return "linear input model: no declared input"
         name, sign, i = self.worst
-        verdict = (f"within {self.fraction:g} sd: ok" if self.passed else
-                   f"FAILS (over {self.fraction:g} sd): the posterior's inputs are "
-                   "approximate beyond the linear model")  # fmt: skip
-        return (f"linear input model at +-{self.n_sd:g} sd of each input: largest error "
-                f"{100 * self.max_relative:.2g} % of an eigenvalue, {self.max_in_sd:.2g} of "
-                f"its measurement sd ({name} {sign}{self.n_sd:g} sd, paired frequency {i}); "
-                f"{verdict}")  # fmt: skip
+        verdict = (
+            f"within {self.fraction:g} sd: ok"
+            if self.passed
+            else f"FAILS (over {self.fraction:g} sd): the posterior's inputs are "
+            "approximate beyond the linear model"
+        )
+        return (
+            f"linear input model at +-{self.n_sd:g} sd of each input: largest error "
+            f"{100 * self.max_relative:.2g} % of an eigenvalue, {self.max_in_sd:.2g} of "
+            f"its measurement sd ({name} {sign}{self.n_sd:g} sd, paired frequency {i}); "
+            f"{verdict}"
+        )
 
 
 def _inputs_at(plate, names, readings):
@@ -393,8 +324,12 @@ def _inputs_at(plate, names, readings):
     if names[1] != "mass":
         return np.array([h, second, a, b])
     # rho = m / (a b h), taken relative to the case's density (which may round m / (a b h))
-    rho = plate.density * (second / plate.mass) * (plate.thickness * plate.length
-                                                   * plate.width) / (h * a * b)  # fmt: skip
+    rho = (
+        plate.density
+        * (second / plate.mass)
+        * (plate.thickness * plate.length * plate.width)
+        / (h * a * b)
+    )
     return np.array([h, rho, a, b])
 
 
@@ -413,8 +348,9 @@ def _case_with(case, p):
     return dataclasses.replace(case, plate=changed)
 
 
-def linear_input_certificate(case, b, B, modes, sd_lambda, mesh=None, n_sd=CERTIFICATE_SD,
-                             fraction=CERTIFICATE_FRACTION) -> InputCertificate:  # fmt: skip
+def linear_input_certificate(
+    case, b, B, modes, sd_lambda, mesh=None, n_sd=CERTIFICATE_SD, fraction=CERTIFICATE_FRACTION
+) -> InputCertificate:
     """Check the linear input model against full solves (module docstring).
 
     Parameters
@@ -460,8 +396,14 @@ def linear_input_certificate(case, b, B, modes, sd_lambda, mesh=None, n_sd=CERTI
             linear = lam + B[:, k] * sign * n_sd
             relative[row, col] = (modal.eigenvalues[moved] - linear) / lam
     in_sd = np.abs(relative) * lam[None, None, :] / sd_lambda[None, None, :]
-    cert = InputCertificate(tuple(names[k] for k in declared), float(n_sd), relative, in_sd,
-                            float(fraction), 1 + 2 * declared.size)  # fmt: skip
+    cert = InputCertificate(
+        tuple(names[k] for k in declared),
+        float(n_sd),
+        relative,
+        in_sd,
+        float(fraction),
+        1 + 2 * declared.size,
+    )
     if not cert.passed:
         log.warning("%s", cert)
     return cert

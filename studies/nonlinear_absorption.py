@@ -137,7 +137,7 @@ def _recorded(fitted, widening, dof):
 
 def effective_dof(fitted, m):
     """``m - p_eff`` as diagnose counts them: ``p_eff`` the trace of the data rows' share of
-    the fit's Gauss-Newton Hessian (:attr:`bayesplate.discrepancy.search.joint_fit.JointFit.
+    the fit's Gauss-Newton Hessian (:attr:`bayesplate.discrepancy.search.laplace.JointFit.
     effective_parameters`), from the Jacobian of :class:`Exact`."""
     J = fitted.jacobian
     data = J[:m].T @ J[:m]

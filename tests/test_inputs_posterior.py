@@ -17,11 +17,11 @@ import types
 import numpy as np
 import pytest
 
+from bayesplate.input_summary import highest_density_interval
 from bayesplate.inputs import input_jacobian, input_sources
 from bayesplate.inputs_posterior import (
     declared_readings,
     draw_inputs,
-    highest_density_interval,
     input_conditional,
     inputs_from_chain,
     linear_input_certificate,

@@ -30,6 +30,7 @@ NUMERICS = (
     "error_scale",
     "inputs",
     "inputs_posterior",
+    "input_summary",
     "estimators",
     "reduced",
     "sampling",

@@ -28,7 +28,8 @@ correlations of the propagated prior; ``"printed"`` is section 3.6 to the letter
 
 Modules: :mod:`~.conventions` (the open choices), :mod:`~.steps` (one B or MVE update),
 :mod:`~.iteration` (:func:`run`: the iteration and its stopping rules), :mod:`~.estimate`
-(:func:`estimate`: a case, MVE-mod's two stages), :mod:`~.fast` (the same on the certified
+(:func:`estimate`: a case, MVE-mod's two stages), :mod:`~.assignment_rounds` (the rounds of
+assignment and estimate that pair by likelihood), :mod:`~.fast` (the same on the certified
 fast model, each answer confirmed by the full model), :mod:`~.result` (:class:`EstimateResult`),
 :mod:`~.assess` (:func:`assess`: every estimate's fit statement and warnings; "converged" is
 the status of a run that stopped with nothing flagged, ``converged`` only that it stopped).

@@ -7,7 +7,8 @@ Everything that touches a file lives here; the numerics never import it.
 - :mod:`~bayesplate.io.case`: the case dataclasses (:class:`Plate`, :class:`Measurement`,
   :class:`Prior`, :class:`Case`), validated, in SI units.
 - :mod:`~bayesplate.io.case_file`: reading a TOML case file (:func:`load_case`,
-  :func:`parse_case`) and the bundled cases.
+  :func:`parse_case`) and the bundled cases; :mod:`~bayesplate.io.case_measured`: its
+  ``[measured]`` table.
 - :mod:`~bayesplate.io.modal_data`, :mod:`~bayesplate.io.uff`,
   :mod:`~bayesplate.io.csv_table`: measured modes from a modal test (UFF or CSV).
 - :mod:`~bayesplate.io.frf`, :mod:`~bayesplate.io.impulse`: a tap test's spectra (FRFs from

@@ -6,7 +6,8 @@ plate. This is the only module of the package that reads case files (the plate s
 
 :func:`parse_case` checks the file's own keys and values (millimetres, GPa), so a message
 quotes what the user wrote, e.g. ``plate.thickness_mm = -3.0: must be a positive number``;
-the :class:`Case` it builds checks its invariants again in SI.
+the :class:`Case` it builds checks its invariants again in SI. The ``[measured]`` table is
+read by :mod:`.case_measured`.
 
 Uncertain inputs (optional keys of ``[plate]``): ``thickness_sd_mm``, ``density_sd_kg_m3``,
 ``length_sd_mm`` and ``width_sd_mm`` give one standard deviation of the measured thickness,
@@ -64,15 +65,12 @@ from collections.abc import Mapping
 import numpy as np
 
 from ..quantities import ENGINEERING_KEYS
-from .case import Case, Measurement, Plate, Prior
+from .case import Case, Plate, Prior
+from .case_measured import parse_measured
 from .checks import (
     _angles,
-    _check_frequencies,
-    _integers,
-    _list,
     _mesh,
     _number,
-    _numbers,
     _ply_thicknesses,
     _positive,
     _string,
@@ -92,7 +90,6 @@ else:  # pragma: no cover - Python 3.10 only
 __all__ = ["load_case", "parse_case", "bundled_case_path", "bundled_case_names"]
 
 _MM = 1e-3  # m per mm
-_MAX_MODE_INDEX = 1_000_000  # keeps mode indices far inside int64
 
 _TOP_KEYS = ("name", "source", "plate", "measured", "prior", "model", "reference")
 _TOP_REQUIRED = ("name", "plate", "measured", "prior")
@@ -119,10 +116,6 @@ _PLATE_SD_KEYS = (
     ("thickness_sd_mm", "thickness_sd", 1e-3),
     ("density_sd_kg_m3", "density_sd", 1.0),
 )
-_MEASURED_KEYS = ("frequency_Hz", "sigma_rel", "sigma_Hz", "mode", "points_mm", "shapes",
-                  "error_scale", "p_spurious", "tap_point_mm", "sensor_point_mm")  # fmt: skip
-_ERROR_SCALE_KEYS = ("median", "upper95")
-_ERROR_SCALE_ENTRY = "a table { median = ..., upper95 = ... } (quantiles of the scale s)"
 _PRIOR_ENTRY_KEYS = ("mean", "sd")
 _PRIOR_ENTRY = "a table { mean = ..., sd = ... }"
 _MODEL_KEYS = ("mesh",)
@@ -244,7 +237,7 @@ def _parse(data: Mapping, path) -> Case:
     name = _string(top["name"], "name", nonempty=True)
     source = _string(top.get("source", ""), "source")
     plate, extent_mm = _parse_plate(top["plate"])
-    measured = _parse_measured(top["measured"], extent_mm)
+    measured = parse_measured(top["measured"], extent_mm)
     prior = _parse_prior(top["prior"])
     mesh = _parse_model(top["model"]) if "model" in top else None
     reference = _parse_reference(top["reference"]) if "reference" in top else None
@@ -263,8 +256,11 @@ def _parse_plate(raw) -> tuple[Plate, tuple[float, float]]:
     )
     _check_proportions(length, width, thickness)
     if "density_kg_m3" in table:
-        _plausible(_positive(table["density_kg_m3"], "plate.density_kg_m3"), "density_kg_m3",
-                   "plate.density_kg_m3")  # fmt: skip
+        _plausible(
+            _positive(table["density_kg_m3"], "plate.density_kg_m3"),
+            "density_kg_m3",
+            "plate.density_kg_m3",
+        )
     layup = _angles(table["layup_deg"], "plate.layup_deg")
     check_plausible(layup, "layup_deg", "plate.layup_deg")
     plies = None
@@ -274,11 +270,15 @@ def _parse_plate(raw) -> tuple[Plate, tuple[float, float]]:
         )
         check_plausible(plies_mm, "ply_thickness_mm", "plate.ply_thickness_mm")
         plies = tuple(t * _MM for t in plies_mm)
-    sds = {field: _sd(table[key], f"plate.{key}") * to_si
-           for key, field, to_si in _PLATE_SD_KEYS if key in table}  # fmt: skip
+    sds = {
+        field: _sd(table[key], f"plate.{key}") * to_si
+        for key, field, to_si in _PLATE_SD_KEYS
+        if key in table
+    }
     density, mass = _density(table, length, width, thickness, sds)
-    plate = Plate(length * _MM, width * _MM, thickness * _MM, density, tuple(layup), plies,
-                  **sds, **mass)  # fmt: skip
+    plate = Plate(
+        length * _MM, width * _MM, thickness * _MM, density, tuple(layup), plies, **sds, **mass
+    )
     return plate, (length, width)
 
 
@@ -297,14 +297,22 @@ def _density(table, length, width, thickness, sds):
         if stated > 0:
             tol, why = stated, "its stated sd"
         else:  # the derived density's own sd (first order), or the rounding of a printed one
-            rel = np.hypot.reduce([mass_sd_g / mass_g, sds.get("thickness_sd", 0.0) / (
-                thickness * _MM), sds.get("length_sd", 0.0) / (length * _MM),
-                sds.get("width_sd", 0.0) / (width * _MM)])  # fmt: skip
+            rel = np.hypot.reduce(
+                [
+                    mass_sd_g / mass_g,
+                    sds.get("thickness_sd", 0.0) / (thickness * _MM),
+                    sds.get("length_sd", 0.0) / (length * _MM),
+                    sds.get("width_sd", 0.0) / (width * _MM),
+                ]
+            )
             tol, why = max(rel, _DENSITY_ROUNDING) * derived, "the derived density's sd"
         if abs(given - derived) > tol:
-            raise CaseError("plate.density_kg_m3", table["density_kg_m3"],
-                            f"must agree with plate.mass_g / (a b h) = {derived:.5g} kg/m^3 "
-                            f"within {tol:.3g} kg/m^3 ({why})")  # fmt: skip
+            raise CaseError(
+                "plate.density_kg_m3",
+                table["density_kg_m3"],
+                f"must agree with plate.mass_g / (a b h) = {derived:.5g} kg/m^3 "
+                f"within {tol:.3g} kg/m^3 ({why})",
+            )
     return derived, {"mass": mass_g * 1e-3, "mass_sd": mass_sd_g * 1e-3}
 
 
@@ -314,119 +322,6 @@ def _sd(raw, key: str) -> float:
     if value < 0:
         raise CaseError(key, raw, "must be a number >= 0 (a standard deviation)")
     return value
-
-
-def _parse_measured(raw, extent_mm: tuple[float, float]) -> Measurement:
-    table = _table(raw, "measured", _MEASURED_KEYS, ("frequency_Hz",))
-    frequency = _numbers(table["frequency_Hz"], "measured.frequency_Hz")
-    _check_frequencies(frequency, "measured.frequency_Hz")
-    check_plausible(frequency, "frequency_Hz", "measured.frequency_Hz")
-    sigma = _parse_sigma(table, frequency)
-    mode = None
-    if "mode" in table:
-        mode = _integers(table["mode"], "measured.mode", 1, _MAX_MODE_INDEX)
-    points, shapes = _parse_shapes(table, extent_mm)
-    scale = _parse_error_scale(table["error_scale"]) if "error_scale" in table else None
-    p_spurious = None
-    if "p_spurious" in table:
-        p_spurious = _numbers(table["p_spurious"], "measured.p_spurious")
-    tap = _tap_points(table, extent_mm)
-    return Measurement(frequency, sigma, mode, points, shapes, scale, p_spurious, tap)
-
-
-def _tap_points(table, extent_mm):
-    """``tap_point_mm`` and ``sensor_point_mm`` (both or neither) as an array (2, 2), m."""
-    keys = ("tap_point_mm", "sensor_point_mm")
-    given = [key for key in keys if key in table]
-    if not given:
-        return None
-    if len(given) == 1:
-        missing = next(key for key in keys if key not in table)
-        raise CaseError(f"measured.{missing}", rule=f"required with measured.{given[0]}")
-    return np.array([_point(table[key], f"measured.{key}", extent_mm) for key in keys]) * _MM
-
-
-def _parse_error_scale(raw):
-    """``measured.error_scale = { median, upper95 }``: the prior of ``s`` (module docstring)."""
-    key = "measured.error_scale"
-    entry = _table(raw, key, _ERROR_SCALE_KEYS, _ERROR_SCALE_KEYS, _ERROR_SCALE_ENTRY)
-    median = _positive(entry["median"], f"{key}.median")
-    upper = _positive(entry["upper95"], f"{key}.upper95")
-    from ..error_scale import ErrorScalePrior
-
-    try:
-        return ErrorScalePrior(median, upper)
-    except ValueError as err:
-        field, rule = str(err).split(": ", 1)
-        raise CaseError(f"{key}.{field}", entry[field], rule) from None
-
-
-def _parse_sigma(table: Mapping, frequency: np.ndarray) -> np.ndarray:
-    if "sigma_rel" in table and "sigma_Hz" in table:
-        rule = "give sigma_rel or sigma_Hz, not both"
-        raise CaseError("measured.sigma_rel", table["sigma_rel"], rule)
-    if "sigma_Hz" in table:
-        sigma = _numbers(table["sigma_Hz"], "measured.sigma_Hz")
-        if sigma.size == frequency.size:  # else Measurement names the length rule
-            _check_sigma_hz(sigma)
-        return sigma
-    if "sigma_rel" not in table:
-        rule = "required: give sigma_rel (fraction of each frequency) or sigma_Hz (list)"
-        raise CaseError("measured.sigma_rel", rule=rule)
-    sigma_rel = _number(table["sigma_rel"], "measured.sigma_rel")
-    if not 0 < sigma_rel < 1:
-        raise CaseError("measured.sigma_rel", table["sigma_rel"], "must be > 0 and < 1")
-    check_plausible(sigma_rel, "sigma_rel", "measured.sigma_rel")
-    return sigma_rel * frequency
-
-
-def _parse_shapes(table: Mapping, extent_mm) -> tuple[np.ndarray | None, np.ndarray | None]:
-    """Return measurement points (p, 2) in m and shapes (m, p), or (None, None)."""
-    if ("points_mm" in table) != ("shapes" in table):
-        given, other = ("points_mm", "shapes") if "points_mm" in table else ("shapes", "points_mm")
-        rule = f"needs measured.{other} too (mode shapes are amplitudes at points)"
-        raise CaseError(f"measured.{given}", table[given], rule)
-    if "points_mm" not in table:
-        return None, None
-    points_mm = _points(table["points_mm"], "measured.points_mm", extent_mm)
-    shapes = _matrix(table["shapes"], "measured.shapes", len(points_mm))
-    return points_mm * _MM, shapes
-
-
-def _points(raw, key: str, extent_mm) -> np.ndarray:
-    items = _list(raw, key, "[x, y] pairs")
-    if not items:
-        raise CaseError(key, raw, "must list at least one [x, y] point")
-    return np.array([_point(item, f"{key}[{i}]", extent_mm) for i, item in enumerate(items)])
-
-
-def _point(raw, key: str, extent_mm) -> list[float]:
-    pair = _list(raw, key, "two numbers [x, y]")
-    if len(pair) != 2:
-        raise CaseError(key, raw, "must be a pair [x, y] of numbers")
-    xy = []
-    for j, (value, axis, size, size_key) in enumerate(
-        zip(pair, "xy", extent_mm, ("length_mm", "width_mm"), strict=True)
-    ):
-        coordinate = _number(value, f"{key}[{j}]")
-        if not 0 <= coordinate <= size:
-            rule = f"{axis} must lie on the plate: 0 <= {axis} <= plate.{size_key} = {size:g}"
-            raise CaseError(f"{key}[{j}]", value, rule)
-        xy.append(coordinate)
-    return xy
-
-
-def _matrix(raw, key: str, ncols: int) -> np.ndarray:
-    rows = _list(raw, key, "rows (lists of numbers)")
-    out = np.empty((len(rows), ncols))
-    for i, row in enumerate(rows):
-        values = _numbers(row, f"{key}[{i}]")
-        if values.size != ncols:
-            rule = f"must have one value per point of points_mm ({ncols}), got {values.size}"
-            raise CaseError(f"{key}[{i}]", row, rule)
-        out[i] = values
-        check_plausible(np.max(np.abs(values), initial=0.0), "shape_amplitude", f"{key}[{i}]")
-    return out
 
 
 def _parse_prior(raw) -> Prior:
@@ -469,12 +364,3 @@ def _check_proportions(length: float, width: float, thickness: float) -> None:
     if thickness > side:
         rule = f"must not exceed the plate's length and width (smaller: {side:g} mm)"
         raise CaseError("plate.thickness_mm", thickness, rule)
-
-
-def _check_sigma_hz(sigma: np.ndarray) -> None:
-    """Each sd positive and plausible (the positivity rule first, as Measurement has it)."""
-    for i, s in enumerate(sigma):
-        key = f"measured.sigma_Hz[{i}]"
-        if not s > 0:
-            raise CaseError(key, s, "must be a positive number")
-        check_plausible(s, "sigma_Hz", key)

@@ -96,7 +96,7 @@ class SamplingResult:
         the inputs drawn, ``input_certificate`` and ``inputs`` (their draws).
     settings : dict
         Seed entropy, walkers, moves, box, stopping settings.
-    input_posterior : bayesplate.inputs_posterior.InputPosterior or None
+    input_posterior : bayesplate.input_summary.InputPosterior or None
         The declared inputs' posterior (inputs marginalised; one conditional draw per kept
         draw of ``b``); None with the inputs exact or none declared.
     input_certificate : bayesplate.inputs_posterior.InputCertificate or None

@@ -12,11 +12,11 @@ A pass of diagnose is a chain of module-level stages, each handing a small froze
 - ``passes``: a pass per assignment of the peaks (``reassign``)
 
 ``options`` holds every setting (:class:`~.options.DiagnoseOptions`). The tools the stages
-use: ``joint_fit`` (a joint problem and its Laplace fit), ``local_fits`` (local fits from
-many starts), ``settling`` (rounds of reduced models checked by the full one),
-``tight_finish`` (the last steps of a fit), ``constants_again`` (a candidate's constants
-searched again globally), ``phases`` (a phase of the ranking over the candidates),
-``two_effects`` (the pairs' stage), ``mesh_error``, ``probabilities``, ``verdict`` (the
-checks and the verdict), ``separation`` (the measurement that would tell two apart),
-``reassign`` and ``store`` (resume after a kill).
+use: ``joint_fit`` (a joint problem and its fit), ``laplace`` (the fit's Laplace summary: its
+covariance and evidence), ``local_fits`` (local fits from many starts), ``settling`` (rounds
+of reduced models checked by the full one), ``tight_finish`` (the last steps of a fit),
+``constants_again`` (a candidate's constants searched again globally), ``phases`` (a phase
+of the ranking over the candidates), ``two_effects`` (the pairs' stage), ``mesh_error``,
+``probabilities``, ``verdict`` (the checks and the verdict), ``separation`` (the
+measurement that would tell two apart), ``reassign`` and ``store`` (resume after a kill).
 """

@@ -8,129 +8,36 @@ order at every evaluation. Derivatives: ``d lambda / d b`` from the eigenvectors
 with the matrix derivatives taken by central differences of the assembled matrices (no
 extra eigen solve).
 
-The evidence is the Laplace approximation around the best fit,
-``ln Z = -chi2_total / 2 - ln det(H) / 2 - ln det(2 pi V_Y) / 2 - sum ln P_trunc``, with the
-Gauss-Newton Hessian ``H = J^T J`` in the whitened unknowns and ``P_trunc`` the prior mass
-inside each parameter's bounds. It was chosen over nested sampling or WAIC/LOO because it
-costs nothing beyond the fit, and with 10-20 frequencies and up to 11 unknowns the posterior
-of a well-identified fit is close to Gaussian; where a parameter is unidentified the Laplace
-volume is its prior volume, which is the right Occam penalty.
+The best fit is summarised by its Laplace approximation (:mod:`.laplace`: the covariance and
+the evidence, :class:`.laplace.JointFit`).
 
 Each fit may run on three levels: every start on a cheap model (a reduced model, or the
 coarse mesh), the best optima polished on a reduced model of the working mesh, and the
 result finished on the working mesh (:func:`fit`; tightly, at a canonical mirror image:
-:mod:`.tight_finish`). Over 400 lines (a written reason, as the
-project asks): the problem, its levels and the Laplace summary share the whitened unknowns
-and the cached evaluation; split, each part would reach into the others' internals.
+:mod:`.tight_finish`).
 """
 
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
 import numpy as np
 from scipy.stats import norm
 
 from ... import laminate
-from ...quantities import engineering_covariance, hz_from_eigenvalue
+from .laplace import summarise
 from .local_fits import distinct as _distinct
 from .local_fits import local_fits as _local_fits
 from .settling import MAX_ROUNDS, polish_and_finish
 from .tight_finish import finish
 
-__all__ = ["JointFit", "JointProblem", "fit", "rough_fit", "settle"]
+__all__ = ["JointProblem", "fit", "rough_fit", "settle"]
 
 _UNPHYSICAL_RESIDUAL = 1e4  # residual returned outside the lamina's physical region
 #: ``ftol`` and ``xtol`` of the local fits of :func:`rough_fit`: a rough optimum only says
 #: where to refine from (the refinement converges on the working mesh).
 ROUGH_TOL = 1e-8
-
-
-@dataclass(frozen=True)
-class JointFit:
-    """Best joint fit of constants and physics parameters.
-
-    Attributes
-    ----------
-    physics : Physics or None
-        None for the nominal model.
-    b : numpy.ndarray, shape (6,)
-        Stiffness coefficients, Pa.
-    theta : numpy.ndarray, shape (k,)
-        Physics parameters in their units.
-    covariance : numpy.ndarray, shape (6 + k, 6 + k)
-        Laplace covariance of ``(b, theta)`` (Pa and parameter units).
-    chi2 : float
-        ``|W (Y - g)|^2`` of the data alone.
-    chi2_prior : float
-        ``|z|^2`` of the prior terms.
-    log_evidence : float
-        Laplace approximation of ``ln f(Y | physics)``.
-    residual_sigma : numpy.ndarray, shape (m,)
-        Standardised residuals ``(Y - g) / sigma_lambda`` (measured minus model).
-    eigenvalues : numpy.ndarray, shape (m,)
-        Model eigenvalues paired with the measured ones, rad^2/s^2.
-    effective_parameters : float
-        ``trace`` of the data's share of the Hessian: how many parameters the data fix.
-    n_solves : int
-        Eigen solves used.
-    success : bool
-    message : str
-    modal : ModalResult
-        The forward solution at the best fit.
-    refined : bool
-        False when the fit stayed on a corrected coarse mesh (see :func:`fit`).
-    alternatives : tuple of (numpy.ndarray, float)
-        The other local optima reached on the working mesh: their stiffness coefficients
-        ``b`` (Pa) and objective ``chi2 + chi2_prior``, best first.
-    check : FitCheck or None
-        When the fit was settled on reduced models of the working mesh (:mod:`.settling`):
-        the full model at its answer. None when it ran on the finite-element model itself
-        or was not refined.
-    rough_optima : tuple of numpy.ndarray
-        Of a fit not refined (:func:`rough_fit`): the whitened unknowns of its best distinct
-        rough optima, best first, to refine from.
-    """
-
-    physics: object
-    b: np.ndarray
-    theta: np.ndarray
-    covariance: np.ndarray
-    chi2: float
-    chi2_prior: float
-    log_evidence: float
-    residual_sigma: np.ndarray
-    eigenvalues: np.ndarray
-    effective_parameters: float
-    n_solves: int
-    success: bool
-    message: str
-    modal: object = field(repr=False, default=None)
-    refined: bool = True
-    alternatives: tuple = ()
-    check: object = None
-    rough_optima: tuple = ()
-
-    @property
-    def constants(self):
-        """Engineering constants ``(E1, E2, nu12, G12, G13, G23)``, SI."""
-        return laminate.engineering_from_stiffness(self.b)
-
-    @property
-    def constants_sd(self):
-        """First-order deviations of the engineering constants, SI."""
-        return np.sqrt(np.diag(engineering_covariance(self.constants, self.covariance[:6, :6])))
-
-    @property
-    def theta_sd(self):
-        """Laplace deviations of the physics parameters."""
-        return np.sqrt(np.diag(self.covariance)[6:])
-
-    @property
-    def frequency_Hz(self):
-        """Model frequencies paired with the measured ones, Hz."""
-        return hz_from_eigenvalue(self.eigenvalues)
 
 
 class JointProblem:
@@ -254,8 +161,9 @@ class JointProblem:
     def _evaluate_reduced(self, b, theta):
         modal, d_theta = self.pencil.solve(b, theta, int(self.modes.max()) + 1)
         lam = modal.eigenvalues[self.modes]
-        J = np.hstack([modal.sensitivities[self.modes] @ self.L,
-                       d_theta[self.modes] * self.theta_sd])  # fmt: skip
+        J = np.hstack(
+            [modal.sensitivities[self.modes] @ self.L, d_theta[self.modes] * self.theta_sd]
+        )
         if self.scale is not None:
             lam, J = lam * self.scale, J * self.scale[:, None]
         return lam, J, modal
@@ -295,9 +203,22 @@ class JointProblem:
         return float(np.sum(np.log(hi - lo)))
 
 
-def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None, keep=1, workers=1,
-        rough=None, distinct=False, rough_nfev=None, polish=None, tol=1e-8,
-        rounds=MAX_ROUNDS):  # fmt: skip
+def fit(
+    problem,
+    starts,
+    max_nfev=40,
+    coarse=None,
+    scale=None,
+    refine=None,
+    keep=1,
+    workers=1,
+    rough=None,
+    distinct=False,
+    rough_nfev=None,
+    polish=None,
+    tol=1e-8,
+    rounds=MAX_ROUNDS,
+):
     """Best joint fit over several starts, with its Laplace evidence.
 
     Parameters
@@ -349,16 +270,15 @@ def fit(problem, starts, max_nfev=40, coarse=None, scale=None, refine=None, keep
     if rough is not None:
         rough_problem = rough
         rough = _local_fits(rough_problem, starts, rough_nfev or max_nfev, workers)
-        if refine is not None and not refine(_summarise(rough_problem, rough[0], refined=False)):
-            return _summarise(rough_problem, rough[0], refined=False)
+        if refine is not None and not refine(summarise(rough_problem, rough[0], refined=False)):
+            return summarise(rough_problem, rough[0], refined=False)
         starts = [r.x for r in (_distinct(rough) if distinct else rough)[:keep]]
         if polish is not None:
             return settle(problem, polish, starts, rounds)
-    results = _local_fits(problem, starts, max_nfev, workers,
-                          tol if rough is not None else 1e-8)  # fmt: skip
+    results = _local_fits(problem, starts, max_nfev, workers, tol if rough is not None else 1e-8)
     others = tuple((problem.unpack(r.x)[0], 2.0 * r.cost) for r in results[1:])
     best = results[0] if rough is None else finish(problem, results[0], max_nfev)
-    return replace(_summarise(problem, best), alternatives=others)
+    return replace(summarise(problem, best), alternatives=others)
 
 
 def rough_fit(rough, starts, max_nfev, keep, more=None):
@@ -389,7 +309,7 @@ def rough_fit(rough, starts, max_nfev, keep, more=None):
             results += _local_fits(rough, extra, max_nfev, tol=ROUGH_TOL)
             results.sort(key=lambda r: r.cost)
     optima = tuple(r.x for r in _distinct(results)[:keep])
-    return replace(_summarise(rough, results[0], refined=False), rough_optima=optima)
+    return replace(summarise(rough, results[0], refined=False), rough_optima=optima)
 
 
 def settle(problem, polish, starts, rounds=MAX_ROUNDS):
@@ -417,81 +337,6 @@ def settle(problem, polish, starts, rounds=MAX_ROUNDS):
     """
     settled, others = polish_and_finish(problem, polish, starts, rounds)
     best = settled[0]
-    fitted = _summarise(best.problem, best.result, modal=best.snapshot)
+    fitted = summarise(best.problem, best.result, modal=best.snapshot)
     solves = problem.n_solves + sum(s.check.full_solves for s in settled)
     return replace(fitted, alternatives=tuple(others), check=best.check, n_solves=solves)
-
-
-def _log_mass_inside(z, sd, lo, hi):
-    """``sum ln P(lo < z_i < hi)`` of the Laplace Gaussian's marginals.
-
-    At a bound (a mass or a foundation stiffness fitted as zero) only part of the Gaussian
-    around the best fit is admissible; without this term the evidence would count the
-    inadmissible half as well.
-    """
-    inside = norm.cdf((hi - z) / sd) - norm.cdf((lo - z) / sd)
-    return float(np.sum(np.log(np.maximum(inside, 1e-300))))
-
-
-def _summarise(problem, res, refined=True, modal=None):
-    """The :class:`JointFit` of the best least-squares result.
-
-    ``modal``: the forward solution to report instead of ``problem``'s (the finite-element
-    one at the answer of a fit on a pencil, whose own vectors are Ritz coefficients).
-    """
-    z = res.x
-    out = problem.evaluate(z)
-    b, theta = problem.unpack(z)
-    if out is None:
-        return JointFit(
-            problem.physics,
-            b,
-            theta,
-            np.full((z.size, z.size), np.nan),
-            np.inf,
-            np.inf,
-            -np.inf,
-            np.full(problem.Y.size, np.nan),
-            np.full(problem.Y.size, np.nan),
-            np.nan,
-            problem.n_solves,
-            False,
-            "the fit left the physical region",
-            refined=refined,
-        )
-    lam, Jg, own = out
-    modal = own if modal is None else modal
-    Jd = Jg / problem.sigma[:, None]
-    H = Jd.T @ Jd + np.eye(z.size)
-    H_inv = np.linalg.inv(H)
-    T = np.zeros((z.size, z.size))  # d(b, theta) / dz
-    T[:6, :6] = problem.L
-    T[6:, 6:] = np.diag(problem.theta_sd)
-    r = (problem.Y - lam) / problem.sigma
-    chi2, chi2_prior = float(r @ r), float(z @ z)
-    lo, hi = problem.bounds()
-    log_z = (
-        -0.5 * (chi2 + chi2_prior)
-        - 0.5 * np.linalg.slogdet(H)[1]
-        - 0.5 * np.sum(np.log(2 * np.pi * problem.sigma**2))
-        - problem.log_truncation()
-        + _log_mass_inside(z, np.sqrt(np.diag(H_inv)), lo, hi)
-    )
-    p_eff = float(np.trace(H_inv @ (Jd.T @ Jd)))
-    return JointFit(
-        problem.physics,
-        b,
-        theta,
-        T @ H_inv @ T.T,
-        chi2,
-        chi2_prior,
-        log_z,
-        r,
-        lam,
-        p_eff,
-        problem.n_solves,
-        bool(res.success),
-        str(res.message),
-        modal,
-        refined,
-    )

@@ -22,7 +22,8 @@ from functools import partial
 import numpy as np
 
 from ..physics.reduced_model import candidate_pencil
-from .joint_fit import JointFit, JointProblem, fit, rough_fit, settle
+from .joint_fit import JointProblem, fit, rough_fit, settle
+from .laplace import JointFit
 from .phases import run_phase
 from .probabilities import images_log_weight
 from .settling import polish_and_finish

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .joint_fit import JointFit
+from .laplace import JointFit
 from .rank import CandidateResult
 from .separation import Separation
 

@@ -134,7 +134,7 @@ def digest(*parts):
 
 
 def fit_digest(fit):
-    """The part of a :class:`.joint_fit.JointFit` later stages build on (its optimum and value)."""
+    """The part of a :class:`.laplace.JointFit` later stages build on (its optimum and value)."""
     return digest(
         fit.b,
         fit.theta,

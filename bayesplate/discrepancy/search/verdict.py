@@ -2,7 +2,7 @@
 
 Step 1 and step 5 of :func:`..diagnose.diagnose`: what a fit's Laplace posterior says about
 each measured mode and each constant, which other optima fit about as well, and the
-verdicts. Pure computation on :class:`.joint_fit.JointFit` results.
+verdicts. Pure computation on :class:`.laplace.JointFit` results.
 """
 
 from __future__ import annotations
