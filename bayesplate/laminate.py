@@ -84,32 +84,35 @@ def stiffness_jacobian(e):
 
     Parameters
     ----------
-    e : array_like, shape (6,)
+    e : array_like, shape (..., 6)
         Engineering constants in Pa.
 
     Returns
     -------
-    numpy.ndarray, shape (6, 6)
-        ``J[i, j] = d b_i / d e_j``.
+    numpy.ndarray, shape (..., 6, 6)
+        ``J[..., i, j] = d b_i / d e_j``.
     """
-    E1, E2, nu12, _, _, _ = np.asarray(e, dtype=float)
+    e = np.asarray(e, dtype=float)
+    E1, E2, nu12 = e[..., 0], e[..., 1], e[..., 2]
     r = E2 / E1
     denom = 1.0 - nu12**2 * r
     # d(1/denom)/dE1 = -nu12^2 E2 / E1^2 / denom^2 ; d/dE2 = nu12^2 / E1 / denom^2
     dinv_dE1 = -(nu12**2) * E2 / E1**2 / denom**2
     dinv_dE2 = nu12**2 / E1 / denom**2
     dinv_dnu = 2.0 * nu12 * r / denom**2
-    J = np.zeros((6, 6))
-    J[0, :3] = [1.0 / denom + E1 * dinv_dE1, E1 * dinv_dE2, E1 * dinv_dnu]
-    J[1, :3] = [E2 * dinv_dE1, 1.0 / denom + E2 * dinv_dE2, E2 * dinv_dnu]
-    J[2, :3] = [
-        nu12 * E2 * dinv_dE1,
-        nu12 / denom + nu12 * E2 * dinv_dE2,
-        E2 / denom + nu12 * E2 * dinv_dnu,
-    ]
-    J[3, 3] = 1.0  # C66 = G12
-    J[4, 5] = 1.0  # C44 = G23
-    J[5, 4] = 1.0  # C55 = G13
+    J = np.zeros(e.shape + (6,))
+    J[..., 0, 0] = 1.0 / denom + E1 * dinv_dE1
+    J[..., 0, 1] = E1 * dinv_dE2
+    J[..., 0, 2] = E1 * dinv_dnu
+    J[..., 1, 0] = E2 * dinv_dE1
+    J[..., 1, 1] = 1.0 / denom + E2 * dinv_dE2
+    J[..., 1, 2] = E2 * dinv_dnu
+    J[..., 2, 0] = nu12 * E2 * dinv_dE1
+    J[..., 2, 1] = nu12 / denom + nu12 * E2 * dinv_dE2
+    J[..., 2, 2] = E2 / denom + nu12 * E2 * dinv_dnu
+    J[..., 3, 3] = 1.0  # C66 = G12
+    J[..., 4, 5] = 1.0  # C44 = G23
+    J[..., 5, 4] = 1.0  # C55 = G13
     return J
 
 

@@ -26,7 +26,6 @@ from .options import mesh_of, resolve_case
 __all__ = [
     "fit_plates",
     "hierarchical_text",
-    "hierarchical_to_dict",
     "joint_text",
     "joint_to_dict",
     "run_plates",
@@ -52,8 +51,12 @@ def _load(names):
         case = resolve_case(name)
         key = os.path.realpath(case.path) if case.path else name
         if key in seen:
-            raise CaseError("case", f"argument {k + 1}, the file of argument {seen[key] + 1}",
-                            "each plate's case file may be given once", path=case.path)  # fmt: skip
+            raise CaseError(
+                "case",
+                f"argument {k + 1}, the file of argument {seen[key] + 1}",
+                "each plate's case file may be given once",
+                path=case.path,
+            )
         seen[key] = k
         cases.append(case)
     return cases
@@ -76,16 +79,22 @@ def joint_text(result):
     ]
     mean, sd, hdi = (to_case_units(v) for v in (s.mean, s.sd, s.hdi))
     for i, key in enumerate(ENGINEERING_KEYS):
-        lines.append(f"{key:>9} {mean[i]:#10.4g} {sd[i]:#9.3g} {hdi[0, i]:#9.4g} "
-                     f"{hdi[1, i]:#9.4g} {s.ess_bulk[i]:6.0f} {s.rhat[i]:6.3f}")  # fmt: skip
-    lines.append("plates: chi2 at the joint mean (m modes); q, p: the others' prediction "
-                 "(flagged below p = 0.01); own B estimate E1, E2, G12 (GPa)")  # fmt: skip
+        lines.append(
+            f"{key:>9} {mean[i]:#10.4g} {sd[i]:#9.3g} {hdi[0, i]:#9.4g} "
+            f"{hdi[1, i]:#9.4g} {s.ess_bulk[i]:6.0f} {s.rhat[i]:6.3f}"
+        )
+    lines.append(
+        "plates: chi2 at the joint mean (m modes); q, p: the others' prediction "
+        "(flagged below p = 0.01); own B estimate E1, E2, G12 (GPa)"
+    )
     for est, c in zip(result.setup.singles, result.checks, strict=True):
         own = to_case_units(est.constants)
         flag = "FLAGGED" if c.status == "flagged" else c.status
-        lines.append(f"  {c.name}: chi2 {c.chi2_joint:.1f} ({c.m}), q {c.chi2_rest:.1f} "
-                     f"p {c.p_rest:.2g} {flag}; own {own[0]:.4g}, {own[1]:.4g}, "
-                     f"{own[3]:.4g}")  # fmt: skip
+        lines.append(
+            f"  {c.name}: chi2 {c.chi2_joint:.1f} ({c.m}), q {c.chi2_rest:.1f} "
+            f"p {c.p_rest:.2g} {flag}; own {own[0]:.4g}, {own[1]:.4g}, "
+            f"{own[3]:.4g}"
+        )
     return "\n".join(lines)
 
 
@@ -96,33 +105,53 @@ def joint_to_dict(result, cases):
     s = result.sampling
     mean, sd, hdi = (to_case_units(v) for v in (s.mean, s.sd, s.hdi))
     constants = {
-        key: {"mean": float(mean[i]), "sd": float(sd[i]), "hdi_3%": float(hdi[0, i]),
-              "hdi_97%": float(hdi[1, i]), "ess_bulk": float(s.ess_bulk[i]),
-              "r_hat": float(s.rhat[i])}
+        key: {
+            "mean": float(mean[i]),
+            "sd": float(sd[i]),
+            "hdi_3%": float(hdi[0, i]),
+            "hdi_97%": float(hdi[1, i]),
+            "ess_bulk": float(s.ess_bulk[i]),
+            "r_hat": float(s.rhat[i]),
+        }
         for i, key in enumerate(ENGINEERING_KEYS)
-    }  # fmt: skip
+    }
     plates = []
     for case, est, c in zip(cases, result.setup.singles, result.checks, strict=True):
         own, own_sd = to_case_units(est.constants), to_case_units(est.sd)
-        plates.append({
-            "name": c.name, "file": case.path, "m": c.m,
-            "chi2_joint": c.chi2_joint, "p_joint": c.p_joint,
-            "q_others": c.chi2_rest, "p_others": c.p_rest,
-            "flagged": c.flagged, "status": c.status,
-            "own_B": {k: {"value": float(own[i]), "sd": float(own_sd[i])}
-                      for i, k in enumerate(ENGINEERING_KEYS)},
-        })  # fmt: skip
+        plates.append(
+            {
+                "name": c.name,
+                "file": case.path,
+                "m": c.m,
+                "chi2_joint": c.chi2_joint,
+                "p_joint": c.p_joint,
+                "q_others": c.chi2_rest,
+                "p_others": c.p_rest,
+                "flagged": c.flagged,
+                "status": c.status,
+                "own_B": {
+                    k: {"value": float(own[i]), "sd": float(own_sd[i])}
+                    for i, k in enumerate(ENGINEERING_KEYS)
+                },
+            }
+        )
     return {
         "status": result.status,
         "prior_from": cases[0].path or result.names[0],
         "constants": constants,
         "plates": plates,
         "flagged": [result.names[i] for i in result.flagged],
-        "chain": {"n_walkers": s.n_walkers, "n_steps": s.n_steps, "n_burn": s.n_burn,
-                  "converged": bool(s.converged), "message": s.message,
-                  "n_full": s.n_full, "rebuilt": list(result.setup.rebuilt)},
+        "chain": {
+            "n_walkers": s.n_walkers,
+            "n_steps": s.n_steps,
+            "n_burn": s.n_burn,
+            "converged": bool(s.converged),
+            "message": s.message,
+            "n_full": s.n_full,
+            "rebuilt": list(result.setup.rebuilt),
+        },
         "timings": {k: float(v) for k, v in result.timings.items()},
-    }  # fmt: skip
+    }
 
 
 def run_plates(args):
@@ -143,11 +172,18 @@ def run_plates(args):
     models = [PlateModel.from_case(c, mesh=mesh_of(args)) for c in cases]
     try:
         result = sample_plates(
-            cases, rng=args.seed, n_walkers=args.walkers, max_steps=args.max_steps,
-            min_ess=args.min_ess, backend_path=args.backend, progress=not quiet,
-            models=models, forward="full" if args.full else "reduced",
-            pairing=args.pairing, inputs=args.inputs or "auto",
-        )  # fmt: skip
+            cases,
+            rng=args.seed,
+            n_walkers=args.walkers,
+            max_steps=args.max_steps,
+            min_ess=args.min_ess,
+            backend_path=args.backend,
+            progress=not quiet,
+            models=models,
+            forward="full" if args.full else "reduced",
+            pairing=args.pairing,
+            inputs=args.inputs or "auto",
+        )
     except PlatesMismatch as err:
         raise CaseError(err.key, err.value, err.rule, path=cases[err.index].path) from None
     if args.out:
@@ -176,8 +212,9 @@ def _fit_task(item):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the workers' warnings are the setup's log lines
         model = PlateModel.from_case(case, mesh=mesh)
-        return fit_plate(case, model=model, rng=rng, prior_mean=prior.mean, prior_sd=prior.sd,
-                         **options)  # fmt: skip
+        return fit_plate(
+            case, model=model, rng=rng, prior_mean=prior.mean, prior_sd=prior.sd, **options
+        )
 
 
 def fit_plates(cases, rng, mesh=None, workers=1, progress=False, **options):
@@ -202,8 +239,9 @@ def fit_plates(cases, rng, mesh=None, workers=1, progress=False, **options):
     from ..batch.pool import map_tasks
 
     prior = cases[0].prior
-    items = [(c, mesh, r, prior, options) for c, r in zip(cases, rng.spawn(len(cases)),
-                                                          strict=True)]  # fmt: skip
+    items = [
+        (c, mesh, r, prior, options) for c, r in zip(cases, rng.spawn(len(cases)), strict=True)
+    ]
     return map_tasks(_fit_task, items, workers=workers, progress=None if progress else False)
 
 
@@ -212,6 +250,7 @@ def run_population(args, cases):
     import time
 
     from ..io import CaseError, save_figure, write_json, write_netcdf
+    from ..io.export_population import hierarchical_to_dict
     from ..parallel import available_cores
     from ..sampling import PlatesMismatch, check_plates, sample_population
     from ..sampling.seeding import resolve_rng, streams
@@ -224,13 +263,27 @@ def run_population(args, cases):
     _, build, walk = streams(resolve_rng(args.seed, None, "sample"))
     workers = args.workers or min(len(cases), available_cores())
     started = time.perf_counter()
-    fits = fit_plates(cases, build, mesh_of(args), workers, not quiet,
-                      forward="full" if args.full else "reduced", pairing=args.pairing,
-                      inputs=args.inputs or "auto")  # fmt: skip
+    fits = fit_plates(
+        cases,
+        build,
+        mesh_of(args),
+        workers,
+        not quiet,
+        forward="full" if args.full else "reduced",
+        pairing=args.pairing,
+        inputs=args.inputs or "auto",
+    )
     t_build = time.perf_counter() - started
     p = fits[0].problem
-    hier = sample_population(fits, p.mu_b, p.V_b, rng=walk, n_walkers=args.walkers,
-                             max_steps=args.max_steps, min_ess=args.min_ess)  # fmt: skip
+    hier = sample_population(
+        fits,
+        p.mu_b,
+        p.V_b,
+        rng=walk,
+        n_walkers=args.walkers,
+        max_steps=args.max_steps,
+        min_ess=args.min_ess,
+    )
     timings = {"build": t_build, "sampling": hier.wall_time, "workers": workers}
     if args.out:
         write_netcdf(hier.idata, args.out)
@@ -250,9 +303,15 @@ def hierarchical_text(hier, timings=None):
     """The population (mean, spread, 94 % intervals), each plate shrunk beside its own answer."""
     from ..quantities import ENGINEERING_KEYS, to_case_units
 
-    timing = "" if timings is None else (f"; fast models {timings['build']:.1f} s "
-                                         f"({timings['workers']} workers), sampling "
-                                         f"{timings['sampling']:.1f} s")  # fmt: skip
+    timing = (
+        ""
+        if timings is None
+        else (
+            f"; fast models {timings['build']:.1f} s "
+            f"({timings['workers']} workers), sampling "
+            f"{timings['sampling']:.1f} s"
+        )
+    )
     lines = [
         f"{len(hier.names)} plates of one material, each its own constants around the "
         "material's mean (ln c_p ~ N(ln mu, tau^2); each plate's likelihood by Laplace)",
@@ -272,8 +331,7 @@ def hierarchical_text(hier, timings=None):
             f"{min(hier.ess[i], hier.ess[6 + i]):6.0f} {max(hier.rhat[i], hier.rhat[6 + i]):6.3f}"
         )
     lines.append("plates: shrunk (own answer) per constant; P(outlier)")
-    lines.append(f"{'plate':>12} " + " ".join(f"{k:>19}" for k in ENGINEERING_KEYS)
-                 + " P(outlier)")  # fmt: skip
+    lines.append(f"{'plate':>12} " + " ".join(f"{k:>19}" for k in ENGINEERING_KEYS) + " P(outlier)")
     shrunk, own = to_case_units(hier.plate_mean), to_case_units(hier.own)
     for p, name in enumerate(hier.names):
         cells = " ".join(f"{shrunk[p, i]:#8.4g} ({own[p, i]:#8.4g})" for i in range(6))
@@ -282,35 +340,3 @@ def hierarchical_text(hier, timings=None):
         note = f" ({which})" if flag else ""
         lines.append(f"{name[:12]:>12} {cells} {hier.outlier[p]:10.3f}{flag}{note}")
     return "\n".join(lines)
-
-
-def hierarchical_to_dict(hier, cases, timings=None):
-    """The population as JSON (case units; spreads ``tau`` of ``ln c``, dimensionless)."""
-    from ..quantities import ENGINEERING_KEYS, to_case_units
-
-    mean, sd = to_case_units(hier.mean), to_case_units(hier.sd)
-    lo, hi = to_case_units(hier.hdi[0]), to_case_units(hier.hdi[1])
-    shrunk, own = to_case_units(hier.plate_mean), to_case_units(hier.own)
-    p_lo, p_hi = to_case_units(hier.plate_hdi[0]), to_case_units(hier.plate_hdi[1])
-    keys = ENGINEERING_KEYS
-    return {
-        "status": hier.status,
-        "mean": {k: {"mean": float(mean[i]), "sd": float(sd[i]), "hdi_3%": float(lo[i]),
-                     "hdi_97%": float(hi[i]), "ess_bulk": float(hier.ess[i]),
-                     "r_hat": float(hier.rhat[i])} for i, k in enumerate(keys)},
-        "spread": {k: {"mean": float(hier.tau_mean[i]), "sd": float(hier.tau_sd[i]),
-                       "hdi_3%": float(hier.tau_hdi[0, i]), "hdi_97%": float(hier.tau_hdi[1, i]),
-                       "ess_bulk": float(hier.ess[6 + i]), "r_hat": float(hier.rhat[6 + i])}
-                   for i, k in enumerate(keys)},
-        "plates": [{"name": n, "file": c.path, "outlier_probability": float(hier.outlier[p]),
-                    "refined": p in hier.refined,
-                    "shrunk": {k: {"mean": float(shrunk[p, i]), "hdi_3%": float(p_lo[p, i]),
-                                   "hdi_97%": float(p_hi[p, i])} for i, k in enumerate(keys)},
-                    "own": {k: float(own[p, i]) for i, k in enumerate(keys)}}
-                   for p, (n, c) in enumerate(zip(hier.names, cases, strict=True))],
-        "flagged": [hier.names[p] for p in hier.flagged],
-        "chain": {"n_walkers": hier.n_walkers, "n_steps": hier.n_steps, "n_burn": hier.n_burn,
-                  "tau_max": hier.tau_max, "ess_min": hier.ess_min, "rhat_max": hier.rhat_max,
-                  "acceptance": hier.acceptance, "message": hier.message},
-        "timings": {} if timings is None else {k: float(v) for k, v in timings.items()},
-    }  # fmt: skip

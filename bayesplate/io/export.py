@@ -59,8 +59,10 @@ def constants_json(mean, sd=None, **extra):
         Further SI fields per constant (e.g. ``hdi_3%``).
     """
     fields = {"mean": mean, "sd": sd, **extra}
-    scaled = {k: None if v is None else np.asarray(v, dtype=float) * _TO_CASE_UNITS
-              for k, v in fields.items()}  # fmt: skip
+    scaled = {
+        k: None if v is None else np.asarray(v, dtype=float) * _TO_CASE_UNITS
+        for k, v in fields.items()
+    }
     return {
         key: {k: None if v is None else float(v[i]) for k, v in scaled.items()}
         for i, key in enumerate(ENGINEERING_KEYS)
@@ -91,7 +93,7 @@ def budget_to_dict(budget):
                 "total": float(total[i]),
             }
             for i, key in enumerate(ENGINEERING_KEYS)
-        },  # fmt: skip
+        },
         "share": {
             key: dict(zip(budget.sources, budget.share[:, i].tolist(), strict=True))
             for i, key in enumerate(ENGINEERING_KEYS)
@@ -164,10 +166,12 @@ def estimate_to_dict(result, case, model, budget=None, scale=None):
     rivals = result.settings.get("rivals") or []
     if rivals:  # other optima of the search: constants and the nats they trail by
         out["rivals"] = [
-            {"constants": dict(zip(ENGINEERING_KEYS, to_case_units(c).tolist(), strict=True)),
-             "nats_behind": float(n)}
+            {
+                "constants": dict(zip(ENGINEERING_KEYS, to_case_units(c).tolist(), strict=True)),
+                "nats_behind": float(n),
+            }
             for c, n in rivals
-        ]  # fmt: skip
+        ]
     if result.stages:
         out["stages"] = [
             {
@@ -204,12 +208,20 @@ def error_scale_to_dict(summary, linearised=None):
         "interval_94": list(summary.interval),
         "source": summary.source,
         "status": summary.status,
-        "prior": {"median": summary.prior.median, "upper95": summary.prior.upper95,
-                  "shape": summary.prior.shape, "scale": summary.prior.scale},
-    }  # fmt: skip
+        "prior": {
+            "median": summary.prior.median,
+            "upper95": summary.prior.upper95,
+            "shape": summary.prior.shape,
+            "scale": summary.prior.scale,
+        },
+    }
     if linearised is not None:
-        out.update(s_hat=linearised.s_hat, chi2=linearised.chi2,
-                   n_effective=linearised.n_effective, dof=linearised.dof)  # fmt: skip
+        out.update(
+            s_hat=linearised.s_hat,
+            chi2=linearised.chi2,
+            n_effective=linearised.n_effective,
+            dof=linearised.dof,
+        )
     return out
 
 
@@ -278,8 +290,9 @@ def sampling_to_dict(result, case, mve=None, scale=None):
     if result.input_certificate is not None:
         out["input_certificate"] = input_certificate_to_dict(result.input_certificate)
     if result.settings.get("assignment") is not None:
-        out["assignment"] = chain_assignment_to_dict(result.settings["assignment"],
-                                                     result.assignment)  # fmt: skip
+        out["assignment"] = chain_assignment_to_dict(
+            result.settings["assignment"], result.assignment
+        )
     return out
 
 
@@ -360,10 +373,15 @@ def _check(fit_):
     check = getattr(fit_, "check", None)
     if check is None:
         return None
-    return {"settled": check.settled, "objective_full": check.full_objective,
-            "objective_fast": check.fast_objective, "max_rel_error": check.max_rel_error,
-            "decrement": check.decrement, "rounds": check.rounds,
-            "full_solves": check.full_solves}  # fmt: skip
+    return {
+        "settled": check.settled,
+        "objective_full": check.full_objective,
+        "objective_fast": check.fast_objective,
+        "max_rel_error": check.max_rel_error,
+        "decrement": check.decrement,
+        "rounds": check.rounds,
+        "full_solves": check.full_solves,
+    }
 
 
 def _rival(d):
@@ -371,9 +389,14 @@ def _rival(d):
     rival, separation = getattr(d, "rival", None), getattr(d, "separation", None)
     if rival is None:
         return None
-    out = {"physics": rival.name, "log_evidence_gain": rival.log_evidence_gain,
-           "chi2": rival.fit.chi2, "parameters": rival.parameters,
-           "parameters_sd": rival.parameters_sd, "separation": None}  # fmt: skip
+    out = {
+        "physics": rival.name,
+        "log_evidence_gain": rival.log_evidence_gain,
+        "chi2": rival.fit.chi2,
+        "parameters": rival.parameters,
+        "parameters_sd": rival.parameters_sd,
+        "separation": None,
+    }
     if separation is not None:
         out["separation"] = {
             "mode": separation.mode,
@@ -423,7 +446,7 @@ def diagnosis_to_dict(d):
                 "failed": getattr(c, "failed", ""),
             }
             for c in d.candidates
-        ],  # fmt: skip
+        ],
         "chosen": None if d.chosen is None else d.chosen.name,
         "refit": refit,
         "probabilities": dict(getattr(d, "probabilities", {})),

@@ -40,7 +40,6 @@ solve on its fast model), and the MAP found again, until none moves (at most fou
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
 
 import emcee
 import numpy as np
@@ -49,12 +48,14 @@ from scipy import optimize
 from .. import laminate
 from .chain import TUNE_ROUNDS, TUNE_STEPS, _tune
 from .moves import LaplaceMove
+from .plate_marginal import Plates, conditional_y, mixture_y
 from .population import (
     OUTLIER_PRIOR,
     OUTLIER_SCALE,
     conditional,
     mixture_log_likelihood,
 )
+from .population_result import HierarchicalResult, result_of
 from .seeding import generator, resolve_rng
 from .stopping import burn_in, load_arviz
 
@@ -71,8 +72,6 @@ __all__ = [
 TAU_SCALE = 0.1
 #: A plate is linearised again when its shrunk mean is this many of its own deviations away.
 REFINE_DISTANCE = 1.0
-#: Most kept draws of the population for each plate's conditional draws and the ArviZ data.
-MAX_DRAWS = 8000
 
 
 def log_jacobian(mu):
@@ -96,10 +95,19 @@ class PopulationDensity:
 
     dim = 12
 
-    def __init__(self, laplaces, mu_b, V_b, tau_scale=TAU_SCALE, outlier_prior=OUTLIER_PRIOR,
-                 outlier_scale=OUTLIER_SCALE):  # fmt: skip
+    def __init__(
+        self,
+        laplaces,
+        mu_b,
+        V_b,
+        tau_scale=TAU_SCALE,
+        outlier_prior=OUTLIER_PRIOR,
+        outlier_scale=OUTLIER_SCALE,
+    ):
         self.H = np.array([fit.H for fit in laplaces])
         self.h = np.array([fit.h for fit in laplaces])
+        in_y = len(laplaces) > 0 and all(getattr(f, "A", None) is not None for f in laplaces)
+        self.in_y = Plates.of(laplaces) if in_y else None
         self.P = len(self.H)
         self.mu_b = np.asarray(mu_b, dtype=float)
         self.Vb_inv = np.linalg.inv(np.asarray(V_b, dtype=float))
@@ -123,8 +131,21 @@ class PopulationDensity:
     def plates(self, theta):
         """Each plate's marginal and its components' responsibilities, (n, P), (n, P, 8)."""
         theta = np.atleast_2d(theta)
-        return mixture_log_likelihood(theta[:, :6], np.exp(theta[:, 6:]), self.H, self.h,
-                                      self.outlier_prior, self.outlier_scale)  # fmt: skip
+        log_mu, tau = theta[:, :6], np.exp(theta[:, 6:])
+        if self.in_y is not None:  # the likelihoods Gaussian in y: Laplace at each plate's mode
+            return mixture_y(log_mu, tau, self.in_y, self.outlier_prior, self.outlier_scale)
+        return mixture_log_likelihood(
+            log_mu, tau, self.H, self.h, self.outlier_prior, self.outlier_scale
+        )
+
+    def conditional(self, log_mu, tau):
+        """Each plate's ``z = ln c`` given the population: mean (..., P, 6), cov (..., P, 6, 6).
+
+        `log_mu`, `tau` (..., P, 6) broadcast against the plates.
+        """
+        if self.in_y is not None:
+            return conditional_y(log_mu, tau, self.in_y.A, self.in_y.a)
+        return conditional(log_mu, tau, self.H, self.h)
 
     def log_density_theta(self, theta):
         """``ln f(theta | Y)`` up to a constant, (n,)."""
@@ -148,6 +169,8 @@ class PopulationDensity:
         best = optimize.minimize(f, theta0, method="L-BFGS-B", options={"maxiter": 5000})
         theta = best.x if np.isfinite(best.fun) and best.fun <= f(theta0) else theta0
         H = _hessian(f, theta, step)
+        if not np.all(np.isfinite(H)):  # a neighbour off the physical region: the prior's scale
+            H = np.eye(theta.size)
         w, V = np.linalg.eigh(0.5 * (H + H.T))
         w = np.maximum(w, 1.0)  # flat directions (unidentified spreads): the prior's scale
         self.centre, self.chol = theta, np.linalg.cholesky((V / w) @ V.T)
@@ -164,96 +187,10 @@ def _hessian(f, x, h):
     H = np.diag((fp - 2 * f0 + fm) / h**2)
     for i in range(n):
         for j in range(i + 1, n):
-            H[i, j] = H[j, i] = (f(x + E[i] + E[j]) - fp[i] - fp[j] + 2 * f0 - fm[i] - fm[j]
-                                 + f(x - E[i] - E[j])) / (2 * h**2)  # fmt: skip
+            H[i, j] = H[j, i] = (
+                f(x + E[i] + E[j]) - fp[i] - fp[j] + 2 * f0 - fm[i] - fm[j] + f(x - E[i] - E[j])
+            ) / (2 * h**2)
     return H
-
-
-@dataclass(frozen=True, eq=False)
-class HierarchicalResult:
-    """The population of plates of one material, and each plate in it.
-
-    Attributes
-    ----------
-    names : tuple of str
-        The plates.
-    mean, sd : numpy.ndarray, shape (6,)
-        Posterior mean and deviation of the material's mean constants ``mu``, SI.
-    hdi : numpy.ndarray, shape (2, 6)
-        Its 3 % and 97 % quantiles (equal-tailed 94 %), SI.
-    tau_mean, tau_sd : numpy.ndarray, shape (6,)
-        The spread ``tau`` per constant (of ``ln c``: 0.05 is about 5 %).
-    tau_hdi : numpy.ndarray, shape (2, 6)
-        Its 3 % and 97 % quantiles.
-    plate_mean, plate_sd : numpy.ndarray, shape (P, 6)
-        Each plate's shrunk constants, SI.
-    plate_hdi : numpy.ndarray, shape (2, P, 6)
-        Their 3 % and 97 % quantiles, SI.
-    own, own_sd : numpy.ndarray, shape (P, 6)
-        Each plate's own answer (its B estimate under the case's prior), SI; NaN without one.
-    outlier : numpy.ndarray, shape (P,)
-        Posterior probability that the plate is not of the population.
-    outlier_constant : numpy.ndarray of int, shape (P,)
-        The likeliest widened component of an outlier: 0-5 a constant, 6 all six.
-    samples : numpy.ndarray, shape (draws, 12)
-        Kept draws of ``theta = (ln mu, ln tau)`` (thinned to at most :data:`MAX_DRAWS`).
-    plate_samples : numpy.ndarray, shape (draws, P, 6)
-        Each plate's constants drawn given each kept ``theta``, SI.
-    ess, rhat : numpy.ndarray, shape (12,)
-        Bulk ESS and R-hat of ``ln mu`` then ``ln tau`` (walkers as chains).
-    ess_min, rhat_max, tau_max : float
-        Smallest ESS, largest R-hat, largest autocorrelation time (steps).
-    n_steps, n_burn, n_walkers : int
-    acceptance : float
-    refined : tuple of int
-        0-based plates linearised again at their shrunk mean.
-    converged : bool
-    status : str
-        ``"converged"`` or ``"max_steps"``.
-    message : str
-    idata : arviz.InferenceData
-        ``posterior``: ``mu`` (case units), ``tau``, ``plate`` constants (case units), with
-        walkers as chains; ``sample_stats``: ``outlier`` responsibilities per plate.
-    wall_time : float
-        Seconds of the sampling (both rounds).
-    """
-
-    names: tuple
-    mean: np.ndarray
-    sd: np.ndarray
-    hdi: np.ndarray
-    tau_mean: np.ndarray
-    tau_sd: np.ndarray
-    tau_hdi: np.ndarray
-    plate_mean: np.ndarray
-    plate_sd: np.ndarray
-    plate_hdi: np.ndarray
-    own: np.ndarray
-    own_sd: np.ndarray
-    outlier: np.ndarray
-    outlier_constant: np.ndarray
-    samples: np.ndarray = field(repr=False)
-    plate_samples: np.ndarray = field(repr=False)
-    ess: np.ndarray
-    rhat: np.ndarray
-    ess_min: float
-    rhat_max: float
-    tau_max: float
-    n_steps: int
-    n_burn: int
-    n_walkers: int
-    acceptance: float
-    refined: tuple
-    converged: bool
-    status: str
-    message: str
-    idata: object = field(repr=False)
-    wall_time: float
-
-    @property
-    def flagged(self):
-        """0-based plates more likely outliers than not."""
-        return tuple(int(i) for i in np.flatnonzero(self.outlier > 0.5))
 
 
 def _diagnostics(chain):
@@ -265,8 +202,7 @@ def _diagnostics(chain):
     return ess, rhat
 
 
-def _run(density, rng, n_walkers, max_steps, check_every, target_tau_factor, min_ess,
-         max_rhat):  # fmt: skip
+def _run(density, rng, n_walkers, max_steps, check_every, target_tau_factor, min_ess, max_rhat):
     """The chain to its stopping rule: (sampler, burn, tau_max, ess, rhat, converged)."""
     import warnings
 
@@ -279,8 +215,7 @@ def _run(density, rng, n_walkers, max_steps, check_every, target_tau_factor, min
     # ln tau is skewed, and a proposal fitted to a short run from the starting ball was
     # accepted 13 % of the time (autocorrelation 115 steps, R-hat 1.016 after 8000 steps on
     # ten synthetic plates); fitted to the longer run 23 % (19 steps, converged at 3460)
-    state, n_tune = _tune(sampler, state, laplace, TUNE_ROUNDS + 1, 8 * TUNE_STEPS, max_steps,
-                          None)  # fmt: skip
+    state, n_tune = _tune(sampler, state, laplace, TUNE_ROUNDS + 1, 8 * TUNE_STEPS, max_steps, None)
     burn, tau_max, ess, rhat, done = n_tune, np.inf, np.zeros(12), np.full(12, np.inf), False
     while sampler.iteration < max_steps and not done:
         state = sampler.run_mcmc(state, min(check_every, max_steps - sampler.iteration))
@@ -321,7 +256,7 @@ def _settle(fits, mu_b, V_b, options, rounds=4):
     for _ in range(rounds):
         density = PopulationDensity([f.laplace for f in fits], mu_b, V_b, **options)
         theta = density.whiten(_start([f.laplace for f in fits], mu_b))
-        mean = conditional(theta[:6], np.exp(theta[6:]), density.H, density.h)[0]  # (P, 6)
+        mean = density.conditional(theta[:6], np.exp(theta[6:]))[0]  # (P, 6)
         far = [
             p
             for p, f in enumerate(fits)
@@ -337,9 +272,21 @@ def _settle(fits, mu_b, V_b, options, rounds=4):
     return fits, tuple(sorted(moved)), None
 
 
-def sample_population(fits, mu_b, V_b, rng=None, n_walkers=48, max_steps=20000,
-                      target_tau_factor=50.0, min_ess=1000.0, max_rhat=1.01, check_every=500,
-                      tau_scale=TAU_SCALE, outlier_prior=OUTLIER_PRIOR, refine=True):  # fmt: skip
+def sample_population(
+    fits,
+    mu_b,
+    V_b,
+    rng=None,
+    n_walkers=48,
+    max_steps=20000,
+    target_tau_factor=50.0,
+    min_ess=1000.0,
+    max_rhat=1.01,
+    check_every=500,
+    tau_scale=TAU_SCALE,
+    outlier_prior=OUTLIER_PRIOR,
+    refine=True,
+):
     """Sample the population of plates of one material; draw each plate in it (module doc).
 
     Parameters
@@ -375,7 +322,7 @@ def sample_population(fits, mu_b, V_b, rng=None, n_walkers=48, max_steps=20000,
         min_ess=min_ess,
         max_rhat=max_rhat,
     )
-    options = dict(tau_scale=tau_scale, outlier_prior=outlier_prior)  # fmt: skip
+    options = dict(tau_scale=tau_scale, outlier_prior=outlier_prior)
     refined, density = (), None
     if refine:
         fits, refined, density = _settle(fits, mu_b, V_b, options)
@@ -384,52 +331,7 @@ def sample_population(fits, mu_b, V_b, rng=None, n_walkers=48, max_steps=20000,
         density = PopulationDensity(laplaces, mu_b, V_b, **options)
         density.whiten(_start(laplaces, mu_b))
     done = (density, *_run(density, rng, **chain))
-    return _result(fits, done, refined, time.perf_counter() - started, rng)
-
-
-def _kept(density, sampler, burn):
-    """Kept ``theta`` (D, 12), step-major, thinned to at most :data:`MAX_DRAWS`."""
-    u = sampler.get_chain(discard=burn)
-    thin = max(1, int(np.ceil(u.shape[0] * u.shape[1] / MAX_DRAWS)))
-    return density.theta(u[::thin]).reshape(-1, 12)
-
-
-def _result(fits, done, refined, wall, rng):
-    from .population_draws import inference_data, plate_draws
-
-    density, sampler, burn, tau_max, ess, rhat, ok = done
-    theta = _kept(density, sampler, burn)
-    plates, resp = plate_draws(density, theta, rng)
-    names = tuple(f.name for f in fits)
-    mu, tau = np.exp(theta[:, :6]), np.exp(theta[:, 6:])
-    q = [3, 97]
-    own = np.array([_own(f)[0] for f in fits])
-    own_sd = np.array([_own(f)[1] for f in fits])
-    widened = resp[..., 1:].mean(axis=0)  # (P, 7)
-    status = "converged" if ok else "max_steps"
-    message = (f"{sampler.iteration} steps, tau <= {tau_max:.1f}, ESS >= {np.min(ess):.0f}, "
-               f"R-hat <= {np.max(rhat):.3f}")  # fmt: skip
-    return HierarchicalResult(
-        names=names, mean=mu.mean(0), sd=mu.std(0, ddof=1), hdi=np.percentile(mu, q, axis=0),
-        tau_mean=tau.mean(0), tau_sd=tau.std(0, ddof=1), tau_hdi=np.percentile(tau, q, axis=0),
-        plate_mean=plates.mean(0), plate_sd=plates.std(0, ddof=1),
-        plate_hdi=np.percentile(plates, q, axis=0), own=own, own_sd=own_sd,
-        outlier=1.0 - resp[..., 0].mean(axis=0), outlier_constant=np.argmax(widened, axis=1),
-        samples=theta, plate_samples=plates, ess=ess, rhat=rhat, ess_min=float(np.min(ess)),
-        rhat_max=float(np.max(rhat)), tau_max=tau_max, n_steps=sampler.iteration, n_burn=burn,
-        n_walkers=sampler.nwalkers, acceptance=float(np.mean(sampler.acceptance_fraction)),
-        refined=refined, converged=ok, status=status, message=message,
-        idata=inference_data(theta, plates, resp, sampler.nwalkers, names), wall_time=wall,
-    )  # fmt: skip
-
-
-def _own(fit):
-    """A plate's own answer and its deviations (SI), NaN without an estimate."""
-    est = fit.estimate
-    if est is None:
-        return np.full(6, np.nan), np.full(6, np.nan)
-    sd = getattr(est, "sd", None)
-    return np.asarray(est.constants, float), np.full(6, np.nan) if sd is None else np.asarray(sd)
+    return result_of(fits, done, refined, time.perf_counter() - started, rng)
 
 
 def sample_hierarchical(setups, singles=None, rng=None, *, names=None, **options):
@@ -456,7 +358,9 @@ def sample_hierarchical(setups, singles=None, rng=None, *, names=None, **options
     singles = [s.estimate for s in setups] if singles is None else list(singles)
     names = [f"plate {p + 1}" for p in range(len(setups))] if names is None else list(names)
     problems = [s.problem_on_fast_model() for s in setups]
-    fits = [PlateFit(n, linearise(q, s.estimate.b), e, q)
-            for n, s, e, q in zip(names, setups, singles, problems, strict=True)]  # fmt: skip
+    fits = [
+        PlateFit(n, linearise(q, s.estimate.b), e, q)
+        for n, s, e, q in zip(names, setups, singles, problems, strict=True)
+    ]
     p = setups[0].problem
     return sample_population(fits, p.mu_b, p.V_b, rng=rng, **options)

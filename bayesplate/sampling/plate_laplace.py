@@ -9,7 +9,11 @@ the case gives them, as for one plate) is, up to a constant,
 
     ln L_p(z) = -1/2 z^T H z + h^T z,   H = G^T V_Y^-1 G,   h = G^T V_Y^-1 (Y - g0 + G z0).
 
-The prior is not in ``H``: the population is the plate's prior. This is the information form
+The same likelihood as a Gaussian in the in-plane stiffness and the transverse shear
+compliance (``A``, ``a``: much closer to the exact one) is what the population's density
+uses (:mod:`bayesplate.sampling.plate_marginal`); ``H``, ``h`` give the plate's own
+deviations and the refinement's distances. The prior is not in ``H``: the population is the
+plate's prior. This is the information form
 (:mod:`bayesplate.sampling.population`): a constant the plate does not identify has a near-zero
 row and column of ``H``, and nothing divides by it. :func:`relinearise` repeats it at another
 point (the plate's shrunk estimate) on the same model.
@@ -22,6 +26,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .. import laminate
+from .plate_marginal import coordinates, stiffness_per_coordinate
 
 __all__ = [
     "PlateFit",
@@ -52,6 +57,12 @@ class PlateLaplace:
         Paired eigenvalues.
     status : str
         ``"ok"``, or ``"not_physical"`` when ``z0`` is not a physical lamina.
+    A : numpy.ndarray, shape (6, 6), optional
+        Gauss-Newton precision in ``y`` (in-plane stiffness and transverse shear compliance,
+        :func:`~bayesplate.sampling.plate_marginal.coordinates`): the likelihood as a
+        Gaussian in which it nearly is; None: the plate is known only in ``z`` (``H``, ``h``).
+    a : numpy.ndarray, shape (6,), optional
+        Information vector in ``y``.
     """
 
     z0: np.ndarray
@@ -60,6 +71,8 @@ class PlateLaplace:
     chi2: float
     m: int
     status: str = "ok"
+    A: np.ndarray | None = None
+    a: np.ndarray | None = None
 
     @property
     def sd(self):
@@ -87,15 +100,20 @@ def linearise(problem, b):
     c = laminate.engineering_from_stiffness(b)
     z0 = np.log(c)
     if not laminate.is_physical(b) or not np.all(np.isfinite(z0)):
-        return PlateLaplace(z0, np.zeros((6, 6)), np.zeros(6), np.inf, problem.m, "not_physical")
+        zero = np.zeros((6, 6)), np.zeros(6)
+        return PlateLaplace(z0, *zero, np.inf, problem.m, "not_physical", A=zero[0], a=zero[1])
     pred = problem.predict(b)
     G = pred.S @ (laminate.stiffness_jacobian(c) * c[None, :])
     r = problem.Y - pred.g
     VinvG = np.linalg.solve(problem.V_Y, G)
     H = G.T @ VinvG
     h = VinvG.T @ (r + G @ z0)
+    S_y = pred.S * stiffness_per_coordinate(b)[None, :]  # in y = coordinates(c)
+    VinvS = np.linalg.solve(problem.V_Y, S_y)
+    A = S_y.T @ VinvS
+    a = VinvS.T @ (r + S_y @ coordinates(c))
     chi2 = float(r @ np.linalg.solve(problem.V_Y, r))
-    return PlateLaplace(z0, 0.5 * (H + H.T), h, chi2, problem.m)
+    return PlateLaplace(z0, 0.5 * (H + H.T), h, chi2, problem.m, A=0.5 * (A + A.T), a=a)
 
 
 @dataclass(frozen=True, eq=False)
@@ -149,8 +167,9 @@ def fit_plate(case, *, model=None, rng=None, prior_mean=None, prior_sd=None, **p
     from .setup import prepare
 
     started = time.perf_counter()
-    setup = prepare(case, model=model, rng=rng, prior_mean=prior_mean, prior_sd=prior_sd,
-                    **prepare_options)  # fmt: skip
+    setup = prepare(
+        case, model=model, rng=rng, prior_mean=prior_mean, prior_sd=prior_sd, **prepare_options
+    )
     problem = setup.problem_on_fast_model()
     own = setup.estimate
     if not own.converged:  # B left the physical region: the mode by damped steps in ln c

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..quantities import CASE_SCALE, ENGINEERING_KEYS
-from .population import component_spreads, conditional
+from .population import component_spreads
 from .stopping import load_arviz
 
 __all__ = ["inference_data", "plate_draws"]
@@ -43,7 +43,7 @@ def plate_draws(density, theta, rng):
     spreads = component_spreads(np.exp(theta[:, 6:]), density.outlier_scale)  # (D, 8, 6)
     tau = np.take_along_axis(spreads, pick[..., None], axis=1)  # (D, P, 6)
     log_mu = np.broadcast_to(theta[:, None, :6], (D, P, 6))
-    mean, cov = conditional(log_mu, tau, density.H[None], density.h[None])
+    mean, cov = density.conditional(log_mu, tau)
     L = np.linalg.cholesky(cov + 1e-300 * np.eye(6))
     z = mean + np.einsum("...ij,...j->...i", L, rng.standard_normal((D, P, 6)))
     return np.exp(z), resp
@@ -79,6 +79,10 @@ def inference_data(theta, constants, resp, n_walkers, names):
     }
     stats = {"outlier": chains(1.0 - resp[..., 0])}
     coords = {"constant": list(ENGINEERING_KEYS), "plate_name": list(names)}
-    dims = {"mu": ["constant"], "tau": ["constant"], "plate": ["plate_name", "constant"],
-            "outlier": ["plate_name"]}  # fmt: skip
+    dims = {
+        "mu": ["constant"],
+        "tau": ["constant"],
+        "plate": ["plate_name", "constant"],
+        "outlier": ["plate_name"],
+    }
     return az.from_dict(posterior=posterior, sample_stats=stats, coords=coords, dims=dims)
