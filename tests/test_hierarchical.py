@@ -328,9 +328,27 @@ def test_cli_hierarchical_on_the_pool_writes_table_json_netcdf_figure(case_files
     from bayesplate.sampling.stopping import load_arviz
 
     out = tmp_path / "pop.json"
-    argv = ["sample", *map(str, case_files), "--hierarchical", "--seed", "1", "--workers", "2",
-            "--min-ess", "400", "--max-steps", "20000", "--walkers", "24", "-o", str(tmp_path),
-            "--out", str(tmp_path / "pop.nc"), "--json", str(out)]  # fmt: skip
+    argv = [
+        "sample",
+        *map(str, case_files),
+        "--hierarchical",
+        "--seed",
+        "1",
+        "--workers",
+        "2",
+        "--min-ess",
+        "400",
+        "--max-steps",
+        "20000",
+        "--walkers",
+        "24",
+        "-o",
+        str(tmp_path),
+        "--out",
+        str(tmp_path / "pop.nc"),
+        "--json",
+        str(out),
+    ]
     assert main(argv) == 0
     text = capsys.readouterr().out
     assert "4 plates of one material" in text and "P(outlier)" in text and "E1_GPa" in text
