@@ -19,8 +19,8 @@ Writes ``reports/population_coverage.md``. ``python studies/population_coverage.
 [--quick] [--replicates N] [--plates P] [--workers W]`` (``--quick``: one replicate; the
 full run: 100 on two worker processes). Each replicate's row is appended, as it ends, to
 ``.bayesplate-cache/population_coverage/<code version>-p<plates>.jsonl``: a stopped run
-resumes where it stopped, and rows of other code are never mixed in. With ``--plates``
-other than 10 (the convergence of larger populations), nothing is written to reports/.
+resumes where it stopped, and rows of other code are never mixed in. With ``--plates P``
+other than 10 (larger populations), the report is ``reports/population_coverage_pP.md``.
 """
 
 from __future__ import annotations
@@ -296,7 +296,7 @@ def _write(out, s, n_plates, info):
     lo, hi = _band(6 * s["n"])
     secs = np.array(s["seconds"])
     lines = [
-        "# Population coverage: 94 % intervals of the means and the spreads",
+        f"# Population coverage ({n_plates} plates): 94 % intervals of the means and spreads",
         "",
         f"{info['when']}, {cpu()}, code {info['version']}, load average at start "
         f"{info['load']}; {s['n']} seeded replicates (seeds {s['seeds'][0]}-{s['seeds'][1]}) of "
@@ -332,7 +332,8 @@ def _write(out, s, n_plates, info):
         lines += ["", "Failed replicates (counted as covering nothing):", ""]
         lines += [f"- seed {seed}: {error}" for seed, error in s["failed"]]
     out.mkdir(parents=True, exist_ok=True)
-    (out / "population_coverage.md").write_text("\n".join(lines) + "\n")
+    name = "population_coverage" + ("" if n_plates == N_PLATES else f"_p{n_plates}")
+    (out / f"{name}.md").write_text("\n".join(lines) + "\n")
 
 
 if __name__ == "__main__":
@@ -345,6 +346,7 @@ if __name__ == "__main__":
     parser.add_argument("--plates", type=int, default=None, help=f"default {N_PLATES}")
     parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args()
-    out = None if args.plates not in (None, N_PLATES) else ROOT / "reports"
-    summary = main(out, args.quick, args.replicates, workers=args.workers, n_plates=args.plates)
+    summary = main(
+        ROOT / "reports", args.quick, args.replicates, workers=args.workers, n_plates=args.plates
+    )
     print({k: v for k, v in summary.items() if k != "seconds"})
