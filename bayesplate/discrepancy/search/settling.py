@@ -273,46 +273,31 @@ def _settled(problem, polish, state, max_rounds, strict=False, known=()):
     objective, a damaged patch's edge on an element's, the decrement of a smooth model need
     not vanish). None (unless ``strict``) when a plate on the way cannot be solved, or when
     the rounds reach one of the optima ``known`` (whitened unknowns) already settled.
+
+    Stages: :func:`_rounds` (the rounds, each :func:`_next_round`), then :func:`_answer`
+    (the check, its record and the result).
+    """
+    ended = _rounds(problem, polish, state, max_rounds, strict, known)
+    if ended is None:
+        return None
+    state, step = ended
+    return _answer(problem, state, step, max_rounds)
+
+
+def _rounds(problem, polish, state, max_rounds, strict, known):
+    """The rounds of :func:`_settled`: ``(last round, last step)``, or None where it says.
+
+    The step is the whitened length of the last fit's move (``inf`` without a round).
     """
     step = np.inf
     lo, hi = problem.bounds()
     try:
         while state.decrement > _tolerance(state) and state.rounds < max_rounds:
-            box = (np.maximum(lo, state.z - state.radius), np.minimum(hi, state.z + state.radius))
-            fitted = _tight(state.problem, state.z, box)
-            step = float(np.linalg.norm(fitted.x - state.z))
+            state, step, moved = _next_round(problem, polish, state, (lo, hi))
             if step <= STEP_TOL:
                 break
-            reach = float(np.max(np.abs(fitted.x - state.z)))
-            predicted = state.objective - 2.0 * fitted.cost
-            z = canonical(problem, fitted.x)
-            fast = state.problem.residuals(z)
-            # the point's own snapshot and the newest others: the pencil stays exact at z
-            others = [v for v in state.problem.pencil.snapshots if v is not state.own]
-            earlier = [*others[len(others) - (SNAPSHOTS - 2) :], state.own]
-            trial = _built(
-                problem,
-                polish(z, earlier=earlier),
-                z,
-                fast,
-                state.radius,
-                state.rounds,
-                state.solves,
-            )
-            actual = state.objective - trial.objective
-            if predicted > 0 and actual >= ACCEPT * predicted:
-                grow = actual >= 0.75 * predicted and reach >= 0.9 * state.radius
-                state = replace(trial, radius=2.0 * state.radius if grow else state.radius)
-                if any(_same(problem, state.z, other) for other in known):
-                    return None  # the same optimum as one settled already
-            else:  # the point stays; the pencil with the proposal's snapshot is exact there too
-                state = replace(
-                    state,
-                    problem=trial.problem,
-                    radius=0.5 * reach,
-                    rounds=trial.rounds,
-                    solves=trial.solves,
-                )
+            if moved and any(_same(problem, state.z, other) for other in known):
+                return None  # the same optimum as one settled already
     except (ValueError, np.linalg.LinAlgError) as error:
         if strict:
             raise
@@ -323,6 +308,46 @@ def _settled(problem, polish, state, max_rounds, strict=False, known=()):
             error,
         )
         return None
+    return state, step
+
+
+def _next_round(problem, polish, state, bounds):
+    """One round from ``state``: ``(next state, step, whether the point moved)``.
+
+    The pencil exact at the point is fitted in the trust region (whose ``bounds`` are the
+    unknowns' ``(lo, hi)``); a step under :data:`STEP_TOL` leaves ``state`` as it is.
+    Otherwise the pencil is built at the proposal and the proposal taken or the region
+    shrunk (:func:`_settled`).
+    """
+    lo, hi = bounds
+    box = (np.maximum(lo, state.z - state.radius), np.minimum(hi, state.z + state.radius))
+    fitted = _tight(state.problem, state.z, box)
+    step = float(np.linalg.norm(fitted.x - state.z))
+    if step <= STEP_TOL:
+        return state, step, False
+    reach = float(np.max(np.abs(fitted.x - state.z)))
+    predicted = state.objective - 2.0 * fitted.cost
+    z = canonical(problem, fitted.x)
+    fast = state.problem.residuals(z)
+    # the point's own snapshot and the newest others: the pencil stays exact at z
+    others = [v for v in state.problem.pencil.snapshots if v is not state.own]
+    earlier = [*others[len(others) - (SNAPSHOTS - 2) :], state.own]
+    trial = _built(
+        problem, polish(z, earlier=earlier), z, fast, state.radius, state.rounds, state.solves
+    )
+    actual = state.objective - trial.objective
+    if predicted > 0 and actual >= ACCEPT * predicted:
+        grow = actual >= 0.75 * predicted and reach >= 0.9 * state.radius
+        return replace(trial, radius=2.0 * state.radius if grow else state.radius), step, True
+    # the point stays; the pencil with the proposal's snapshot is exact there too
+    stays = replace(
+        state, problem=trial.problem, radius=0.5 * reach, rounds=trial.rounds, solves=trial.solves
+    )
+    return stays, step, False
+
+
+def _answer(problem, state, step, max_rounds):
+    """The :class:`Settled` answer at the last round ``state``, its check recorded."""
     m = problem.Y.size
     lam_fast = problem.Y - state.fast[:m] * problem.sigma
     lam_full = problem.Y - state.full[:m] * problem.sigma
@@ -336,35 +361,7 @@ def _settled(problem, polish, state, max_rounds, strict=False, known=()):
         state.solves,
         settled,
     )
-    name = problem_name(problem)
-    if settled:
-        log.info(
-            "%s: settled in %d rounds: objective %.6g (reduced %.6g), decrement %.2g",
-            name,
-            state.rounds,
-            check.full_objective,
-            check.fast_objective,
-            state.decrement,
-        )
-    elif max_rounds < MAX_ROUNDS:
-        log.info(
-            "%s: provisional after %d rounds: objective %.6g (reduced %.6g), decrement %.2g",
-            name,
-            state.rounds,
-            check.full_objective,
-            check.fast_objective,
-            state.decrement,
-        )
-    else:
-        log.error(
-            "%s: not settled in %d rounds: the full model's objective %.6g could still "
-            "fall by %.2g (reduced model %.6g)",
-            name,
-            state.rounds,
-            check.full_objective,
-            state.decrement,
-            check.fast_objective,
-        )
+    _record(problem_name(problem), check, max_rounds)
     result = OptimizeResult(
         x=state.z,
         cost=0.5 * check.full_objective,
@@ -375,6 +372,38 @@ def _settled(problem, polish, state, max_rounds, strict=False, known=()):
         n_solves=state.solves,
     )
     return Settled(result, state.problem, check)
+
+
+def _record(name, check, max_rounds):
+    """The answer's check in the log: settled, provisional (fewer rounds asked) or not."""
+    if check.settled:
+        log.info(
+            "%s: settled in %d rounds: objective %.6g (reduced %.6g), decrement %.2g",
+            name,
+            check.rounds,
+            check.full_objective,
+            check.fast_objective,
+            check.decrement,
+        )
+    elif max_rounds < MAX_ROUNDS:
+        log.info(
+            "%s: provisional after %d rounds: objective %.6g (reduced %.6g), decrement %.2g",
+            name,
+            check.rounds,
+            check.full_objective,
+            check.fast_objective,
+            check.decrement,
+        )
+    else:
+        log.error(
+            "%s: not settled in %d rounds: the full model's objective %.6g could still "
+            "fall by %.2g (reduced model %.6g)",
+            name,
+            check.rounds,
+            check.full_objective,
+            check.decrement,
+            check.fast_objective,
+        )
 
 
 def _same(problem, z, other):
