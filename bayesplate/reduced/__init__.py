@@ -43,12 +43,14 @@ from .box import Box, prior_stiffness, stiffness_box
 from .certified import CertifiedModel, ReducedModelWarning, fast_model
 from .certify import DEFAULT_TOLERANCE, Certificate, certify, relative_errors
 from .model import ReducedModalResult, ReducedModel
+from .options import FastModelOptions
 
 __all__ = [
     "DEFAULT_TOLERANCE",
     "Box",
     "Certificate",
     "CertifiedModel",
+    "FastModelOptions",
     "ReducedModalResult",
     "ReducedModel",
     "ReducedModelWarning",

@@ -15,8 +15,9 @@ import warnings
 
 import numpy as np
 
-from .certify import DEFAULT_TOLERANCE, _certify, _probe_points
+from .certify import _certify, _probe_points
 from .model import ReducedModel
+from .options import FastModelOptions
 
 __all__ = ["CertifiedModel", "ReducedModelWarning", "fast_model"]
 
@@ -28,107 +29,96 @@ class ReducedModelWarning(UserWarning):
     """The reduced model is not used for an evaluation; the full model is used instead."""
 
 
-def fast_model(
-    model,
-    mean_b,
-    box,
-    n_modes,
-    *,
-    tolerance=DEFAULT_TOLERANCE,
-    safety=1.0,
-    n_snapshots=16,
-    n_test=6,
-    n_probe=4,
-    n_candidates=256,
-    n_add=3,
-    max_rounds=4,
-    max_basis=None,
-    margin=6,
-    rank_tol=2e-3,
-    spacing="log",
-    rng=None,
-    n_sigma=3.0,
-    floor=0.1,
-):
+def fast_model(model, mean_b, box, n_modes, *, options=None, rng=None, **settings):
     """Build, certify and greedily enrich a reduced model; wrap it with a full-model fallback.
 
     Each round certifies the current basis against the full model on ``n_test`` fresh
     Latin-hypercube points of the box and ``n_probe`` probe points; if the error is above
     ``safety * tolerance``, the modes at the (up to ``n_add``) worst of them, already
-    computed, join the basis and the next round certifies again on fresh points.
+    computed, join the basis and the next round certifies again on fresh points
+    (:class:`~bayesplate.reduced.options.FastModelOptions`).
 
     Parameters
     ----------
     model : bayesplate.model.PlateModel
-    mean_b, box, n_modes, n_snapshots, margin, rank_tol, spacing, n_sigma, floor
-        As for :meth:`ReducedModel.build`.
-    tolerance : float
-        Bound on the relative frequency error over the first ``n_modes`` modes.
-    safety : float
-        Enrichment goes on until the held-out error is below ``safety * tolerance`` (1:
-        until the certificate passes; less for a margin). The certificate passes below
-        ``tolerance``.
-    n_test : int
-        Held-out points per round drawn at random (Latin hypercube) from the box.
-    n_probe : int
-        Held-out points per round chosen among ``n_candidates`` random ones where the model
-        changed most with its last batch of snapshots (its error is likeliest to be large
-        there); they join the certificate, which a random draw alone makes optimistic (the
-        error is largest in small corners of the box).
-    n_candidates : int
-        Candidates for the probes, evaluated with the reduced model only.
-    n_add : int
-        Points added per failed round.
-    max_rounds : int
-        Certification rounds at most.
-    max_basis : int, optional
-        Stop enriching once the basis would grow beyond this size.
+    mean_b : array_like, shape (6,)
+        Prior mean of ``(C11, C22, C12, C66, C44, C55)``, Pa; always a snapshot point.
+    box : Box or array_like
+        As for :meth:`ReducedModel.build` (bounds in Pa, or a covariance in Pa^2).
+    n_modes : int
+        Elastic modes to be reproduced and certified.
+    options : FastModelOptions, optional
+        The build's, certificate's and enrichment's settings (default: the defaults).
     rng : numpy.random.Generator or int, optional
         Seed of every design; the same seed gives the same basis and certificate.
+    **settings
+        Fields of :class:`~bayesplate.reduced.options.FastModelOptions` by name, over
+        `options` (``tolerance``, ``safety``, ``n_snapshots``, ``n_test``, ``n_probe``,
+        ``n_candidates``, ``n_add``, ``max_rounds``, ``max_basis``, ``margin``,
+        ``rank_tol``, ``spacing``, ``n_sigma``, ``floor``).
 
     Returns
     -------
     CertifiedModel
+
+    Raises
+    ------
+    TypeError
+        A keyword that is no field of :class:`~bayesplate.reduced.options.FastModelOptions`.
     """
+    options = FastModelOptions.of(options, "fast_model", **settings)
     started = time.perf_counter()
     rng = np.random.default_rng(rng)
-    reduced = ReducedModel.build(
-        model,
-        mean_b,
-        box,
-        n_modes,
-        n_snapshots=n_snapshots,
-        margin=margin,
-        rng=rng,
-        rank_tol=rank_tol,
-        spacing=spacing,
-        n_sigma=n_sigma,
-        floor=floor,
+    reduced = ReducedModel.build(model, mean_b, box, n_modes, rng=rng, **options.build_settings())
+    reduced, history = _enriched(model, reduced, n_modes, options, rng)
+    solves = 1 + options.n_snapshots + sum(c.n_test for c in history)
+    return CertifiedModel(
+        model, reduced, history[-1], history, time.perf_counter() - started, solves
     )
-    n_solve = n_modes + margin
+
+
+def _enriched(model, reduced, n_modes, options, rng):
+    """The rounds of :func:`fast_model`: the last basis, and every round's certificate.
+
+    Each round certifies on fresh points (:func:`_certified_round`); the rounds stop once
+    the error is under ``safety * tolerance``, after ``max_rounds``, or where the enriched
+    basis would pass ``max_basis`` (the basis certified last is kept).
+    """
+    target = options.safety * options.tolerance
     history = []
-    for round_ in range(1, max_rounds + 1):
-        probes = _probe_points(reduced, n_probe, n_candidates, rng)
-        points = np.vstack([reduced.box.sample(n_test, rng), probes])
-        certificate, results = _certify(
-            model, reduced, points, tolerance, n_modes, n_solve, n_probe=len(probes)
-        )
+    for round_ in range(1, options.max_rounds + 1):
+        certificate, points, results = _certified_round(model, reduced, n_modes, options, rng)
         history.append(certificate)
         log.info("round %d: %s", round_, certificate)
-        if certificate.max_rel_error < safety * tolerance or round_ == max_rounds:
+        if certificate.max_rel_error < target or round_ == options.max_rounds:
             break
-        worst = np.argsort(-np.max(np.abs(certificate.errors), axis=1), kind="stable")
-        target = safety * tolerance
-        worst = [i for i in worst[:n_add] if np.abs(certificate.errors[i]).max() >= target]
+        worst = _worst(certificate, options.n_add, target)
         enriched = reduced.enrich(model, points[worst], [results[i] for i in worst])
-        if max_basis is not None and enriched.size > max_basis:
-            log.info("basis cap %d reached (%d needed)", max_basis, enriched.size)
+        if options.max_basis is not None and enriched.size > options.max_basis:
+            log.info("basis cap %d reached (%d needed)", options.max_basis, enriched.size)
             break
         reduced = enriched
-    solves = 1 + n_snapshots + sum(c.n_test for c in history)
-    return CertifiedModel(
-        model, reduced, certificate, history, time.perf_counter() - started, solves
+    return reduced, history
+
+
+def _certified_round(model, reduced, n_modes, options, rng):
+    """One round's certificate, its held-out points and the full solutions there.
+
+    The points: ``n_test`` drawn from the box and ``n_probe`` probes (drawn first).
+    """
+    probes = _probe_points(reduced, options.n_probe, options.n_candidates, rng)
+    points = np.vstack([reduced.box.sample(options.n_test, rng), probes])
+    n_solve = n_modes + options.margin
+    certificate, results = _certify(
+        model, reduced, points, options.tolerance, n_modes, n_solve, n_probe=len(probes)
     )
+    return certificate, points, results
+
+
+def _worst(certificate, n_add, target):
+    """Indices of the (up to ``n_add``) worst held-out points whose error reaches ``target``."""
+    worst = np.argsort(-np.max(np.abs(certificate.errors), axis=1), kind="stable")
+    return [i for i in worst[:n_add] if np.abs(certificate.errors[i]).max() >= target]
 
 
 class CertifiedModel:
