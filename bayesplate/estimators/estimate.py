@@ -17,13 +17,13 @@ from .assess import assess
 from .assignment_rounds import most_probable, settle_assignment
 from .conventions import resolve_conventions
 from .fast import case_fast_model, confirmed_run, modes_to_certify, resolve_forward
-from .iteration import DEFAULT_MAX_ITER
+from .options import EstimateOptions
 from .paired import estimate_paired
 from .result import METHODS
 
 log = logging.getLogger(__name__)
 
-__all__ = ["OrderRefuted", "estimate", "estimate_on_fast", "settle_pairing"]
+__all__ = ["EstimateOptions", "OrderRefuted", "estimate", "estimate_on_fast", "settle_pairing"]
 
 
 class OrderRefuted(Exception):
@@ -43,20 +43,11 @@ def estimate(
     case,
     method="MVE",
     model: ForwardModel | None = None,
-    tol=1e-3,
-    max_iter=DEFAULT_MAX_ITER,
-    convention="paper",
-    prior_mean=None,
-    prior_sd=None,
-    stage1_tol=1e-2,
-    stage2_factor=2.0,
-    stage2_sd=None,
-    pairing="auto",
-    tracking="auto",
     *,
-    forward="auto",
+    options=None,
     fast=None,
     rng=None,
+    **settings,
 ):
     """Estimate the elastic constants of a case with the paper's B, MVE or MVE-mod.
 
@@ -64,164 +55,118 @@ def estimate(
     first-order propagation through eqs. 20-21 (:func:`bayesplate.posterior.prior_in_stiffness`);
     ``V_Y`` from the frequency deviations, ``d lambda = 8 pi^2 f df`` (section 3.6).
 
+    The stages: the fast path (:func:`_estimate_on_fast`) or, on the full model, a given
+    pairing (:func:`.paired.estimate_paired`), a named one (:func:`_by_named_pairing`, the
+    order checked at the estimate) or the most probable assignment
+    (:func:`_by_likelihood`); then the assessment.
+
     Parameters
     ----------
     case : bayesplate.io.Case
     method : {"B", "MVE", "MVE-mod"}
     model : PlateModel, optional
         Forward model; default ``PlateModel.from_case(case)`` (the case's mesh).
-    tol : float
-        TOL of section 2.4 (of stage 2 for MVE-mod).
-    max_iter : int
-        Iteration cap (per stage).
-    convention : str or Conventions
-        ``"paper"`` (reproduces the paper, the default) or ``"consistent"``, or explicit
-        :class:`Conventions`.
-    prior_mean, prior_sd : array_like, shape (6,), optional
-        Initial values and deviations of ``(E1, E2, nu12, G12, G13, G23)`` in SI, replacing
-        the case's prior (stage 1 of MVE-mod).
-    stage1_tol : float
-        MVE-mod stage-1 TOL (section 5: 1e-2).
-    stage2_factor : float
-        MVE-mod stage-2 deviations are this multiple of stage 1's (section 6: 2).
-    stage2_sd : array_like, shape (6,), optional
-        Explicit stage-2 deviations (SI), overriding `stage2_factor`.
-    pairing : {"auto", "mac", "likelihood", "index", "order"} or Pairing
-        Measured-to-computed mode pairing (:func:`bayesplate.pairing.pair_measured`, at the
-        prior mean): "auto" pairs by shape and frequency ("mac") when the case has measured
-        shapes, else by the case's mode indices if any, else by order (the paper's).
-        "likelihood": the most probable
-        assignment of frequencies (:mod:`bayesplate.assignment`), made at the prior with the
-        prior's spread and remade at each estimate with the estimate's, the estimator run
-        again until the assignment stands (at most
-        :data:`.assignment_rounds.MAX_ASSIGNMENTS` rounds); unobserved computed modes and
-        spurious peaks are in ``settings`` and the message. Measured modes left unpaired are
-        left out of the fit.
-    tracking : {"auto", "report", "follow", "off"}
-        MAC tracking of paired modes between iterates (see :func:`run`); "auto" follows
-        modes paired by shape and keeps order or index pairings as they are.
-    forward : {"auto", "fast", "full"}
-        Iterate on the certified fast model, the answer confirmed by the full one
-        (:mod:`bayesplate.estimators.fast`; the result's ``check``), or on the full model
-        throughout; ``"auto"``: fast on meshes of more than ``FAST_MIN_DOFS`` unknowns,
-        except for B (a handful of solves, fewer than the fast model's build).
+    options : EstimateOptions, optional
+        The stopping rule, conventions, prior, MVE-mod's stages, pairing, tracking and
+        forward model (default ``EstimateOptions()``).
     fast : bayesplate.reduced.CertifiedModel, optional
         A fast model already built for this case (implies the fast path); see
         :func:`estimate_on_fast` to get it back enriched.
     rng : numpy.random.Generator or int, optional
         Seed of the fast model's design (default 0: the same model every time).
+    **settings
+        Any field of :class:`~bayesplate.estimators.options.EstimateOptions` by name, over
+        `options`: ``tol`` (TOL of section 2.4), ``max_iter``, ``convention`` (``"paper"``,
+        ``"consistent"`` or :class:`Conventions`), ``prior_mean`` and ``prior_sd`` (SI),
+        ``stage1_tol``, ``stage2_factor``, ``stage2_sd`` (MVE-mod), ``pairing`` (``"auto"``,
+        ``"mac"``, ``"likelihood"``, ``"index"``, ``"order"`` or a Pairing), ``tracking``
+        (``"auto"``, ``"report"``, ``"follow"``, ``"off"``) and ``forward`` (``"auto"``,
+        ``"fast"``, ``"full"``).
 
     Returns
     -------
     EstimateResult
         Assessed (:func:`.assess.assess`): its ``fit``, its ``warnings`` and a status
         ``"rejected"`` or ``"implausible"`` when the answer should not be trusted.
+
+    Raises
+    ------
+    TypeError
+        A keyword that is no field of :class:`~bayesplate.estimators.options.EstimateOptions`.
     """
-    result = _estimate(
-        case,
-        method,
-        model,
-        tol,
-        max_iter,
-        convention,
-        prior_mean,
-        prior_sd,
-        stage1_tol,
-        stage2_factor,
-        stage2_sd,
-        pairing,
-        tracking,
-        forward=forward,
-        fast=fast,
-        rng=rng,
-    )
-    return assess(result, case)
+    options = EstimateOptions.of(options, "estimate", **settings)
+    return assess(_estimate(case, method, model, options, fast=fast, rng=rng), case)
 
 
-def _estimate(
-    case,
-    method="MVE",
-    model=None,
-    tol=1e-3,
-    max_iter=DEFAULT_MAX_ITER,
-    convention="paper",
-    prior_mean=None,
-    prior_sd=None,
-    stage1_tol=1e-2,
-    stage2_factor=2.0,
-    stage2_sd=None,
-    pairing="auto",
-    tracking="auto",
-    *,
-    forward="auto",
-    fast=None,
-    rng=None,
-):
+def _estimate(case, method, model, options, *, fast=None, rng=None):
     """:func:`estimate` without its assessment (what the calls inside this module make)."""
     if method not in METHODS:
         raise ValueError(f"method = {method!r}: must be one of {METHODS}")
     model = model or PlateModel.from_case(case)
-    if fast is not None or resolve_forward(forward, model, method) == "fast":
-        options = {
-            "tol": tol,
-            "max_iter": max_iter,
-            "convention": convention,
-            "prior_mean": prior_mean,
-            "prior_sd": prior_sd,
-            "stage1_tol": stage1_tol,
-            "stage2_factor": stage2_factor,
-            "stage2_sd": stage2_sd,
-            "pairing": pairing,
-            "tracking": tracking,
-        }
-        return _estimate_on_fast(case, method, model, fast, rng=rng, **options)[0]
-    conventions = resolve_conventions(convention)
-    mean = np.asarray(case.prior.mean if prior_mean is None else prior_mean, dtype=float)
-    sd = np.asarray(case.prior.sd if prior_sd is None else prior_sd, dtype=float)
+    if fast is not None or resolve_forward(options.forward, model, method) == "fast":
+        return _estimate_on_fast(case, method, model, fast, rng, options)[0]
+    run = _run_settings(options, model)
+    mean = np.asarray(
+        case.prior.mean if options.prior_mean is None else options.prior_mean, dtype=float
+    )
+    sd = np.asarray(case.prior.sd if options.prior_sd is None else options.prior_sd, dtype=float)
     b0 = laminate.stiffness_from_engineering(mean)
-    options = {
-        "conventions": conventions,
-        "tracking": tracking,
-        "weight": model.mass,  # the MAC weight for tracking (ForwardModel interface)
-        "tol": tol,
-        "max_iter": max_iter,
-        "stage1_tol": stage1_tol,
-        "stage2": (stage2_factor, stage2_sd),
-    }
-    if isinstance(pairing, Pairing):
-        return estimate_paired(case, model, pairing, method, mean, sd, options)
-    how = resolve_pairing(case.measured, pairing)
+    if isinstance(options.pairing, Pairing):
+        return estimate_paired(case, model, options.pairing, method, mean, sd, run)
+    how = resolve_pairing(case.measured, options.pairing)
     _, V = prior_in_stiffness(mean, sd, "full")
+    prior = (mean, sd, b0, V)
     if how != "likelihood":
-        pair = pair_measured(case, model, b0, how, prior=(b0, V))
-        result = estimate_paired(case, model, pair, method, mean, sd, options)
-        if not checks_order(case.measured, pairing):
-            return result
-        at = result.b if laminate.is_physical(result.b) else b0
-        found = assignment_at(case, model, at, V, pair)
-        if found.keeps_order:
-            return _order_checked(result, replace(pair, assignment=found))
-        if not isinstance(model, PlateModel):
-            # a fast model holds the order's modes only: the caller redoes it by likelihood
-            raise OrderRefuted(found)
-        by_likelihood = _estimate(
-            case,
-            method,
-            model=model,
-            tol=tol,
-            max_iter=max_iter,
-            convention=convention,
-            prior_mean=prior_mean,
-            prior_sd=prior_sd,
-            stage1_tol=stage1_tol,
-            stage2_factor=stage2_factor,
-            stage2_sd=stage2_sd,
-            pairing="likelihood",
-            tracking=tracking,
-            forward="full",
-        )
-        refuted = refuted_order(found)
-        return replace(by_likelihood, message=f"{by_likelihood.message}; {refuted}")
+        return _by_named_pairing(case, model, method, options, how, prior, run)
+    return _by_likelihood(case, model, method, prior, run)
+
+
+def _run_settings(options, model):
+    """The settings of every run (:func:`.paired.estimate_paired`) from the options."""
+    return {
+        "conventions": resolve_conventions(options.convention),
+        "tracking": options.tracking,
+        "weight": model.mass,  # the MAC weight for tracking (ForwardModel interface)
+        "tol": options.tol,
+        "max_iter": options.max_iter,
+        "stage1_tol": options.stage1_tol,
+        "stage2": (options.stage2_factor, options.stage2_sd),
+    }
+
+
+def _by_named_pairing(case, model, method, options, how, prior, run):
+    """The estimate paired by ``how`` at the prior mean; by order, the order checked.
+
+    The order is checked at the estimate (:func:`.checked_order.assignment_at`): kept when
+    the most probable assignment there keeps it, else the estimate made by likelihood (on
+    the full model; a fast model raises :class:`OrderRefuted` for its caller to redo it).
+    ``prior``: ``(mean, sd, b0, V)``, the engineering prior (SI) and its mean and
+    covariance in ``b`` (Pa, Pa^2).
+    """
+    mean, sd, b0, V = prior
+    pair = pair_measured(case, model, b0, how, prior=(b0, V))
+    result = estimate_paired(case, model, pair, method, mean, sd, run)
+    if not checks_order(case.measured, options.pairing):
+        return result
+    at = result.b if laminate.is_physical(result.b) else b0
+    found = assignment_at(case, model, at, V, pair)
+    if found.keeps_order:
+        return _order_checked(result, replace(pair, assignment=found))
+    if not isinstance(model, PlateModel):
+        # a fast model holds the order's modes only: the caller redoes it by likelihood
+        raise OrderRefuted(found)
+    again = replace(options, pairing="likelihood", forward="full")
+    by_likelihood = _estimate(case, method, model, again)
+    refuted = refuted_order(found)
+    return replace(by_likelihood, message=f"{by_likelihood.message}; {refuted}")
+
+
+def _by_likelihood(case, model, method, prior, run):
+    """The estimate by the most probable assignment, remade at each estimate until it stands.
+
+    ``prior``: ``(mean, sd, b0, V)`` as for :func:`_by_named_pairing`.
+    """
+    mean, sd, b0, V = prior
     # by the most probable assignment (the constants integrated out over the prior's spread
     # centred where the model is linearised: a profile fit with its Occam factor, not the
     # evidence under a far prior mean, which would rather drop the peaks that disagree with
@@ -229,26 +174,25 @@ def _estimate(
     # the prior is unreliable, so two starts: pairing by order (kept when its estimate
     # confirms it), and the lowest peaks assigned at the prior and fitted first. The settled
     # one more probable at its own estimate wins. B settles it (its prior anchors it).
-    first = most_probable(case, model, b0, V, "B", mean, sd, options)
+    first = most_probable(case, model, b0, V, "B", mean, sd, run)
     if method == "B":
         return _assigned(first.result, first.pair, first.rounds, first.note, first.rivals)
     if not first.result.converged:  # no estimate to start from: the method's own rounds
-        own = most_probable(case, model, b0, V, method, mean, sd, options)
+        own = most_probable(case, model, b0, V, method, mean, sd, run)
         return _assigned(own.result, own.pair, own.rounds, own.note, own.rivals)
     # MVE and MVE-mod from B's estimate, the assigned modes followed by MAC between iterates
     # (identified where B converged, not at a far prior): re-pairing by sorted index lets two
     # close modes swap places every iteration while MVE moves a weakly determined constant
-    follow = {
-        **options,
-        "tracking": "follow" if options["tracking"] == "auto" else options["tracking"],
-    }
+    follow = {**run, "tracking": "follow" if run["tracking"] == "auto" else run["tracking"]}
     s = settle_assignment(case, model, b0, V, method, mean, sd, follow, first.pair, first.result.b)
     note = "" if s.settled else f"; the assignment did not settle in {s.rounds} rounds"
     note += f"; started from B's estimate (assignment settled in {first.rounds} rounds)"
     return _assigned(s.result, s.pair, first.rounds + s.rounds, note, first.rivals)
 
 
-def estimate_on_fast(case, method="MVE", model=None, fast=None, *, rng=None, **options):
+def estimate_on_fast(
+    case, method="MVE", model=None, fast=None, *, options=None, rng=None, **settings
+):
     """:func:`estimate` on the certified fast model, confirmed by the full model.
 
     Parameters
@@ -260,10 +204,12 @@ def estimate_on_fast(case, method="MVE", model=None, fast=None, *, rng=None, **o
         mean and checks the answer.
     fast : bayesplate.reduced.CertifiedModel, optional
         Built over the prior's box when not given (:func:`.fast.case_fast_model`).
+    options : EstimateOptions, optional
+        As for :func:`estimate` (its ``forward`` is not used).
     rng : numpy.random.Generator or int, optional
         Seed of the build.
-    **options
-        The other keywords of :func:`estimate` (not ``forward``).
+    **settings
+        The other keywords of :func:`estimate` (not ``forward``), over `options`.
 
     Returns
     -------
@@ -272,14 +218,15 @@ def estimate_on_fast(case, method="MVE", model=None, fast=None, *, rng=None, **o
     fast : CertifiedModel
         The fast model, enriched where the full model corrected it: share it.
     """
-    result, fast = _estimate_on_fast(case, method, model, fast, rng=rng, **options)
+    options = EstimateOptions.of(options, "estimate_on_fast", **settings)
+    result, fast = _estimate_on_fast(case, method, model, fast, rng, options)
     return assess(result, case), fast
 
 
-def _estimate_on_fast(case, method="MVE", model=None, fast=None, *, rng=None, **options):
+def _estimate_on_fast(case, method, model, fast, rng, options):
     """:func:`estimate_on_fast` without its assessment."""
     model = model or PlateModel.from_case(case)
-    pairing = options.pop("pairing", "auto")
+    pairing = options.pairing
     checked = checks_order(case.measured, pairing)
     if (
         not isinstance(pairing, Pairing)
@@ -287,19 +234,20 @@ def _estimate_on_fast(case, method="MVE", model=None, fast=None, *, rng=None, **
         and resolve_pairing(case.measured, pairing) != "likelihood"
     ):
         # a fixed pairing is made as the full path makes it: on the full model at the prior
-        pairing, _ = settle_pairing(case, model, pairing, prior_mean=options.get("prior_mean"))
+        pairing, _ = settle_pairing(case, model, pairing, prior_mean=options.prior_mean)
     n_modes = modes_to_certify(case, pairing)
     if fast is None:
-        prior = {k: options.get(k) for k in ("prior_mean", "prior_sd")}
+        prior = {"prior_mean": options.prior_mean, "prior_sd": options.prior_sd}
         fast = case_fast_model(case, model, n_modes, rng=rng, **prior)
     elif n_modes > fast.reduced.n_modes + fast.reduced.margin:
         raise ValueError(
             f"the fast model holds {fast.reduced.n_modes + fast.reduced.margin} modes; "
             f"the pairing needs {n_modes}"
         )
+    on_reduced = replace(options, pairing=pairing, forward="full")
 
     def run_on(reduced):
-        return _estimate(case, method, model=reduced, pairing=pairing, forward="full", **options)
+        return _estimate(case, method, reduced, on_reduced)
 
     try:
         return confirmed_run(run_on, model, fast)
@@ -307,9 +255,8 @@ def _estimate_on_fast(case, method="MVE", model=None, fast=None, *, rng=None, **
         # order checked and set aside at the estimate: by likelihood, on a fast model that
         # holds the modes the assignment may reach (a new one: this one holds the order's)
         log.info("%s", refuted)
-        result, fast = _estimate_on_fast(
-            case, method, model, None, rng=rng, **{**options, "pairing": "likelihood"}
-        )
+        again = replace(options, pairing="likelihood")
+        result, fast = _estimate_on_fast(case, method, model, None, rng, again)
         return replace(result, message=f"{result.message}; {refuted}"), fast
 
 
