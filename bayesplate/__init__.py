@@ -35,8 +35,8 @@ _LAZY = {
     "CaseError": ".io",
     "bundled_case_path": ".io",
     "load_case": ".io",
-    "ModalResult": ".model",
-    "PlateModel": ".model",
+    "ModalResult": ".plate.model",
+    "PlateModel": ".plate.model",
     "EstimateResult": ".estimators",
     "estimate": ".estimators",
     "diagnose": ".discrepancy.diagnose",
@@ -44,19 +44,20 @@ _LAZY = {
     "stiffness_from_engineering": ".laminate",
 }
 
-#: Submodules that the eager ``__init__`` left as attributes of the package.
-_SUBMODULES = (
-    "assignment",
-    "discrepancy",
-    "estimators",
-    "fem",
-    "io",
-    "laminate",
-    "model",
-    "pairing",
-    "posterior",
-    "quantities",
-)
+#: Submodules that the eager ``__init__`` left as attributes of the package -> where they
+#: live now (``from bayesplate import pairing`` still gives ``bayesplate.matching.pairing``).
+_SUBMODULES = {
+    "assignment": ".matching.assignment",
+    "discrepancy": ".discrepancy",
+    "estimators": ".estimators",
+    "fem": ".fem",
+    "io": ".io",
+    "laminate": ".laminate",
+    "model": ".plate.model",
+    "pairing": ".matching.pairing",
+    "posterior": ".likelihood.posterior",
+    "quantities": ".quantities",
+}
 
 
 def __getattr__(name):
@@ -64,7 +65,7 @@ def __getattr__(name):
     if name in _LAZY:
         value = getattr(importlib.import_module(_LAZY[name], __name__), name)
     elif name in _SUBMODULES:
-        value = importlib.import_module(f".{name}", __name__)
+        value = importlib.import_module(_SUBMODULES[name], __name__)
     else:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
     globals()[name] = value

@@ -111,7 +111,7 @@ def _shipped(cases, options, out):
 def model_build(mesh):
     """Seconds to build each bundled case's plate model, on `mesh` and on its own mesh."""
     from bayesplate.io import bundled_case_names, bundled_case_path, load_case
-    from bayesplate.model import PlateModel
+    from bayesplate.plate.model import PlateModel
 
     out = {}
     for name in bundled_case_names():

@@ -38,8 +38,8 @@ import _machine  # noqa: E402  (this folder's shared helper)
 
 from bayesplate.estimators import case_fast_model, estimate, estimate_on_fast  # noqa: E402
 from bayesplate.io import atomic_write_text, bundled_case_path, load_case  # noqa: E402
-from bayesplate.model import PlateModel  # noqa: E402
-from bayesplate.pairing import pair_measured  # noqa: E402
+from bayesplate.matching.pairing import pair_measured  # noqa: E402
+from bayesplate.plate.model import PlateModel  # noqa: E402
 
 REPORT = "benchmark_estimators.md"
 METHODS = ("B", "MVE", "MVE-mod")

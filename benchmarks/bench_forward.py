@@ -162,7 +162,7 @@ def run(quick=False, runs=7):
     """All measurements; a dict."""
     from bayesplate.io import bundled_case_path, load_case
     from bayesplate.laminate import stiffness_from_engineering
-    from bayesplate.model import PlateModel
+    from bayesplate.plate.model import PlateModel
 
     case = load_case(bundled_case_path(CASE))
     b = stiffness_from_engineering(case.reference)

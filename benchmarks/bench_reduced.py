@@ -74,7 +74,7 @@ def _per_call(fn, points):
 def measure(mesh=None):
     """Build, certify and time; a dict of numbers and objects for the report."""
     from bayesplate.io import bundled_case_path, load_case
-    from bayesplate.model import PlateModel
+    from bayesplate.plate.model import PlateModel
     from bayesplate.reduced import certify, fast_model, prior_stiffness, stiffness_box
 
     case = load_case(bundled_case_path(CASE))

@@ -57,7 +57,7 @@ def machine():
 def run_frederiksen():
     """The timed posterior, then the per-evaluation times; a dict for the report."""
     from bayesplate.io import bundled_case_path, load_case
-    from bayesplate.model import PlateModel
+    from bayesplate.plate.model import PlateModel
     from bayesplate.sampling import prepare, sample
 
     load = [os.getloadavg()[0]]

@@ -65,7 +65,7 @@ from bayesplate.discrepancy import (
 from bayesplate.discrepancy.diagnose import DEFAULTS, diagnose, mesh_error
 from bayesplate.discrepancy.physics.location import absorbable_projector
 from bayesplate.io import atomic_write_text
-from bayesplate.posterior import prior_in_stiffness
+from bayesplate.likelihood.posterior import prior_in_stiffness
 
 _HERE = pathlib.Path(__file__).resolve().parent
 if str(_HERE) not in sys.path:

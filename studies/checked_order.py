@@ -1,7 +1,7 @@
 """diagnose with the default pairing (by order, checked) on the calibration study's recordings.
 
 Issue 16: without shapes or mode numbers the default pairing is by order, checked at the
-answer (:mod:`bayesplate.checked_order`): diagnose's first pass pairs by order and the most
+answer (:mod:`bayesplate.matching.checked_order`): diagnose's first pass pairs by order and the most
 probable assignment is made again at its verdict's fit, a further pass made only where it
 pairs a peak with another mode. This study asks two things of that default, on recordings
 diagnose did not make (`studies/calibration.py`'s: the finer mesh, 0.2 % noise, its seeds):

@@ -25,8 +25,8 @@ from bayesplate.discrepancy.diagnose import diagnose
 from bayesplate.discrepancy.search.joint_fit import JointProblem, fit
 from bayesplate.io import atomic_write_text, bundled_case_path, load_case
 from bayesplate.laminate import stiffness_from_engineering
-from bayesplate.model import PlateModel
-from bayesplate.posterior import observed_eigenvalues, prior_in_stiffness
+from bayesplate.likelihood.posterior import observed_eigenvalues, prior_in_stiffness
+from bayesplate.plate.model import PlateModel
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 from _study_host import code_version, cpu, utc_now  # noqa: E402  (this folder's helper)

@@ -6,8 +6,8 @@ intervals widen with the misfit. Two seeded experiments:
 
 1. A linear-Gaussian model (m = 14 data, p = 6 constants, sensitivities N(0, 1), a weak
    prior sd 100): B's interval, estimate +- 1.881 sd, without and with the scale
-   (:func:`bayesplate.error_scale.linearised_scale`), over ``TOY_REPLICATES`` replicates, for
-   true noise 3 and 1 times the declared, and for three priors on ``s``.
+   (:func:`bayesplate.likelihood.error_scale.linearised_scale`), over ``TOY_REPLICATES`` replicates,
+   for true noise 3 and 1 times the declared, and for three priors on ``s``.
 2. A synthetic plate (single orthotropic ply 300 x 200 x 4 mm, density 1600 kg/m^3, mesh
    12 x 8, 10 frequencies, declared deviation 0.5 %, drawn with 1.5 %; the prior mean drawn
    from the prior, sd 25 %, so the truth is a draw from the prior): B (TOL 1e-6) and its
@@ -40,11 +40,11 @@ import numpy as np
 
 from bayesplate import laminate
 from bayesplate.batch import map_tasks
-from bayesplate.error_scale import ErrorScalePrior, linearised_at, linearised_scale
 from bayesplate.estimators import run as run_estimator
 from bayesplate.io import Case, Measurement, Plate, Prior, atomic_write_text
-from bayesplate.model import PlateModel
-from bayesplate.posterior import GaussianProblem
+from bayesplate.likelihood.error_scale import ErrorScalePrior, linearised_at, linearised_scale
+from bayesplate.likelihood.posterior import GaussianProblem
+from bayesplate.plate.model import PlateModel
 from bayesplate.quantities import ENGINEERING_KEYS, engineering_covariance, hz_from_eigenvalue
 
 _HERE = pathlib.Path(__file__).resolve().parent
@@ -134,7 +134,7 @@ def fit_b(task):
 def fit_sampler(seed, true_s, rng):
     """The sampler's 94 % HDI covers (6,) and the interval of s, or None (B, the MAP, or the
     chain did not converge)."""
-    from bayesplate.error_scale import scale_from_draws
+    from bayesplate.likelihood.error_scale import scale_from_draws
     from bayesplate.sampling import prepare, sample
 
     case = draw(np.random.default_rng(seed), true_s)

@@ -20,8 +20,8 @@ covering replicates has a binomial deviation ``sqrt(p (1 - p) / n)``; its 95 % b
 
 The sampler (emcee on the certified fast model, :func:`bayesplate.sampling.sample`, 94 % HDI)
 then runs on every replicate (both treatments); with the inputs marginal it also draws the
-thickness and density (:mod:`bayesplate.inputs_posterior`), and a replicate's input interval
-covers when it holds the plate's true thickness (density). ``--sampler-minutes`` caps one
+thickness and density (:mod:`bayesplate.likelihood.inputs_posterior`), and a replicate's input
+interval covers when it holds the plate's true thickness (density). ``--sampler-minutes`` caps one
 run; the report says how many replicates were sampled. Every finished row (B's, the
 sampler's) is stored as it comes in ``out_dir/.cache/input_coverage.json`` (atomic writes),
 so an interrupted run resumes where it stopped.
@@ -49,8 +49,8 @@ import numpy as np
 from bayesplate import laminate
 from bayesplate.estimators import run as run_estimator
 from bayesplate.io import Case, Measurement, Plate, Prior, atomic_write_text
-from bayesplate.model import PlateModel
-from bayesplate.posterior import GaussianProblem
+from bayesplate.likelihood.posterior import GaussianProblem
+from bayesplate.plate.model import PlateModel
 from bayesplate.quantities import ENGINEERING_KEYS, hz_from_eigenvalue
 
 _HERE = pathlib.Path(__file__).resolve().parent
@@ -167,7 +167,7 @@ def _sampler_row(case, model, index, h, rho):
     """The sampler's coverage of the constants (both treatments) and of the inputs (marginal).
 
     The inputs' row: whether the true thickness and density lie in the 94 % HDI of their
-    draws (one per kept draw of the constants, :mod:`bayesplate.inputs_posterior`).
+    draws (one per kept draw of the constants, :mod:`bayesplate.likelihood.inputs_posterior`).
     """
     started = time.perf_counter()
     row = {"covers": {}, "converged": {}, "load": os.getloadavg()[0]}
@@ -355,8 +355,8 @@ def _certificate_lines(rows):
     med, hi = np.median(sizes), np.max(sizes)
     return [
         "",
-        f"Linear input model (`bayesplate.inputs_posterior.linear_input_certificate`, at "
-        "each MAP: full solves at +-2 sd of thickness and density against the linear "
+        f"Linear input model (`bayesplate.likelihood.inputs_posterior.linear_input_certificate`, "
+        "at each MAP: full solves at +-2 sd of thickness and density against the linear "
         f"prediction): largest error {hi:.3f} of a frequency's declared deviation (median "
         f"{med:.3f}) over the {len(sizes)} replicates; {failed} above the pass mark 0.25.",
     ]
@@ -397,8 +397,8 @@ def report(rows, n, errors, seconds, command):
         f"{n_sampler} of {n} replicates sampled, both treatments each (seed 1000 + replicate, "
         f"min_ess {SAMPLER['min_ess']}, max_steps {SAMPLER['max_steps']}). With the inputs "
         "marginal, thickness and density are also drawn, one draw per kept draw of the "
-        "constants from their Gaussian conditional (`bayesplate.inputs_posterior`: exact "
-        "joint draws under the linear input model); the input columns are the share of "
+        "constants from their Gaussian conditional (`bayesplate.likelihood.inputs_posterior`: "
+        "exact joint draws under the linear input model); the input columns are the share of "
         "replicates whose 94 % HDI of the drawn thickness (density) holds the plate's true "
         "one.",
         "",

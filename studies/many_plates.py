@@ -68,7 +68,7 @@ def synthetic_plate(
     """
     from bayesplate import laminate
     from bayesplate.io.case import Case, Measurement, Plate, Prior
-    from bayesplate.model import PlateModel
+    from bayesplate.plate.model import PlateModel
 
     prior = Prior(PRIOR_MEAN, PRIOR_SD)
     plate = Plate(length, width, thickness, 1000.0, (0.0,))

@@ -68,7 +68,7 @@ def exact_fit(plate, b_true, lam_effect, sigma, prior=None):
 
     Parameters
     ----------
-    plate : bayesplate.model.PlateModel
+    plate : bayesplate.plate.model.PlateModel
         The model of the recordings (without the effect).
     b_true : numpy.ndarray, shape (6,)
         The true stiffness coefficients, Pa: the start.

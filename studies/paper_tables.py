@@ -31,7 +31,7 @@ import numpy as np
 
 from bayesplate.estimators import CONVENTIONS, DEFAULT_MAX_ITER, estimate
 from bayesplate.io import atomic_write_text, bundled_case_path, load_case
-from bayesplate.model import PlateModel
+from bayesplate.plate.model import PlateModel
 
 if sys.version_info >= (3, 11):
     import tomllib

@@ -81,7 +81,7 @@ def synthetic_plate(name, geometry, constants, rng, *, mesh=MESH, modes=MODES, n
 
     from bayesplate import laminate
     from bayesplate.io.case import Case, Measurement, Plate, Prior
-    from bayesplate.model import PlateModel
+    from bayesplate.plate.model import PlateModel
 
     length, width, thickness = geometry
     dummy = Measurement(np.linspace(500, 5000, modes), np.full(modes, 5.0))
@@ -112,7 +112,7 @@ def quick_fit(case, model):
     """
     from bayesplate import laminate
     from bayesplate.estimators.starts import start_points
-    from bayesplate.posterior import GaussianProblem
+    from bayesplate.likelihood.posterior import GaussianProblem
     from bayesplate.sampling.plate_laplace import PlateFit, linearise, plate_mode
 
     problem = GaussianProblem.from_case(case, model)
@@ -129,7 +129,7 @@ def quick_fit(case, model):
 def draw_truth(rng, tau_scale=0.1):
     """A material's mean constants (the prior, physical) and spreads (half-normal), SI."""
     from bayesplate import laminate
-    from bayesplate.posterior import prior_in_stiffness
+    from bayesplate.likelihood.posterior import prior_in_stiffness
 
     mu_b, V_b = prior_in_stiffness(PRIOR_MEAN, PRIOR_SD)
     while True:
@@ -162,7 +162,7 @@ def replicate(seed, n_plates=N_PLATES, **options):
     """One replicate: whether each 94 % interval covers the truth, and the run's numbers."""
     from threadpoolctl import threadpool_limits
 
-    from bayesplate.posterior import prior_in_stiffness
+    from bayesplate.likelihood.posterior import prior_in_stiffness
     from bayesplate.sampling import sample_population
 
     rng = np.random.default_rng(seed)

@@ -62,8 +62,8 @@ import input_coverage as ic  # noqa: E402  (a study of this folder, not a packag
 from bayesplate import laminate  # noqa: E402
 from bayesplate.batch import map_tasks  # noqa: E402
 from bayesplate.io import atomic_write_text  # noqa: E402
-from bayesplate.model import PlateModel  # noqa: E402
-from bayesplate.posterior import GaussianProblem  # noqa: E402
+from bayesplate.likelihood.posterior import GaussianProblem  # noqa: E402
+from bayesplate.plate.model import PlateModel  # noqa: E402
 from bayesplate.quantities import ENGINEERING_KEYS  # noqa: E402
 
 REPORT = "posterior_coverage.md"

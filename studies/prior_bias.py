@@ -24,9 +24,9 @@ import matplotlib
 import numpy as np
 
 from bayesplate.io import atomic_write_text, bundled_case_path, load_case
-from bayesplate.model import PlateModel
-from bayesplate.pairing import Pairing
-from bayesplate.posterior import GaussianProblem
+from bayesplate.likelihood.posterior import GaussianProblem
+from bayesplate.matching.pairing import Pairing
+from bayesplate.plate.model import PlateModel
 from bayesplate.reduced import Box, fast_model
 from bayesplate.sampling import posterior_box, prepare, sample
 from bayesplate.sampling.setup import FAST_DEFAULTS, PILOT_TOL

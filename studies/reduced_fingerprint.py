@@ -14,7 +14,7 @@ import numpy as np
 
 from bayesplate.discrepancy.physics.elastic_foundation import ElasticFoundation
 from bayesplate.io import bundled_case_path, load_case
-from bayesplate.model import PlateModel
+from bayesplate.plate.model import PlateModel
 from bayesplate.reduced import ReducedModel, fast_model, prior_stiffness, stiffness_box
 
 N_MODES, SEED = 14, 20070461

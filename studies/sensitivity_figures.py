@@ -20,7 +20,7 @@ from bayesplate import plots
 from bayesplate.discrepancy.search.locate import mode_kinds
 from bayesplate.io import bundled_case_path, load_case
 from bayesplate.laminate import stiffness_from_engineering
-from bayesplate.model import PlateModel
+from bayesplate.plate.model import PlateModel
 from bayesplate.quantities import STIFFNESS_NAMES
 
 matplotlib.use("Agg")  # files only, never a window

@@ -26,7 +26,7 @@ import numpy as np
 
 from bayesplate.estimators import METHODS, estimate
 from bayesplate.io import atomic_write_text, bundled_case_path, load_case
-from bayesplate.model import PlateModel
+from bayesplate.plate.model import PlateModel
 from bayesplate.quantities import ENGINEERING_NAMES, ENGINEERING_UNITS, to_case_units
 
 _HERE = pathlib.Path(__file__).resolve().parent

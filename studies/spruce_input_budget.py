@@ -10,15 +10,15 @@ Two readings of the density's uncertainty:
 - *independent*: what the case keys express (``density_sd_kg_m3``, inputs independent), with
   the density's sd propagated from those of h, a, b and the mass (2.3 %);
 - *from the mass*: the case keys ``mass_g`` and ``mass_sd_g``: rho = m / (a b h) moves with
-  h, a and b, so the inputs are h, a, b and m (:func:`bayesplate.inputs.input_sources`): the
-  eigenvalues depend on h through ``J_h - (rho / h) J_rho`` (and likewise a, b) and on the
+  h, a and b, so the inputs are h, a, b and m (:func:`bayesplate.likelihood.inputs.input_sources`):
+  the eigenvalues depend on h through ``J_h - (rho / h) J_rho`` (and likewise a, b) and on the
   mass alone through ``J_rho`` with sd ``rho sd_m / m``. Bending eigenvalues go as
   ``E h^2 / rho``, i.e. as ``E h^3 a b / m``: thickness weighs 3 sd_h / h, not 2.
 
 The posterior with the inputs: the sampler on the case with the mass
 (``inputs="marginal"``, ``J_p A A^T J_p^T`` added to ``V_Y``, pairing by likelihood as in
 ``studies/spruce_badiane.py``), beside the same sampler with the inputs exact; the inputs
-drawn with the constants (:mod:`bayesplate.inputs_posterior`), each input's share of the
+drawn with the constants (:mod:`bayesplate.likelihood.inputs_posterior`), each input's share of the
 posterior variance of E1, E2 and G12 from those joint draws, and the linear input model's
 certificate.
 
@@ -38,10 +38,10 @@ import time
 import numpy as np
 
 from bayesplate.estimators import estimate
-from bayesplate.inputs import input_jacobian
 from bayesplate.io import atomic_write_text, bundled_case_path, load_case
 from bayesplate.laminate import engineering_from_stiffness
-from bayesplate.model import PlateModel
+from bayesplate.likelihood.inputs import input_jacobian
+from bayesplate.plate.model import PlateModel
 from bayesplate.quantities import ENGINEERING_KEYS, to_case_units
 from bayesplate.run.budget import estimate_budget
 
@@ -188,7 +188,7 @@ def input_shares(result):
     """Each drawn input's share of each constant's posterior variance, shape (k, 6).
 
     The squared correlation of the constant with the input over the joint draws (one draw of
-    the inputs per kept draw of the constants, :mod:`bayesplate.inputs_posterior`): the
+    the inputs per kept draw of the constants, :mod:`bayesplate.likelihood.inputs_posterior`): the
     fraction of its posterior variance the input explains linearly (a first-order Sobol
     index). The inputs are correlated a posteriori, so the shares need not add up.
     """

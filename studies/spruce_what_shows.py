@@ -33,7 +33,7 @@ import numpy as np
 from bayesplate import load_case, stiffness_from_engineering
 from bayesplate.discrepancy import PointMass, ThicknessTaper
 from bayesplate.io import atomic_write_text, bundled_case_path
-from bayesplate.model import PlateModel
+from bayesplate.plate.model import PlateModel
 from bayesplate.quantities import CASE_SCALE
 
 _HERE = pathlib.Path(__file__).resolve().parent

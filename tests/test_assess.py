@@ -22,7 +22,7 @@ from bayesplate.estimators.assess import (
 )
 from bayesplate.io import bundled_case_path, load_case
 from bayesplate.laminate import stiffness_from_engineering
-from bayesplate.model import PlateModel
+from bayesplate.plate.model import PlateModel
 from bayesplate.quantities import ENGINEERING_KEYS, hz_from_eigenvalue, to_case_units
 
 MESH = (6, 3)  # coarse: each estimate well under a second

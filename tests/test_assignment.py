@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from bayesplate.assignment import MAC_SCALE, assign, assign_with_shapes, predictive_sd_Hz
+from bayesplate.matching.assignment import MAC_SCALE, assign, assign_with_shapes, predictive_sd_Hz
 
 # A plate-like spectrum: 14 modes, two of them close (modes 4 and 5, 1.5 % apart).
 COMPUTED = np.array(
@@ -274,8 +274,8 @@ def test_likelihood_assignment_of_a_complete_test_is_the_order(plate1_test2, com
 def test_pairing_by_order_checked_is_the_default_without_shapes_or_mode_numbers(plate1_test2):
     import dataclasses
 
-    from bayesplate.checked_order import checks_order
-    from bayesplate.pairing import Pairing
+    from bayesplate.matching.checked_order import checks_order
+    from bayesplate.matching.pairing import Pairing
 
     case, _ = plate1_test2
     assert checks_order(case.measured, "auto")
@@ -344,7 +344,7 @@ def test_on_the_fast_model_a_refuted_order_is_redone_on_a_fast_model_of_its_own(
 
 def test_the_command_line_offers_every_pairing():
     from bayesplate.cli.options import PAIRING_CHOICES
-    from bayesplate.pairing import PAIRINGS
+    from bayesplate.matching.pairing import PAIRINGS
 
     assert PAIRING_CHOICES == PAIRINGS
 

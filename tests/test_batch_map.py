@@ -92,8 +92,8 @@ def test_no_items_start_no_cluster():
 @pytest.mark.filterwarnings("ignore:More chains:UserWarning")
 @pytest.mark.filterwarnings("ignore:invalid value encountered in divide:RuntimeWarning")
 def test_task_pool_is_a_map_for_the_sampler(client):
-    from bayesplate.pairing import Pairing
-    from bayesplate.posterior import GaussianProblem, prior_in_stiffness
+    from bayesplate.likelihood.posterior import GaussianProblem, prior_in_stiffness
+    from bayesplate.matching.pairing import Pairing
     from bayesplate.sampling import sample_problem
 
     # g(b) = A b: a problem cheap to evaluate, its log-density a closure shipped to workers

@@ -14,7 +14,7 @@ import scipy.linalg as sla
 from bayesplate import bundled_case_path, laminate, load_case
 from bayesplate.fem.eigen import lowest_modes
 from bayesplate.fem.submatrix import SubPattern
-from bayesplate.model import PlateModel
+from bayesplate.plate.model import PlateModel
 
 E_REF = np.array([113e9, 8.5e9, 0.323, 4.45e9, 4.43e9, 2.97e9])
 B_REF = laminate.stiffness_from_engineering(E_REF)

@@ -101,7 +101,7 @@ def test_nominal_fit_is_global_where_a_local_fit_is_trapped():
     # chi-square ~140 (the issue's pitfall); the global fit must not
     from bayesplate.discrepancy.diagnose import coarse_model, fit_nominal
     from bayesplate.discrepancy.search.joint_fit import JointProblem, fit
-    from bayesplate.posterior import prior_in_stiffness
+    from bayesplate.likelihood.posterior import prior_in_stiffness
 
     case = load_case(bundled_case_path("frederiksen_t300"))
     model = PlateModel.from_case(case, mesh=(24, 12))
@@ -227,7 +227,7 @@ def test_global_stage_reaches_the_basin_of_the_published_constants():
     # issue 12) stopped at ~18.4. The many reduced-model starts must reach the former.
     from bayesplate.discrepancy.diagnose import coarse_model, fit_nominal, nominal_reduced
     from bayesplate.discrepancy.search.joint_fit import JointProblem, fit
-    from bayesplate.posterior import observed_eigenvalues, prior_in_stiffness
+    from bayesplate.likelihood.posterior import observed_eigenvalues, prior_in_stiffness
 
     case = load_case(bundled_case_path("frederiksen_t300"))
     model = PlateModel.from_case(case)

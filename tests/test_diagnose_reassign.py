@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 
 from bayesplate import PlateModel, bundled_case_path, load_case, stiffness_from_engineering
-from bayesplate.assignment import P_SPURIOUS, P_UNOBSERVED, assign
 from bayesplate.discrepancy import PointMass
 from bayesplate.discrepancy.diagnose import diagnose
 from bayesplate.discrepancy.search.reassign import assignment_log_prior, full_modes, pairing_of
-from bayesplate.pairing import Pairing
+from bayesplate.matching.assignment import P_SPURIOUS, P_UNOBSERVED, assign
+from bayesplate.matching.pairing import Pairing
 from bayesplate.quantities import eigenvalue_from_hz
 
 MESH = (12, 6)

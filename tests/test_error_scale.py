@@ -11,7 +11,8 @@ import pytest
 import tomllib
 from scipy import integrate, stats
 
-from bayesplate.error_scale import (
+from bayesplate.io import CaseError, bundled_case_path, load_case, parse_case
+from bayesplate.likelihood.error_scale import (
     ErrorScalePrior,
     draw_scale,
     linearised_scale,
@@ -19,9 +20,8 @@ from bayesplate.error_scale import (
     loo_pointwise,
     scale_from_draws,
 )
-from bayesplate.io import CaseError, bundled_case_path, load_case, parse_case
-from bayesplate.pairing import Pairing
-from bayesplate.posterior import GaussianProblem
+from bayesplate.likelihood.posterior import GaussianProblem
+from bayesplate.matching.pairing import Pairing
 
 Z97 = stats.norm.ppf(0.97)  # half-width of a 94 % Gaussian interval, in sd
 
@@ -277,7 +277,7 @@ _BEFORE = {
 
 def test_without_the_key_the_numbers_are_those_of_before():
     from bayesplate.estimators import estimate
-    from bayesplate.model import PlateModel
+    from bayesplate.plate.model import PlateModel
     from bayesplate.sampling import WhitenedLogPosterior
 
     case = load_case(bundled_case_path("plate1"))
@@ -311,7 +311,7 @@ def _synthetic_Hz(case, model, rng, rel):
 
 def test_the_estimate_with_the_key_widens_its_deviations():
     from bayesplate.estimators import estimate
-    from bayesplate.model import PlateModel
+    from bayesplate.plate.model import PlateModel
     from bayesplate.run.budget import scale_estimate
 
     case = _plate1_with({"median": 1.0, "upper95": 5.0})
@@ -376,7 +376,7 @@ def test_estimate_prints_the_scale_and_writes_it_to_json(tmp_path, capsys):
 
 def _scaled_linear_problem(rng, m=30, true_s=3.0):
     """g(b) = A b, declared 1 % deviations, drawn 3 %, an almost flat prior, s unknown."""
-    from bayesplate.posterior import prior_in_stiffness
+    from bayesplate.likelihood.posterior import prior_in_stiffness
 
     e0 = np.array([150e9, 10e9, 0.25, 3e9, 3e9, 2e9])
     mu, V_b = prior_in_stiffness(e0, e0 / 6, "variance")
@@ -437,7 +437,7 @@ def test_the_screen_bound_is_above_the_marginal_likelihood(rng):
 def test_the_report_widens_the_estimates_with_the_scale(tmp_path):
     """`bayesplate report` on a case with the key: B's sd are those of `scale_estimate`."""
     from bayesplate.estimators import estimate
-    from bayesplate.model import PlateModel
+    from bayesplate.plate.model import PlateModel
     from bayesplate.report import ReportOptions, make_report
     from bayesplate.run.budget import scale_estimate
 
@@ -465,7 +465,7 @@ def test_the_report_widens_the_estimates_with_the_scale(tmp_path):
 def test_the_sampler_with_a_setup_prepared_from_its_stream_gives_the_same_chain():
     """The report keeps the setup (for s): seeding `prepare` with `streams(rng)[1]` must give
     the chain `sample(case, rng)` gives on its own."""
-    from bayesplate.model import PlateModel
+    from bayesplate.plate.model import PlateModel
     from bayesplate.sampling import prepare, sample
     from bayesplate.sampling.seeding import streams
 
@@ -480,7 +480,7 @@ def test_the_sampler_with_a_setup_prepared_from_its_stream_gives_the_same_chain(
 
 def test_the_reports_posterior_gives_the_scale_from_its_draws():
     """The report's sampling step: s from the chain's draws, and the line in the Markdown."""
-    from bayesplate.model import PlateModel
+    from bayesplate.plate.model import PlateModel
     from bayesplate.report import ReportOptions
     from bayesplate.report.markdown import _sample_lines
     from bayesplate.report.steps import sample_step

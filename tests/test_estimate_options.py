@@ -5,7 +5,7 @@ import pytest
 
 from bayesplate.estimators import EstimateOptions, estimate
 from bayesplate.io import bundled_case_path, load_case
-from bayesplate.model import PlateModel
+from bayesplate.plate.model import PlateModel
 
 
 @pytest.fixture(scope="module")

@@ -13,9 +13,9 @@ from bayesplate.cli import main as cli_main
 from bayesplate.estimators import CONVENTIONS, b_step, estimate, mve_step, run
 from bayesplate.estimators.iteration import DEFAULT_MAX_ITER
 from bayesplate.io import bundled_case_path, load_case
-from bayesplate.model import PlateModel
-from bayesplate.pairing import Pairing
-from bayesplate.posterior import GaussianProblem, prior_in_stiffness
+from bayesplate.likelihood.posterior import GaussianProblem, prior_in_stiffness
+from bayesplate.matching.pairing import Pairing
+from bayesplate.plate.model import PlateModel
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -431,7 +431,7 @@ def test_mve_drifting_where_the_data_barely_see_stops_unidentified(monkeypatch):
     assert run(problem, "B").converged
 
 
-@pytest.mark.filterwarnings("ignore::bayesplate.pairing.UnpairedModeWarning")
+@pytest.mark.filterwarnings("ignore::bayesplate.matching.pairing.UnpairedModeWarning")
 def test_shape_pairing_recovers_a_test_that_missed_a_mode(plate1):
     # Plate 1's frequencies without mode 5, with shapes (w at 28 points) computed at the
     # target: by order every mode above the gap goes with the wrong computed mode and MVE
@@ -475,7 +475,7 @@ def _missed_mode_case(plate1, nudge=None):
     )
 
 
-@pytest.mark.filterwarnings("ignore::bayesplate.pairing.UnpairedModeWarning")
+@pytest.mark.filterwarnings("ignore::bayesplate.matching.pairing.UnpairedModeWarning")
 @pytest.mark.parametrize(("method", "pairing"), [("B", "order"), ("MVE", "order"), ("MVE", "auto")])
 def test_estimates_do_not_depend_on_round_off(plate1, method, pairing):
     # Issue 16: a result that flips with the CPU's round-off is a defect of the method.

@@ -19,7 +19,7 @@ from bayesplate.estimators import (
 )
 from bayesplate.estimators import fast as fast_module
 from bayesplate.io import bundled_case_path, load_case
-from bayesplate.model import PlateModel
+from bayesplate.plate.model import PlateModel
 
 TOL = 1e-3  # the estimators' stopping tolerance on b (section 2.4)
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from bayesplate.io import bundled_case_path, load_case
-from bayesplate.model import PlateModel
+from bayesplate.plate.model import PlateModel
 from bayesplate.reduced import (
     FastModelOptions,
     ReducedModelWarning,

@@ -95,7 +95,7 @@ def test_log_jacobian_is_that_of_the_stiffness_map(rng):
 
 def test_population_prior_is_the_case_prior_carried_to_log_mu():
     """``ln f(ln mu)`` = the Gaussian prior on b at b(mu) + ln|db/de| + sum ln mu (+ const)."""
-    from bayesplate.posterior import prior_in_stiffness
+    from bayesplate.likelihood.posterior import prior_in_stiffness
 
     mean = np.array([140e9, 9e9, 0.30, 3.5e9, 3.5e9, 2.5e9])
     mu_b, V_b = prior_in_stiffness(mean, mean * 0.2)
@@ -118,7 +118,7 @@ def study():
 
 def test_linearised_likelihood_has_the_exact_gradient_at_its_point(study, rng):
     """``h - H z0`` is the gradient of ln L in ``z`` at ``z0`` (central differences)."""
-    from bayesplate.posterior import GaussianProblem
+    from bayesplate.likelihood.posterior import GaussianProblem
     from bayesplate.sampling.plate_laplace import linearise
 
     c = np.array([150e9, 10e9, 0.25, 3e9, 3e9, 2e9])
@@ -143,7 +143,7 @@ def test_linearised_likelihood_has_the_exact_gradient_at_its_point(study, rng):
 
 def _y_plate(study, rng):
     """A synthetic plate's likelihood in ``y`` (A, a) and that Gaussian as a function of ``z``."""
-    from bayesplate.posterior import GaussianProblem
+    from bayesplate.likelihood.posterior import GaussianProblem
     from bayesplate.sampling.plate_laplace import linearise
     from bayesplate.sampling.plate_marginal import coordinates
 
@@ -216,7 +216,7 @@ def test_conditional_in_y_has_the_importance_sampled_moments(study, rng):
 
 def test_plate_mode_is_b_where_b_converges(study, rng):
     from bayesplate.estimators import run
-    from bayesplate.posterior import GaussianProblem
+    from bayesplate.likelihood.posterior import GaussianProblem
     from bayesplate.sampling.plate_laplace import plate_mode
 
     c = np.array([150e9, 10e9, 0.25, 3e9, 3e9, 2e9])
@@ -234,7 +234,7 @@ TRUE_MU = np.array([150e9, 10e9, 0.25, 3e9, 3e9, 2e9])
 
 
 def _population(study, seed, tau, offsets=None):
-    from bayesplate.posterior import prior_in_stiffness
+    from bayesplate.likelihood.posterior import prior_in_stiffness
 
     rng = np.random.default_rng(seed)
     fits, truths = study.population(rng, TRUE_MU, np.asarray(tau), offsets=offsets)

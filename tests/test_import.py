@@ -28,15 +28,15 @@ from bayesplate.io import (
 )
 from bayesplate.io.uff import read_uff_modes
 from bayesplate.laminate import stiffness_from_engineering
-from bayesplate.model import PlateModel
+from bayesplate.plate.model import PlateModel
 
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover
     import tomli as tomllib
 
-try:  # the package's MAC once bayesplate.pairing is committed
-    from bayesplate.pairing import mac_matrix
+try:  # the package's MAC once bayesplate.matching.pairing is committed
+    from bayesplate.matching.pairing import mac_matrix
 except ImportError:  # pragma: no cover
 
     def mac_matrix(A, B):

@@ -7,14 +7,14 @@ import pytest
 
 from bayesplate import laminate
 from bayesplate.estimators import estimate
-from bayesplate.inputs import (
+from bayesplate.io import Case, CaseError, Measurement, Plate, Prior, parse_case
+from bayesplate.likelihood.inputs import (
     INPUT_NAMES,
     input_jacobian,
     input_sd,
     variance_budget,
 )
-from bayesplate.io import Case, CaseError, Measurement, Plate, Prior, parse_case
-from bayesplate.model import PlateModel
+from bayesplate.plate.model import PlateModel
 from bayesplate.quantities import hz_from_eigenvalue
 from bayesplate.run.budget import estimate_budget
 
@@ -281,8 +281,8 @@ def test_marginal_inputs_widen_the_posterior_as_h_squared(rng):
     # from h^2 (1 to 5 % at a/h = 75 on this mesh) let the data inform h; on this plate
     # with 1 % data both stay within 12 % of the scaling law (measured 5, 9 and 10 %).
     from bayesplate.estimators import run
-    from bayesplate.pairing import Pairing
-    from bayesplate.posterior import GaussianProblem
+    from bayesplate.likelihood.posterior import GaussianProblem
+    from bayesplate.matching.pairing import Pairing
 
     sd_h = 0.02 * 0.004
     case, model = _synthetic(rng, sigma_rel=0.01, prior_rel=1.0, thickness_sd=sd_h)
@@ -316,8 +316,8 @@ def test_marginal_inputs_widen_the_posterior_as_h_squared(rng):
 
 
 def test_marginal_without_input_sds_changes_nothing():
-    from bayesplate.pairing import Pairing
-    from bayesplate.posterior import GaussianProblem
+    from bayesplate.likelihood.posterior import GaussianProblem
+    from bayesplate.matching.pairing import Pairing
 
     case = _case()
     model = PlateModel.from_case(case, mesh=MESH)

@@ -1,7 +1,7 @@
 """Mass-derived density: the case keys mass_g and mass_sd_g, and the budget through rho = m/(abh).
 
-The reference for the budget is independent of :func:`bayesplate.inputs.input_sources`: the full
-covariance of (h, rho, a, b) written out by hand from the same readings (first-order error
+The reference for the budget is independent of :func:`bayesplate.likelihood.inputs.input_sources`:
+the full covariance of (h, rho, a, b) written out by hand from the same readings (first-order error
 propagation of rho = m / (a b h)), put through the estimator's gain.
 """
 
@@ -14,15 +14,15 @@ from test_inputs import MESH, _case, _plate_table
 
 from bayesplate import laminate
 from bayesplate.estimators import estimate
-from bayesplate.inputs import (
+from bayesplate.io import CaseError, Plate, parse_case
+from bayesplate.likelihood.inputs import (
     describe_inputs,
     input_covariance,
     input_jacobian,
     input_sources,
 )
-from bayesplate.io import CaseError, Plate, parse_case
-from bayesplate.model import PlateModel
-from bayesplate.posterior import GaussianProblem
+from bayesplate.likelihood.posterior import GaussianProblem
+from bayesplate.plate.model import PlateModel
 from bayesplate.quantities import hz_from_eigenvalue
 from bayesplate.run.budget import estimate_budget
 

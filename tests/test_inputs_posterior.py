@@ -17,19 +17,19 @@ import types
 import numpy as np
 import pytest
 
-from bayesplate.input_summary import highest_density_interval
-from bayesplate.inputs import input_jacobian, input_sources
-from bayesplate.inputs_posterior import (
+from bayesplate.io import bundled_case_path, load_case
+from bayesplate.laminate import stiffness_from_engineering
+from bayesplate.likelihood.input_summary import highest_density_interval
+from bayesplate.likelihood.inputs import input_jacobian, input_sources
+from bayesplate.likelihood.inputs_posterior import (
     declared_readings,
     draw_inputs,
     input_conditional,
     inputs_from_chain,
     linear_input_certificate,
 )
-from bayesplate.io import bundled_case_path, load_case
-from bayesplate.laminate import stiffness_from_engineering
-from bayesplate.pairing import Pairing
-from bayesplate.posterior import GaussianProblem, prior_in_stiffness
+from bayesplate.likelihood.posterior import GaussianProblem, prior_in_stiffness
+from bayesplate.matching.pairing import Pairing
 
 SEED = 20070461
 N_MC = 4.0  # Monte Carlo errors allowed: a 4-sigma band fails by chance ~6e-5 per check
@@ -201,7 +201,7 @@ def test_certificate_fails_loudly_beyond_its_mark(caplog):
     names, A = input_sources(case.plate)
     B = input_jacobian(case, b, modes).J @ A
     lam = -B[:, 1] * mass / 1e-4  # B[:, 1] = d lambda / d m sd_m = -lambda sd_m / m
-    with caplog.at_level(logging.WARNING, logger="bayesplate.inputs_posterior"):
+    with caplog.at_level(logging.WARNING, logger="bayesplate.likelihood.inputs_posterior"):
         cert = linear_input_certificate(case, b, B, modes, 0.02 * lam)
     assert cert.names == ("thickness", "mass")
     assert not cert.passed and cert.status == "nonlinear" and cert.worst[0] == "thickness"

@@ -12,11 +12,11 @@ import dataclasses
 import numpy as np
 import pytest
 
-from bayesplate.inputs import input_covariance, input_jacobian
 from bayesplate.io import bundled_case_path, load_case
-from bayesplate.model import PlateModel
-from bayesplate.pairing import Pairing
-from bayesplate.posterior import GaussianProblem, prior_in_stiffness
+from bayesplate.likelihood.inputs import input_covariance, input_jacobian
+from bayesplate.likelihood.posterior import GaussianProblem, prior_in_stiffness
+from bayesplate.matching.pairing import Pairing
+from bayesplate.plate.model import PlateModel
 from bayesplate.sampling import WhitenedLogPosterior, prepare, sample_problem
 from bayesplate.sampling.moves import RitzScreen
 from bayesplate.sampling.setup import resolve_inputs

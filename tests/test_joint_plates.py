@@ -13,7 +13,7 @@ import pytest
 from _studies import load_study
 
 from bayesplate import laminate
-from bayesplate.posterior import GaussianProblem, prior_in_stiffness
+from bayesplate.likelihood.posterior import GaussianProblem, prior_in_stiffness
 from bayesplate.sampling import (
     PlatesMismatch,
     WhitenedLogPosterior,
@@ -73,7 +73,7 @@ def _prior():
 
 def linear_plates(rng, n=3, m=8, shift=None):
     """`n` linear plates of one material (data at ``B_TRUE``, 1 % noise); shift: last off."""
-    from bayesplate.pairing import Pairing
+    from bayesplate.matching.pairing import Pairing
 
     mu_b, V_b = _prior()
     problems = []

@@ -18,24 +18,19 @@ NUMERICS = (
     "laminate",
     "parallel",
     "fem",
-    "plate_bounds",
-    "modal",
-    "model",
-    "forward",
-    "pairing",
-    "assignment",
-    "peak_prior",
-    "checked_order",
-    "posterior",
-    "error_scale",
-    "inputs",
-    "inputs_posterior",
-    "input_summary",
+    "plate",
+    "matching",
+    "likelihood",
     "estimators",
     "reduced",
     "sampling",
     "discrepancy",
 )
+#: The numerics' root modules, which everything uses: they import no group below.
+ROOT = ("quantities", "laminate", "parallel")
+#: The root's groups by idea, in order: each imports only the root, ``fem`` and the groups
+#: before it (the plate model; matching measured peaks with its modes; the likelihood).
+GROUPS = ("plate", "matching", "likelihood")
 MAX_LINES = 500
 #: A module longer than MAX_LINES must say why in its docstring with this phrase.
 REASON = "Longer than 500 lines because"
@@ -90,6 +85,18 @@ def test_every_module_is_in_a_layer():
 def test_numerics_import_nothing_from_the_edge(path):
     upward = _imported_rooms(path) & set(EDGE)
     assert not upward, f"{path.relative_to(PACKAGE)} imports the edge: {sorted(upward)}"
+
+
+@pytest.mark.parametrize(
+    "path",
+    [p for p in _modules() if _top(p) in ROOT + GROUPS],
+    ids=lambda p: str(p.relative_to(PACKAGE)),
+)
+def test_the_root_and_its_groups_import_only_downward(path):
+    top = _top(path)
+    below = {"fem", *ROOT, *GROUPS[: GROUPS.index(top) + 1]} if top in GROUPS else set(ROOT)
+    upward = _imported_rooms(path) - below
+    assert not upward, f"{path.relative_to(PACKAGE)} imports above it: {sorted(upward)}"
 
 
 def test_the_layer_check_sees_lazy_and_relative_imports(tmp_path):

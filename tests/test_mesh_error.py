@@ -113,7 +113,7 @@ def test_a_concealed_point_support_reaches_its_best_basin_and_is_named():
     from bayesplate.discrepancy import ElasticFoundation
     from bayesplate.discrepancy.physics.point_support import PointSupport
     from bayesplate.discrepancy.search.joint_fit import JointProblem, fit
-    from bayesplate.posterior import observed_eigenvalues, prior_in_stiffness
+    from bayesplate.likelihood.posterior import observed_eigenvalues, prior_in_stiffness
     from tests._studies import load_study
 
     concealment = load_study("concealment", "concealment_study")

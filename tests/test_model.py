@@ -5,7 +5,7 @@ import pytest
 import scipy.linalg as sla
 
 from bayesplate import laminate
-from bayesplate.model import PlateModel
+from bayesplate.plate.model import PlateModel
 
 E_REF = np.array([113e9, 8.5e9, 0.323, 4.45e9, 4.43e9, 2.97e9])
 B_REF = laminate.stiffness_from_engineering(E_REF)

@@ -7,8 +7,7 @@ from hypothesis import strategies as st
 
 from bayesplate.io import bundled_case_path, load_case
 from bayesplate.laminate import stiffness_from_engineering
-from bayesplate.model import PlateModel
-from bayesplate.pairing import (
+from bayesplate.matching.pairing import (
     Pairing,
     assign_by_mac,
     mac_matrix,
@@ -16,6 +15,7 @@ from bayesplate.pairing import (
     pair_by_order,
     track,
 )
+from bayesplate.plate.model import PlateModel
 
 
 @pytest.fixture(scope="module")

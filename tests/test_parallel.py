@@ -28,7 +28,7 @@ def test_full_solves_are_the_same_on_one_process_or_two():
     # the reduced model's snapshots (reduced/basis._solve_many): each solve at one BLAS
     # thread wherever it runs, so forked workers give the serial numbers to the last bit
     from bayesplate import laminate
-    from bayesplate.model import PlateModel
+    from bayesplate.plate.model import PlateModel
     from bayesplate.reduced.basis import _solve_many
 
     model = PlateModel(0.1, 0.06, 2e-3, 1537.0, [0, 90, 0], mesh=(6, 4))

@@ -17,7 +17,7 @@ from bayesplate.discrepancy import (
 from bayesplate.discrepancy.physics.base import plate_symmetries
 from bayesplate.discrepancy.physics.combined import Pair
 from bayesplate.discrepancy.physics.local_stiffness_loss import area_fractions
-from bayesplate.model import PlateModel
+from bayesplate.plate.model import PlateModel
 
 E_REF = np.array([113e9, 8.5e9, 0.323, 4.45e9, 4.43e9, 2.97e9])
 B_REF = laminate.stiffness_from_engineering(E_REF)

@@ -8,13 +8,13 @@ from scipy.stats import multivariate_normal
 
 from bayesplate import laminate
 from bayesplate.io import bundled_case_path, load_case
-from bayesplate.pairing import Pairing
-from bayesplate.posterior import (
+from bayesplate.likelihood.posterior import (
     GaussianProblem,
     observation_covariance,
     observed_eigenvalues,
     prior_in_stiffness,
 )
+from bayesplate.matching.pairing import Pairing
 
 E_PLATE1 = np.array([150e9, 10e9, 0.25, 3e9, 3e9, 2e9])
 

@@ -14,9 +14,9 @@ import pytest
 
 from bayesplate import laminate
 from bayesplate.discrepancy.physics.elastic_foundation import ElasticFoundation
-from bayesplate.forward import ForwardModel, Modes
 from bayesplate.io import bundled_case_path, load_case
-from bayesplate.model import ModalResult, PlateModel
+from bayesplate.plate.forward import ForwardModel, Modes
+from bayesplate.plate.model import ModalResult, PlateModel
 from bayesplate.reduced import (
     DEFAULT_TOLERANCE,
     Box,

@@ -15,15 +15,15 @@ from matplotlib.figure import Figure
 from bayesplate.estimators import estimate
 from bayesplate.io import Measurement, bundled_case_path, load_case
 from bayesplate.laminate import stiffness_from_engineering
-from bayesplate.model import PlateModel
-from bayesplate.pairing import (
+from bayesplate.likelihood.posterior import GaussianProblem
+from bayesplate.matching.pairing import (
     MAC_EXTRA_MODES,
     Pairing,
     UnpairedModeWarning,
     pair_measured,
 )
+from bayesplate.plate.model import PlateModel
 from bayesplate.plots import mac_matrix_plot
-from bayesplate.posterior import GaussianProblem
 from bayesplate.report import (
     ESTIMATORS,
     ReportOptions,

@@ -434,7 +434,7 @@ def test_the_map_of_a_consistent_plate_says_nothing_was_found(small_report):
 
     from bayesplate.discrepancy.physics.location import LocationMap
     from bayesplate.io import bundled_case_path, load_case
-    from bayesplate.model import PlateModel
+    from bayesplate.plate.model import PlateModel
     from bayesplate.plots import diagnosis_figures
 
     model = PlateModel.from_case(load_case(bundled_case_path("plate1")))

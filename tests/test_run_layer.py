@@ -19,7 +19,7 @@ from bayesplate.batch import BatchOptions, run_step
 from bayesplate.cli import main
 from bayesplate.cli.options import resolve_case
 from bayesplate.io import bundled_case_path
-from bayesplate.model import PlateModel
+from bayesplate.plate.model import PlateModel
 from bayesplate.quantities import ENGINEERING_KEYS, to_case_units
 from bayesplate.report import ReportOptions, steps
 from bayesplate.sampling import CASE_UNITS

@@ -109,7 +109,7 @@ def _small_diagnosis(workers):
     from bayesplate.discrepancy import PointMass, ThicknessTaper
     from bayesplate.discrepancy.diagnose import diagnose
     from bayesplate.io import diagnosis_to_dict
-    from bayesplate.model import PlateModel
+    from bayesplate.plate.model import PlateModel
 
     case = resolve_case(CASE)
     model = PlateModel.from_case(case, mesh=(4, 2))

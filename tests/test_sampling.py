@@ -16,9 +16,9 @@ from scipy.optimize import minimize
 
 from bayesplate.estimators import estimate
 from bayesplate.io import bundled_case_path, load_case
-from bayesplate.model import PlateModel
-from bayesplate.pairing import Pairing
-from bayesplate.posterior import GaussianProblem, prior_in_stiffness
+from bayesplate.likelihood.posterior import GaussianProblem, prior_in_stiffness
+from bayesplate.matching.pairing import Pairing
+from bayesplate.plate.model import PlateModel
 from bayesplate.reduced import Box
 from bayesplate.sampling import (
     CASE_UNITS,

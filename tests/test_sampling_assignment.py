@@ -14,11 +14,15 @@ import numpy as np
 import pytest
 from scipy.stats import norm
 
-from bayesplate.assignment import P_SPURIOUS, P_UNOBSERVED
 from bayesplate.cli.sample import sample_text
 from bayesplate.io import bundled_case_path, load_case, sampling_to_dict
-from bayesplate.pairing import Pairing
-from bayesplate.posterior import GaussianProblem, observation_covariance, prior_in_stiffness
+from bayesplate.likelihood.posterior import (
+    GaussianProblem,
+    observation_covariance,
+    prior_in_stiffness,
+)
+from bayesplate.matching.assignment import P_SPURIOUS, P_UNOBSERVED
+from bayesplate.matching.pairing import Pairing
 from bayesplate.sampling import WhitenedLogPosterior, prepare, sample
 from bayesplate.sampling.assigned import ChainAssignment, ReassignedLikelihood, reassignment
 from bayesplate.sampling.moves import RitzScreen
@@ -316,7 +320,7 @@ def test_ritz_screen_bounds_the_reassigned_density_off_the_box(rng):
 def test_an_error_scale_keeps_the_settled_assignment_and_says_so(caplog):
     import dataclasses
 
-    from bayesplate.error_scale import ErrorScalePrior
+    from bayesplate.likelihood.error_scale import ErrorScalePrior
 
     case = _plate1()
     scaled = dataclasses.replace(

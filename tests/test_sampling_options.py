@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from bayesplate.io import bundled_case_path, load_case
-from bayesplate.model import PlateModel
-from bayesplate.pairing import Pairing
-from bayesplate.posterior import GaussianProblem, prior_in_stiffness
+from bayesplate.likelihood.posterior import GaussianProblem, prior_in_stiffness
+from bayesplate.matching.pairing import Pairing
+from bayesplate.plate.model import PlateModel
 from bayesplate.sampling import (
     ChainOptions,
     SetupOptions,

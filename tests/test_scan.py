@@ -13,7 +13,7 @@ from bayesplate.discrepancy.physics.local_stiffness_loss import stiffness_loss_s
 from bayesplate.discrepancy.physics.location import absorbable_projector
 from bayesplate.discrepancy.physics.point_mass import point_mass_scan
 from bayesplate.discrepancy.physics.ritz_scan import RitzBasis, Scan
-from bayesplate.model import PlateModel
+from bayesplate.plate.model import PlateModel
 
 E_REF = np.array([113e9, 8.5e9, 0.323, 4.45e9, 4.43e9, 2.97e9])
 B_REF = laminate.stiffness_from_engineering(E_REF)

@@ -10,7 +10,7 @@ import pytest
 
 from bayesplate.estimators import estimate, estimate_on_fast
 from bayesplate.io import bundled_case_path, load_case
-from bayesplate.model import PlateModel
+from bayesplate.plate.model import PlateModel
 
 #: What bending frequencies of a thin plate barely determine (the in-plane E1, E2, G12 they
 #: determine to a few per cent).

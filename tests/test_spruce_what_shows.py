@@ -19,7 +19,7 @@ def study():
 @pytest.fixture(scope="module")
 def plate(study):
     from bayesplate.io import bundled_case_path, load_case
-    from bayesplate.model import PlateModel
+    from bayesplate.plate.model import PlateModel
 
     model = PlateModel.from_case(load_case(bundled_case_path(study.CASE)), mesh=MESH)
     return model, stiffness_from_engineering(np.array(study.CONSTANTS_GPA) * CASE_SCALE)

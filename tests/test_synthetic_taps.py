@@ -21,7 +21,7 @@ from bayesplate.io.synthetic_taps import (
 )
 from bayesplate.io.taps import average_taps, coherence_at_poles
 from bayesplate.laminate import stiffness_from_engineering
-from bayesplate.model import PlateModel
+from bayesplate.plate.model import PlateModel
 
 RATE_HZ = 25600  # 4 x the top mode of plate1 (6.4 kHz)
 PULSE_S = (0.08e-3, 0.12e-3)  # a hard tip: the half-sine's first zero above 12 kHz

@@ -15,8 +15,8 @@ from bayesplate.io.impulse import Recording
 from bayesplate.io.poles import Pole, extract_poles
 from bayesplate.io.taps import average_taps, coherence_at_poles, read_taps
 from bayesplate.laminate import stiffness_from_engineering
-from bayesplate.model import PlateModel
-from bayesplate.pairing import resolve_pairing
+from bayesplate.matching.pairing import resolve_pairing
+from bayesplate.plate.model import PlateModel
 
 RATE_HZ = 25600  # 4 x the top mode of plate1 (6.4 kHz)
 DURATION_S = 0.5  # the slowest mode (611 Hz, 0.5 % damping) decays to 1e-4 in it

@@ -18,7 +18,7 @@ from bayesplate.io.poles import extract_poles, modal_data_from_poles
 from bayesplate.io.poles_file import read_poles
 from bayesplate.io.taps import read_impulse
 from bayesplate.laminate import stiffness_from_engineering
-from bayesplate.model import PlateModel
+from bayesplate.plate.model import PlateModel
 
 RATE_HZ = 25600.0  # 4 x the top mode of plate1 (6.4 kHz)
 FREQUENCY_RTOL = 1e-3  # the figure: 0.1 %

@@ -7,9 +7,9 @@ import pytest
 
 from bayesplate.io import CaseError, bundled_case_path, load_case, parse_case
 from bayesplate.laminate import stiffness_from_engineering
-from bayesplate.model import PlateModel
-from bayesplate.pairing import pair_measured
-from bayesplate.peak_prior import P_NODE, assignment_priors
+from bayesplate.matching.pairing import pair_measured
+from bayesplate.matching.peak_prior import P_NODE, assignment_priors
+from bayesplate.plate.model import PlateModel
 
 TAP_MM, SENSOR_MM = [0.0, 0.0], [200.0, 70.0]  # sensor near a nodal line of plate1's mode 3
 

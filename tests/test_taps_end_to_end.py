@@ -27,7 +27,7 @@ from bayesplate.cli import main
 from bayesplate.io import bundled_case_path, load_case
 from bayesplate.io.synthetic_taps import TapArtefacts, plate_modes_at, synthetic_taps, write_taps
 from bayesplate.laminate import stiffness_from_engineering
-from bayesplate.model import PlateModel
+from bayesplate.plate.model import PlateModel
 
 DATA_5R = Path(__file__).parent / "data" / "taps_5R"
 KEYS = ("E1_GPa", "E2_GPa", "G12_GPa")

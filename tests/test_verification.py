@@ -12,7 +12,7 @@ import pytest
 from reference.navier_tsdt import navier_frequencies, nondimensional
 
 from bayesplate import laminate
-from bayesplate.model import PlateModel
+from bayesplate.plate.model import PlateModel
 
 
 def _reddy_material(r, E2=1.0):

@@ -91,7 +91,7 @@ def _parse(case_bytes, path):
 
 
 def _model(case, options):
-    from ..model import PlateModel
+    from ..plate.model import PlateModel
 
     return PlateModel.from_case(case, mesh=_mesh(options))
 

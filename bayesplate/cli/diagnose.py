@@ -47,7 +47,7 @@ def run(args):
     from ..discrepancy.diagnose import diagnose
     from ..io import diagnosis_to_dict, save_figure, write_json
     from ..io.stage_store import DirectoryStore
-    from ..model import PlateModel
+    from ..plate.model import PlateModel
 
     folder = cache_dir(args)
     case = resolve_case(args.case)

@@ -29,7 +29,7 @@ def run(args):
     """Solve the plate at the chosen constants; print (or write) the frequencies."""
     from ..io import write_json
     from ..laminate import stiffness_from_engineering
-    from ..model import PlateModel
+    from ..plate.model import PlateModel
 
     case = resolve_case(args.case)
     e = _constants(case, args.constants)

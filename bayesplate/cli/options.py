@@ -148,8 +148,8 @@ def resolve_case(name_or_path):
     return load_case(name_or_path)
 
 
-#: The pairings of :data:`bayesplate.pairing.PAIRINGS`, spelled here so that the parser does
-#: not import scipy at start-up (a test holds the two equal).
+#: The pairings of :data:`bayesplate.matching.pairing.PAIRINGS`, spelled here so that the parser
+#: does not import scipy at start-up (a test holds the two equal).
 PAIRING_CHOICES = ("auto", "mac", "likelihood", "index", "order")
 
 #: :data:`bayesplate.estimators.METHODS`, the keys of :data:`~bayesplate.estimators.CONVENTIONS`

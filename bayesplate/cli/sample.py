@@ -102,7 +102,7 @@ def _input_rows(result):
 
 def _inputs_line(case, inputs):
     """Which treatment of the plate's inputs the posterior used, with their deviations."""
-    from ..inputs import describe_inputs
+    from ..likelihood.inputs import describe_inputs
 
     given = describe_inputs(case.plate)
     if inputs == "marginal":

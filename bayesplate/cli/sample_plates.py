@@ -157,7 +157,7 @@ def joint_to_dict(result, cases):
 def run_plates(args):
     """Several cases: the joint posterior, its table, JSON, netCDF and figure on request."""
     from ..io import CaseError, save_figure, write_json, write_netcdf
-    from ..model import PlateModel
+    from ..plate.model import PlateModel
     from ..sampling import PlatesMismatch, sample_plates
 
     for attr, option in _ONE_CASE_ONLY:
@@ -205,7 +205,7 @@ def _fit_task(item):
     """One plate's fit for the pool: its model, setup and Laplace (a PlateFit)."""
     import warnings
 
-    from ..model import PlateModel
+    from ..plate.model import PlateModel
     from ..sampling import fit_plate
 
     case, mesh, rng, prior, options = item

@@ -42,10 +42,10 @@ import logging
 
 import numpy as np
 
-from ..checked_order import checks_order
-from ..model import PlateModel
-from ..pairing import Pairing
-from ..posterior import prior_in_stiffness
+from ..likelihood.posterior import prior_in_stiffness
+from ..matching.checked_order import checks_order
+from ..matching.pairing import Pairing
+from ..plate.model import PlateModel
 from . import candidates as all_candidates
 from .search.locate import RITZ_EXTRA_MODES
 from .search.mesh_error import coarse_model, mesh_error
@@ -101,7 +101,7 @@ def diagnose(
     progress : callable, optional
         ``progress(message)`` after each step.
     pairing : {"auto", "mac", "likelihood", "index", "order"} or Pairing
-        Measured-to-computed modes (:func:`bayesplate.pairing.pair_measured` at the prior
+        Measured-to-computed modes (:func:`bayesplate.matching.pairing.pair_measured` at the prior
         mean, as :func:`bayesplate.estimators.estimate` takes it): "auto" pairs by shape
         and frequency when the case has shapes, else by mode numbers if any, else by order
         checked (the assignment made again at the verdict's fit: ``reassign``);

@@ -1,7 +1,7 @@
 """The paper's estimators B, MVE and MVE-mod (Daghia et al. 2007, sections 2 and 5).
 
 All three iterate on the stiffness coefficients ``b = (C11, C22, C12, C66, C44, C55)`` with
-the Gaussian problem of :mod:`bayesplate.posterior`:
+the Gaussian problem of :mod:`bayesplate.likelihood.posterior`:
 
 - **B** (eq. 9), the Bayesian estimator: Gauss-Newton steps on ``S_B`` (eq. 5) with the prior
   mean ``mu`` fixed, ``b^{k+1} = mu + P^k S^T V_Y^-1 [Y - g^k - S (mu - b^k)]``,

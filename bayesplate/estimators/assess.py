@@ -6,10 +6,10 @@ answer it returns. All of it is array arithmetic on the result: no forward solve
 
 Fit statement
     The chi-square of the paired peaks with the declared deviations, in the eigenvalues the
-    estimators fit (:mod:`bayesplate.posterior`): ``chi2 = r^T V_Y^-1 r`` with ``r = g - Y``
-    and ``V_Y = diag(d lambda^2)``, ``d lambda = 8 pi^2 f sigma`` (the declared frequency
-    deviations, whatever convention the estimator weighted with). Its degrees of freedom are
-    the paired peaks less the effective number of constants the data determine,
+    estimators fit (:mod:`bayesplate.likelihood.posterior`): ``chi2 = r^T V_Y^-1 r`` with
+    ``r = g - Y`` and ``V_Y = diag(d lambda^2)``, ``d lambda = 8 pi^2 f sigma`` (the declared
+    frequency deviations, whatever convention the estimator weighted with). Its degrees of freedom
+    are the paired peaks less the effective number of constants the data determine,
     ``p_eff = trace(S P S^T V_Y^-1)`` with ``P = (S^T V_Y^-1 S + V_b^-1)^-1``; as
     ``P^-1 = S^T V_Y^-1 S + V_b^-1``, that is ``6 - trace(P V_b^-1)``, read off the
     estimator's own ``P`` (``covariance_b``: B's at the estimate, MVE's updated covariance)
@@ -43,7 +43,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import stats
 
-from ..posterior import observation_covariance, observed_eigenvalues, prior_in_stiffness
+from ..likelihood.posterior import observation_covariance, observed_eigenvalues, prior_in_stiffness
 from ..quantities import ENGINEERING_NAMES, ENGINEERING_UNITS, to_case_units
 
 __all__ = [

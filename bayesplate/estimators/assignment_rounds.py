@@ -14,8 +14,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .. import laminate
-from ..model import PlateModel
-from ..pairing import Pairing, pair_measured
+from ..matching.pairing import Pairing, pair_measured
+from ..plate.model import PlateModel
 from .paired import estimate_paired
 from .starts import log_evidence, rivals_of, start_points
 

@@ -7,14 +7,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..posterior import OBSERVATION_CONVENTIONS, PRIOR_CONVENTIONS
+from ..likelihood.posterior import OBSERVATION_CONVENTIONS, PRIOR_CONVENTIONS
 
 __all__ = ["Conventions", "CONVENTIONS", "resolve_conventions"]
 
 
 @dataclass(frozen=True)
 class Conventions:
-    """Choices the paper leaves open; see the module docstring of :mod:`bayesplate.posterior`.
+    """Choices the paper leaves open; see :mod:`bayesplate.likelihood.posterior`'s docstring.
 
     Parameters
     ----------

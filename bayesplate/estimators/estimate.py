@@ -8,11 +8,11 @@ from dataclasses import replace
 import numpy as np
 
 from .. import laminate
-from ..checked_order import assignment_at, checks_order, refuted_order
-from ..forward import ForwardModel
-from ..model import PlateModel
-from ..pairing import Pairing, pair_measured, resolve_pairing
-from ..posterior import prior_in_stiffness
+from ..likelihood.posterior import prior_in_stiffness
+from ..matching.checked_order import assignment_at, checks_order, refuted_order
+from ..matching.pairing import Pairing, pair_measured, resolve_pairing
+from ..plate.forward import ForwardModel
+from ..plate.model import PlateModel
 from .assess import assess
 from .assignment_rounds import most_probable, settle_assignment
 from .conventions import resolve_conventions
@@ -52,8 +52,9 @@ def estimate(
     """Estimate the elastic constants of a case with the paper's B, MVE or MVE-mod.
 
     The prior deviations of ``b`` follow from those of the engineering constants by
-    first-order propagation through eqs. 20-21 (:func:`bayesplate.posterior.prior_in_stiffness`);
-    ``V_Y`` from the frequency deviations, ``d lambda = 8 pi^2 f df`` (section 3.6).
+    first-order propagation through eqs. 20-21
+    (:func:`bayesplate.likelihood.posterior.prior_in_stiffness`); ``V_Y`` from the frequency
+    deviations, ``d lambda = 8 pi^2 f df`` (section 3.6).
 
     The stages: the fast path (:func:`_estimate_on_fast`) or, on the full model, a given
     pairing (:func:`.paired.estimate_paired`), a named one (:func:`_by_named_pairing`, the
@@ -276,9 +277,9 @@ def settle_pairing(
     """The pairing for a case, and the B run that settled it when it is by likelihood.
 
     The one place where the sampler, diagnose and the report turn a pairing's name into a
-    :class:`bayesplate.pairing.Pairing`: ``"likelihood"`` is the assignment B settles on
+    :class:`bayesplate.matching.pairing.Pairing`: ``"likelihood"`` is the assignment B settles on
     (:func:`estimate` with ``pairing="likelihood"``: rounds with warm starts, on `model`),
-    any other name :func:`bayesplate.pairing.pair_measured` at the prior mean.
+    any other name :func:`bayesplate.matching.pairing.pair_measured` at the prior mean.
 
     Parameters
     ----------

@@ -33,9 +33,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..checked_order import checks_order
-from ..pairing import MAC_EXTRA_MODES, Pairing
-from ..posterior import prior_in_stiffness
+from ..likelihood.posterior import prior_in_stiffness
+from ..matching.checked_order import checks_order
+from ..matching.pairing import MAC_EXTRA_MODES, Pairing
 from ..quantities import hz_from_eigenvalue
 from ..reduced import Box, CertifiedModel, fast_model, relative_errors
 from .result import FullModelCheck
@@ -93,7 +93,7 @@ def resolve_forward(forward, model, method=None):
 def modes_to_certify(case, pairing):
     """Elastic modes a fast model must hold for `pairing` (a Pairing, or a pairing's name).
 
-    A :class:`~bayesplate.pairing.Pairing` needs its own ``n_modes()``, and so does pairing
+    A :class:`~bayesplate.matching.pairing.Pairing` needs its own ``n_modes()``, and so does pairing
     by order checked (``"auto"`` without shapes or mode numbers: the check looks at the
     order's modes only, and a run whose order is set aside is redone on a fast model of its
     own); an assignment by likelihood, still to be made, may reach any of the
@@ -113,7 +113,7 @@ def case_fast_model(case, model, n_modes, *, prior_mean=None, prior_sd=None, rng
     ----------
     case : bayesplate.io.Case
         Duck-typed: its ``.prior`` (engineering mean and deviations, SI).
-    model : bayesplate.model.PlateModel
+    model : bayesplate.plate.model.PlateModel
         The full model, which builds and certifies the fast one.
     n_modes : int
         Elastic modes to certify (the estimators' pairing needs ``pairing.n_modes()``).
@@ -147,8 +147,8 @@ def confirmed_run(run, model, fast):
     ----------
     run : callable
         ``run(forward_model) -> EstimateResult``; called with the reduced model (a
-        :class:`bayesplate.forward.ForwardModel`).
-    model : bayesplate.model.PlateModel
+        :class:`bayesplate.plate.forward.ForwardModel`).
+    model : bayesplate.plate.model.PlateModel
         The full model.
     fast : CertifiedModel
 
@@ -200,11 +200,11 @@ class BoxedModel:
     are expected on a path from a far prior or along a weakly determined constant, so they
     are counted (:attr:`n_full`), not warned of.
 
-    A :class:`bayesplate.forward.ForwardModel`.
+    A :class:`bayesplate.plate.forward.ForwardModel`.
 
     Parameters
     ----------
-    model : bayesplate.model.PlateModel
+    model : bayesplate.plate.model.PlateModel
     reduced : bayesplate.reduced.ReducedModel
     tolerance : float
         Largest relative frequency error accepted (the certificate's).

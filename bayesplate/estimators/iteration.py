@@ -1,7 +1,7 @@
 """The iteration of section 2.4: B or MVE from the prior mean to convergence, or why not.
 
-:func:`run` takes a :class:`bayesplate.posterior.GaussianProblem`; it follows the paired modes
-by MAC between iterates, stops on the relative change of ``b`` (or of the engineering
+:func:`run` takes a :class:`bayesplate.likelihood.posterior.GaussianProblem`; it follows the paired
+modes by MAC between iterates, stops on the relative change of ``b`` (or of the engineering
 constants), and ends a run that cycles, stalls, leaves the physical region, fails to solve or
 reaches its cap with ``converged=False``, a :attr:`~EstimateResult.status` and a message; it
 never raises. Two rules keep a run from cycling silently to the cap: a pairing by order or
@@ -19,8 +19,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import laminate
-from ..pairing import track
-from ..posterior import Prediction
+from ..likelihood.posterior import Prediction
+from ..matching.pairing import track
 from ..quantities import engineering_covariance, hz_from_eigenvalue
 from ..reduced.model import ReducedModalResult
 from . import drift as _drift_rule
@@ -305,7 +305,7 @@ def run(
     weight=None,
     start=None,
 ):
-    """Run B or MVE on a :class:`bayesplate.posterior.GaussianProblem`, from its prior mean.
+    """Run B or MVE on a Gaussian problem, from its prior mean.
 
     Parameters
     ----------

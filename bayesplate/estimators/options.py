@@ -23,8 +23,9 @@ class EstimateOptions:
     The case, the method, the model, a fast model and the seed are arguments of their own.
 
     The prior deviations of ``b`` follow from those of the engineering constants by
-    first-order propagation through eqs. 20-21 (:func:`bayesplate.posterior.prior_in_stiffness`);
-    ``V_Y`` from the frequency deviations, ``d lambda = 8 pi^2 f df`` (section 3.6).
+    first-order propagation through eqs. 20-21
+    (:func:`bayesplate.likelihood.posterior.prior_in_stiffness`); ``V_Y`` from the frequency
+    deviations, ``d lambda = 8 pi^2 f df`` (section 3.6).
 
     Parameters
     ----------
@@ -46,11 +47,11 @@ class EstimateOptions:
     stage2_sd : array_like, shape (6,), optional
         Explicit stage-2 deviations (SI, as `prior_sd`), overriding `stage2_factor`.
     pairing : {"auto", "mac", "likelihood", "index", "order"} or Pairing
-        Measured-to-computed mode pairing (:func:`bayesplate.pairing.pair_measured`, at the
+        Measured-to-computed mode pairing (:func:`bayesplate.matching.pairing.pair_measured`, at the
         prior mean): "auto" pairs by shape and frequency ("mac") when the case has measured
         shapes, else by the case's mode indices if any, else by order (the paper's), the
         order checked at the estimate. "likelihood": the most probable assignment of
-        frequencies (:mod:`bayesplate.assignment`), made at the prior with the prior's
+        frequencies (:mod:`bayesplate.matching.assignment`), made at the prior with the prior's
         spread and remade at each estimate with the estimate's, the estimator run again
         until the assignment stands (at most :data:`.assignment_rounds.MAX_ASSIGNMENTS`
         rounds); unobserved computed modes and spurious peaks are in ``settings`` and the

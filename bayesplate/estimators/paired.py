@@ -10,7 +10,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..posterior import GaussianProblem, prior_in_stiffness
+from ..likelihood.posterior import GaussianProblem, prior_in_stiffness
 from .iteration import run
 
 __all__ = ["estimate_paired"]

@@ -142,7 +142,7 @@ class EstimateResult:
         ``"rejected"`` and ``"implausible"`` (set by
         :func:`bayesplate.estimators.assess.assess`) are runs that stopped (``converged``
         True) with an answer that should not be trusted: see ``warnings``.
-    pairing : bayesplate.pairing.Pairing or None
+    pairing : bayesplate.matching.pairing.Pairing or None
         The measured-to-computed pairing the run used (for ``"likelihood"``, the settled
         assignment, with its unobserved modes and spurious peaks).
     check : FullModelCheck or None

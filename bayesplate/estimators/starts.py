@@ -12,7 +12,7 @@ nats it trails by, which :mod:`.assess` reports where one is nearly as good and 
 ``log p(Y, a) ~ ln N(Y_a; g(b*), V_Y) + ln N(b*; mu, V_b) + 1/2 ln det(2 pi Sigma)
 + log P_assign(a)``: the paired peaks' likelihood at the estimate ``b*``, the prior there,
 the Laplace volume of the estimate's covariance ``Sigma`` (B's ``P``), and the assignment's
-own terms (:func:`bayesplate.assignment.assignment_terms`: a spurious peak uniform over the
+own terms (:func:`bayesplate.matching.assignment.assignment_terms`: a spurious peak uniform over the
 band, a mode in the band unobserved or not), all in eigenvalues.
 """
 
@@ -21,8 +21,8 @@ from __future__ import annotations
 import numpy as np
 
 from .. import laminate
-from ..assignment import assignment_terms
-from ..peak_prior import assignment_priors
+from ..matching.assignment import assignment_terms
+from ..matching.peak_prior import assignment_priors
 from ..quantities import eigenvalue_from_hz, eigenvalue_sd
 
 __all__ = ["START_SCALES", "start_points", "log_evidence", "rivals_of"]
@@ -70,7 +70,7 @@ def log_evidence(case, result, assignment, prior):
     result : EstimateResult
         B's answer with the assignment's pairs: ``measured_Hz``, ``frequency_Hz``, ``b``,
         ``covariance_b``.
-    assignment : bayesplate.assignment.Assignment
+    assignment : bayesplate.matching.assignment.Assignment
         The assignment at the answer (its spurious peaks and unobserved modes).
     prior : tuple
         ``(mu_b, V_b)``, Pa and Pa^2.

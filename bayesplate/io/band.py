@@ -51,7 +51,7 @@ def prior_band_Hz(case, n_modes: int = DEFAULT_BAND_MODES) -> tuple[float, float
         and the top of the fit.
     """
     from ..laminate import stiffness_from_engineering
-    from ..model import PlateModel
+    from ..plate.model import PlateModel
 
     model = PlateModel.from_case(case)
     frequency = model.solve(stiffness_from_engineering(case.prior.mean), n_modes).frequency_Hz

@@ -82,7 +82,7 @@ class Plate(_EqualByValue):
     mass : float, optional
         The weighed mass, kg, when the density was derived from it, ``rho = m / (a b h)``:
         the measured inputs are then (h, a, b, m), independent, and the density's error
-        is correlated with the thickness's (:func:`bayesplate.inputs.input_sources`).
+        is correlated with the thickness's (:func:`bayesplate.likelihood.inputs.input_sources`).
         Default None (the density measured on its own). Not checked against the density
         here: the input Jacobian perturbs one input at a time.
     mass_sd : float, optional
@@ -163,17 +163,17 @@ class Measurement(_EqualByValue):
         (x, y) of the measurement points on the mid-plane, m. Given with `shapes`.
     shapes : array_like, shape (m, p), optional
         Out-of-plane amplitude of each measured mode at each point (arbitrary scale).
-    error_scale : bayesplate.error_scale.ErrorScalePrior, optional
+    error_scale : bayesplate.likelihood.error_scale.ErrorScalePrior, optional
         Prior of a common, unknown scale ``s`` of the deviations (`sigma_Hz` times ``s``),
         inferred with the constants; None: ``s = 1`` (the deviations as declared).
     p_spurious : array_like, shape (m,), optional
         Prior probability that each frequency is no mode of the plate, in (0, 1), from the
-        test's own evidence (a tap-test import: :mod:`bayesplate.peak_prior`). Given, the
+        test's own evidence (a tap-test import: :mod:`bayesplate.matching.peak_prior`). Given, the
         frequencies are paired with modes by the most probable assignment by default.
     tap_points : array_like, shape (2, 2), optional
         (x, y) of the tap and of the sensor of a one-point tap test, m: a computed mode weak
         at either is more likely unobserved
-        (:func:`bayesplate.peak_prior.unobserved_from_amplitude`).
+        (:func:`bayesplate.matching.peak_prior.unobserved_from_amplitude`).
     """
 
     frequency_Hz: np.ndarray
@@ -199,7 +199,7 @@ class Measurement(_EqualByValue):
             _set(self, "mode", _mode_array(self.mode, frequency.size))
         _set_shapes(self, frequency.size)
         if self.error_scale is not None:
-            from ..error_scale import ErrorScalePrior
+            from ..likelihood.error_scale import ErrorScalePrior
 
             _require_type(self.error_scale, ErrorScalePrior, "measured.error_scale")
         if self.p_spurious is not None:

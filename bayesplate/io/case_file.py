@@ -13,9 +13,9 @@ Uncertain inputs (optional keys of ``[plate]``): ``thickness_sd_mm``, ``density_
 ``length_sd_mm`` and ``width_sd_mm`` give one standard deviation of the measured thickness,
 density, length and width, in the units of the value they qualify; absent means 0 (taken as
 exact). Each must be a finite number >= 0, e.g. ``plate.thickness_sd_mm = -0.1: must be a
-number >= 0 (a standard deviation)``. They are not fitted: :mod:`bayesplate.inputs` carries them
-into each constant's variance (the estimate's variance budget) and, on request, into the
-eigenvalue covariance of the Gaussian problem (``inputs="marginal"``). Example::
+number >= 0 (a standard deviation)``. They are not fitted: :mod:`bayesplate.likelihood.inputs`
+carries them into each constant's variance (the estimate's variance budget) and, on request, into
+the eigenvalue covariance of the Gaussian problem (``inputs="marginal"``). Example::
 
     [plate]
     thickness_mm = 4.89
@@ -27,10 +27,10 @@ Error scale (optional key ``error_scale`` of ``[measured]``): a lab unsure of it
 states a prior on one common scale ``s`` of them (the deviations are ``s`` times the declared
 ``sigma_rel`` or ``sigma_Hz``): ``error_scale = { median = 1.0, upper95 = 3.0 }``, the median of
 ``s`` and the value it stays below with 95 % probability (dimensionless, both > 0). They fix an
-inverse-gamma prior on ``s^2`` (:class:`bayesplate.error_scale.ErrorScalePrior`); ``upper95``
-must lie between 1.005 and about 100 times ``median``, e.g. ``measured.error_scale.upper95 =
-1.0: must be between 1.005 and 102 times the median (1); closer, s is known (leave
-error_scale out)``. ``s`` is then inferred with the constants (integrated out of the
+inverse-gamma prior on ``s^2`` (:class:`bayesplate.likelihood.error_scale.ErrorScalePrior`);
+``upper95`` must lie between 1.005 and about 100 times ``median``, e.g.
+``measured.error_scale.upper95 = 1.0: must be between 1.005 and 102 times the median (1); closer, s
+is known (leave error_scale out)``. ``s`` is then inferred with the constants (integrated out of the
 likelihood: a Student-t); absent, ``s = 1`` as before::
 
     [measured]

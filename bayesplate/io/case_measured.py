@@ -86,7 +86,7 @@ def _parse_error_scale(raw):
     entry = _table(raw, key, _ERROR_SCALE_KEYS, _ERROR_SCALE_KEYS, _ERROR_SCALE_ENTRY)
     median = _positive(entry["median"], f"{key}.median")
     upper = _positive(entry["upper95"], f"{key}.upper95")
-    from ..error_scale import ErrorScalePrior
+    from ..likelihood.error_scale import ErrorScalePrior
 
     try:
         return ErrorScalePrior(median, upper)

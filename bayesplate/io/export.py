@@ -73,7 +73,7 @@ def constants_json(mean, sd=None, **extra):
 
 
 def budget_to_dict(budget):
-    """The JSON document of a variance budget (:class:`bayesplate.inputs.VarianceBudget`).
+    """A variance budget's JSON document (:class:`bayesplate.likelihood.inputs.VarianceBudget`).
 
     Returns
     -------
@@ -110,12 +110,12 @@ def estimate_to_dict(result, case, model, budget=None, scale=None):
         The estimate.
     case : bayesplate.io.Case
         The case it was computed for (its name).
-    model : bayesplate.forward.ForwardModel
+    model : bayesplate.plate.forward.ForwardModel
         The model it was computed with (its mesh).
-    budget : bayesplate.inputs.VarianceBudget, optional
+    budget : bayesplate.likelihood.inputs.VarianceBudget, optional
         Its variance budget (:func:`bayesplate.run.budget.converged_budget`), under
         ``"variance_budget"``.
-    scale : bayesplate.error_scale.LinearisedScale, optional
+    scale : bayesplate.likelihood.error_scale.LinearisedScale, optional
         The inferred error scale (the case's ``measured.error_scale``), under
         ``"error_scale"`` (:func:`error_scale_to_dict`); `result`'s sd then include it.
 
@@ -194,8 +194,8 @@ def error_scale_to_dict(summary, linearised=None):
 
     Parameters
     ----------
-    summary : bayesplate.error_scale.ScaleSummary
-    linearised : bayesplate.error_scale.LinearisedScale, optional
+    summary : bayesplate.likelihood.error_scale.ScaleSummary
+    linearised : bayesplate.likelihood.error_scale.LinearisedScale, optional
         At an estimate: adds ``s_hat``, ``chi2``, the effective number of constants and the
         Student-t degrees of freedom.
 
@@ -236,7 +236,7 @@ def sampling_to_dict(result, case, mve=None, scale=None):
         The case it was sampled for (its name).
     mve : bayesplate.estimators.EstimateResult, optional
         The MVE estimate, reported beside B.
-    scale : bayesplate.error_scale.ScaleSummary, optional
+    scale : bayesplate.likelihood.error_scale.ScaleSummary, optional
         The posterior of the error scale, under ``"error_scale"`` (:func:`error_scale_to_dict`).
 
     Returns
@@ -328,7 +328,7 @@ def input_posterior_to_dict(posterior):
 
 
 def input_certificate_to_dict(certificate):
-    """The linear input model's certificate (:class:`bayesplate.inputs_posterior.InputCertificate`).
+    """The linear input model's certificate (an ``inputs_posterior.InputCertificate``).
 
     The largest error relative to an eigenvalue and in units of a mode's declared deviation,
     the pass mark, ``passed`` and ``status`` (``"ok"`` or ``"nonlinear"``), where the largest

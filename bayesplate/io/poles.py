@@ -75,7 +75,7 @@ class Pole:
         fitted).
     p_spurious : float
         Prior probability that it is no mode of the plate
-        (:func:`bayesplate.peak_prior.spurious_probability`; NaN where not assessed).
+        (:func:`bayesplate.matching.peak_prior.spurious_probability`; NaN where not assessed).
     spread_Hz : float
         Standard deviation of its frequency over the model orders it is stable in, Hz
         (1.4826 times the median absolute deviation: a robust spread); NaN where unknown.
@@ -267,7 +267,7 @@ def assess_poles(frf: FRFData, analysis: PoleAnalysis) -> PoleAnalysis:
     response point where each is strongest (their magnitude against the median, their
     phase against the candidates' common line, weighted by magnitude), the fraction of
     model orders each was stable over, and from these
-    :func:`bayesplate.peak_prior.spurious_probability`.
+    :func:`bayesplate.matching.peak_prior.spurious_probability`.
 
     Parameters
     ----------
@@ -279,7 +279,7 @@ def assess_poles(frf: FRFData, analysis: PoleAnalysis) -> PoleAnalysis:
     PoleAnalysis
         The same, the kept candidates with their evidence filled in.
     """
-    from ..peak_prior import spurious_probability
+    from ..matching.peak_prior import spurious_probability
 
     kept = analysis.kept
     if not kept:

@@ -10,7 +10,7 @@ The poles file is a CSV table, one candidate mode per row::
 ``keep`` is 1 (take the pole into the case) or 0 (leave it out); deleting a row leaves it
 out too. ``frequency_Hz`` (undamped natural frequency, Hz) and ``damping`` (viscous
 damping ratio) define the pole. ``p_spurious`` is the prior probability that the pole is no
-mode of the plate (:mod:`bayesplate.peak_prior`), which the assignment of peaks to modes
+mode of the plate (:mod:`bayesplate.matching.peak_prior`), which the assignment of peaks to modes
 weighs: edit it to say what you know (empty: not assessed; a case then pairs by order).
 ``orders_stable``, ``coherence``, ``phase_deviation_deg``, ``amplitude`` and ``spread_Hz``
 are the evidence it came from (:class:`~bayesplate.io.poles.Pole`), information only.

@@ -47,7 +47,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model import PlateModel
+from ..plate.model import PlateModel
 
 __all__ = [
     "TapArtefacts",

@@ -24,7 +24,7 @@ def variance_budget_bars(budget, ax=None, title=None):
 
     Parameters
     ----------
-    budget : bayesplate.inputs.VarianceBudget
+    budget : bayesplate.likelihood.inputs.VarianceBudget
         Its ``share`` (n_sources, 6), the fraction of each constant's total variance from
         each source, stacks to 100 % per constant.
     ax : matplotlib.axes.Axes, optional

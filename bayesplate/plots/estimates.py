@@ -23,7 +23,7 @@ def sensitivity_bars(normalised, ax=None, title=None, names=STIFFNESS_NAMES, not
     ----------
     normalised : array_like, shape (n_modes, 6)
         ``s_ij = (d lambda_i / d b_j) b_j / lambda_i`` (dimensionless), e.g.
-        :meth:`bayesplate.model.ModalResult.normalised_sensitivities`; absolute values are
+        :meth:`bayesplate.plate.model.ModalResult.normalised_sensitivities`; absolute values are
         drawn.
     ax : matplotlib.axes.Axes, optional
     title : str, optional

@@ -18,8 +18,8 @@ def mode_shapes(model, result, n=6, fig=None, points=(121, 61), marks=None):
 
     Parameters
     ----------
-    model : bayesplate.model.PlateModel
-    result : bayesplate.model.ModalResult
+    model : bayesplate.plate.model.PlateModel
+    result : bayesplate.plate.model.ModalResult
         Modes of ``model``.
     n : int
         Number of modes drawn (at most the number in ``result``).

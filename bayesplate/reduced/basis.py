@@ -154,7 +154,7 @@ def _project_terms(model, basis, new):
 def _project_constant(model, basis, new):
     """``basis.T @ K_0 @ new`` for the stiffness independent of ``b``, or None.
 
-    ``K_0`` is the model's :attr:`~bayesplate.model.PlateModel.extra_stiffness_data` (None for
+    ``K_0`` is the model's :attr:`~bayesplate.plate.model.PlateModel.extra_stiffness_data` (None for
     the bare plate).
     """
     K0 = model.extra_stiffness

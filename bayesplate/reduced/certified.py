@@ -40,7 +40,7 @@ def fast_model(model, mean_b, box, n_modes, *, options=None, rng=None, **setting
 
     Parameters
     ----------
-    model : bayesplate.model.PlateModel
+    model : bayesplate.plate.model.PlateModel
     mean_b : array_like, shape (6,)
         Prior mean of ``(C11, C22, C12, C66, C44, C55)``, Pa; always a snapshot point.
     box : Box or array_like
@@ -130,12 +130,12 @@ class CertifiedModel:
     ``logging`` and by one :class:`ReducedModelWarning`; repeats are only counted (and logged
     again at 10, 100, 1000, ... occurrences).
 
-    A :class:`bayesplate.forward.ForwardModel`: :attr:`mesh` and :attr:`mass` are the full
+    A :class:`bayesplate.plate.forward.ForwardModel`: :attr:`mesh` and :attr:`mass` are the full
     model's, which both paths' mode shapes live on.
 
     Parameters
     ----------
-    model : bayesplate.model.PlateModel
+    model : bayesplate.plate.model.PlateModel
         The full model.
     reduced : ReducedModel
     certificate : Certificate

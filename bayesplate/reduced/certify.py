@@ -125,7 +125,7 @@ def certify(
 
     Parameters
     ----------
-    model : bayesplate.model.PlateModel
+    model : bayesplate.plate.model.PlateModel
         The full model the reduced one was built from.
     reduced : ReducedModel
     points : array_like, shape (k, 6), optional

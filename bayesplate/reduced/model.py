@@ -4,7 +4,7 @@
 (:meth:`ReducedModel.build`), grows it (:meth:`ReducedModel.enrich`) and evaluates the lowest
 elastic modes and their sensitivities with small dense eigenproblems only
 (:meth:`ReducedModel.solve`, :meth:`ReducedModel.eigenvalues`): the
-:class:`bayesplate.forward.ForwardModel` interface, with the mesh and mass matrix of the full
+:class:`bayesplate.plate.forward.ForwardModel` interface, with the mesh and mass matrix of the full
 model it was built from. :class:`ReducedModalResult` is what it returns.
 """
 
@@ -18,7 +18,7 @@ from functools import cached_property
 import numpy as np
 
 from ..fem.eigen import RIGID_TOL
-from ..model import ModalResult
+from ..plate.model import ModalResult
 from .basis import _grow, _project_constant, _project_terms, _rigid_basis, _solve_many
 from .blocks import _Blocks
 from .box import Box, _as_box
@@ -32,7 +32,7 @@ log = logging.getLogger(__package__)
 
 @dataclass(frozen=True, eq=False)
 class ReducedModalResult:
-    """Elastic modes from the reduced model; the fields of :class:`~bayesplate.model.ModalResult`.
+    """Elastic modes from the reduced model; the fields of :class:`ModalResult`.
 
     Attributes
     ----------
@@ -68,7 +68,7 @@ class ReducedModalResult:
         return self.basis @ self.coefficients
 
     def to_modal_result(self):
-        """The same modes as a :class:`~bayesplate.model.ModalResult` (full vectors)."""
+        """The same modes as a :class:`~bayesplate.plate.model.ModalResult` (full vectors)."""
         return ModalResult(
             self.b, self.eigenvalues, self.vectors, self.sensitivities, self.rigid_eigenvalues
         )
@@ -78,7 +78,7 @@ class ReducedModalResult:
 class ReducedModel:
     """Rayleigh-Ritz model on a fixed M-orthonormal basis; build it with :meth:`build`.
 
-    A :class:`bayesplate.forward.ForwardModel`: :attr:`mesh` and :attr:`mass` are those of the
+    A :class:`bayesplate.plate.forward.ForwardModel`: :attr:`mesh` and :attr:`mass` are those of the
     full model the basis was built from, on whose unknowns the mode shapes live.
 
     Attributes
@@ -111,7 +111,7 @@ class ReducedModel:
         Basis size after each batch of snapshots (the rigid-body motions, each half of the
         initial design, each enrichment); the leading columns up to a level form the model
         of that stage.
-    full_model : bayesplate.model.PlateModel
+    full_model : bayesplate.plate.model.PlateModel
         The full model the basis was built from (keyword only; referenced, not copied).
     """
 
@@ -189,7 +189,7 @@ class ReducedModel:
 
         Parameters
         ----------
-        model : bayesplate.model.PlateModel
+        model : bayesplate.plate.model.PlateModel
         mean_b : array_like, shape (6,)
             Prior mean of ``(C11, C22, C12, C66, C44, C55)``, Pa; always a snapshot point.
         box : Box or array_like, shape (2, 6) or (6, 6)
@@ -256,7 +256,7 @@ class ReducedModel:
 
         Parameters
         ----------
-        model : bayesplate.model.PlateModel
+        model : bayesplate.plate.model.PlateModel
             The model the basis was built from.
         points : array_like, shape (k, 6)
             Pa.

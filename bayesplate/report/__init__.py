@@ -4,7 +4,7 @@ The report runs a fixed list of steps on one case file:
 
 ``pairing``
     The modes at the prior mean (``m + 6`` of them) and the measured-to-computed pairing
-    (:func:`bayesplate.pairing.pair_measured`: by shape when the case has shapes).
+    (:func:`bayesplate.matching.pairing.pair_measured`: by shape when the case has shapes).
 ``B``, ``MVE``, ``MVE-mod``
     The paper's estimators (:func:`bayesplate.estimators.estimate`) with that pairing.
 ``modes``

@@ -14,8 +14,8 @@ from .. import __version__
 from ..estimators import METHODS, case_fast_model, modes_to_certify, resolve_forward
 from ..io import Case
 from ..laminate import stiffness_from_engineering
-from ..model import PlateModel
-from ..pairing import DEFAULT_EXTRA_MODES, Pairing
+from ..matching.pairing import DEFAULT_EXTRA_MODES, Pairing
+from ..plate.model import PlateModel
 from .options import ReportOptions
 
 __all__ = ["ESTIMATORS", "ReportData", "TapTest", "sampling_available"]
@@ -69,7 +69,7 @@ class ReportData:
     taps: object = field(default=None, repr=False)
 
     def plate_model(self):
-        """The working :class:`bayesplate.model.PlateModel` (built when first needed)."""
+        """The working :class:`bayesplate.plate.model.PlateModel` (built when first needed)."""
         if self.model is None:
             self.model = PlateModel.from_case(self.case, mesh=self.mesh)
         return self.model
@@ -96,11 +96,11 @@ class ReportData:
     def pairing_for_steps(self):
         """What the estimate, sample and diagnose steps are given as their pairing.
 
-        The pairing step's :class:`bayesplate.pairing.Pairing`; but ``"likelihood"`` by name,
-        so that each step settles the assignment as :func:`bayesplate.estimators.estimate`
+        The pairing step's :class:`bayesplate.matching.pairing.Pairing`; but ``"likelihood"`` by
+        name, so that each step settles the assignment as :func:`bayesplate.estimators.estimate`
         does, from B's warm-started rounds (given only the pairing, B from the prior mean
         can reach another optimum when a mode is missing); and ``"auto"`` for pairing by
-        order checked (:func:`bayesplate.pairing.checks_order`), which each step checks
+        order checked (:func:`bayesplate.matching.pairing.checks_order`), which each step checks
         again at its own answer.
         """
         if self.options.pairing == "likelihood" or self.results["pairing"]["how"] == "likelihood":
@@ -110,7 +110,7 @@ class ReportData:
         return self.pairing()
 
     def pairing(self):
-        """The :class:`bayesplate.pairing.Pairing` the pairing step found."""
+        """The :class:`bayesplate.matching.pairing.Pairing` the pairing step found."""
         p = self.results["pairing"]
         measured = p.get("measured")
         return Pairing(

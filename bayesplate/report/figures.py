@@ -12,7 +12,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from ..model import ModalResult
+from ..plate.model import ModalResult
 from ..quantities import ENGINEERING_KEYS, ENGINEERING_NAMES, ENGINEERING_UNITS, to_case_units
 from .data import ESTIMATORS, _estimate_for_modes
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ..model import DEFAULT_MESH
+from ..plate.model import DEFAULT_MESH
 
 __all__ = ["ReportOptions"]
 

@@ -12,7 +12,7 @@ import time
 import numpy as np
 
 from ..io import load_case
-from ..pairing import MAC_EXTRA_MODES
+from ..matching.pairing import MAC_EXTRA_MODES
 from ..parallel import Forked, available_cores
 from . import steps
 from .cache import StepCache

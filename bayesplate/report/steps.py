@@ -11,9 +11,9 @@ import warnings
 
 import numpy as np
 
-from ..checked_order import checks_order
 from ..laminate import stiffness_from_engineering
-from ..pairing import MAC_EXTRA_MODES
+from ..matching.checked_order import checks_order
+from ..matching.pairing import MAC_EXTRA_MODES
 from ..quantities import to_case_units
 
 # Chain bounds of the posterior section: the sampler's own defaults (5000 steps, ESS 2000)
@@ -26,8 +26,8 @@ _CORNER_DRAWS = 4000  # posterior draws kept for the corner plot
 def pairing_step(case, model, how="auto"):
     """Modes at the prior mean and the pairing (with any warnings as text).
 
-    ``how == "likelihood"``: the assignment B settles on (:mod:`bayesplate.assignment`), with
-    its unobserved computed modes and spurious peaks (0-based) in the result.
+    ``how == "likelihood"``: the assignment B settles on (:mod:`bayesplate.matching.assignment`),
+    with its unobserved computed modes and spurious peaks (0-based) in the result.
     """
     m = case.measured.size
     b = stiffness_from_engineering(case.prior.mean)
@@ -118,7 +118,7 @@ def estimate_options(method, pairing, model):
 
 
 def _scale_data(summary):
-    """A :class:`bayesplate.error_scale.ScaleSummary` as plain data (with its sentence)."""
+    """A :class:`bayesplate.likelihood.error_scale.ScaleSummary` as plain data, its sentence too."""
     return {
         "median": summary.median,
         "interval": list(summary.interval),
@@ -194,8 +194,8 @@ def sample_step(case, model, pairing, options, fast=None):
     The draws kept for the corner plot (at most ``_CORNER_DRAWS``, shape (n, 6)) are in
     case units (GPa, -).
     """
-    from ..inputs import describe_inputs
     from ..laminate import engineering_from_stiffness
+    from ..likelihood.inputs import describe_inputs
     from ..run import run_sample
 
     done = run_sample(

@@ -1,10 +1,10 @@
 """What a run adds to an estimate: its variance budget and its error scale.
 
-Both rebuild the estimate's Gaussian problem (:class:`bayesplate.posterior.GaussianProblem`)
-and combine it with a lower piece: the measured inputs' Jacobian
-(:mod:`bayesplate.inputs`) or the error scale's linearisation (:mod:`bayesplate.error_scale`).
-They live here, above all three, so that the likelihood's pieces do not import the
-likelihood that uses them.
+Both rebuild the estimate's Gaussian problem
+(:class:`bayesplate.likelihood.posterior.GaussianProblem`) and combine it with a lower piece: the
+measured inputs' Jacobian (:mod:`bayesplate.likelihood.inputs`) or the error scale's linearisation
+(:mod:`bayesplate.likelihood.error_scale`). They live here, above all three, so that the
+likelihood's pieces do not import the likelihood that uses them.
 """
 
 from __future__ import annotations
@@ -13,10 +13,16 @@ import dataclasses
 
 import numpy as np
 
-from ..error_scale import linearised_at
-from ..inputs import INPUT_NAMES, VarianceBudget, input_jacobian, input_sources, variance_budget
-from ..model import PlateModel
-from ..posterior import GaussianProblem
+from ..likelihood.error_scale import linearised_at
+from ..likelihood.inputs import (
+    INPUT_NAMES,
+    VarianceBudget,
+    input_jacobian,
+    input_sources,
+    variance_budget,
+)
+from ..likelihood.posterior import GaussianProblem
+from ..plate.model import PlateModel
 from ..quantities import engineering_covariance
 
 __all__ = ["converged_budget", "estimate_budget", "scale_estimate"]
@@ -101,7 +107,7 @@ def scale_estimate(case, model, result):
     ----------
     case : bayesplate.io.Case
         With ``measured.error_scale`` set.
-    model : bayesplate.forward.ForwardModel
+    model : bayesplate.plate.forward.ForwardModel
         The full model (one solve at the estimate).
     result : bayesplate.estimators.EstimateResult
 

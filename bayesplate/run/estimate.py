@@ -15,14 +15,14 @@ class EstimateRun:
     Attributes
     ----------
     case : bayesplate.io.Case
-    model : bayesplate.model.PlateModel
+    model : bayesplate.plate.model.PlateModel
         The full model of the run (its mesh).
     result : bayesplate.estimators.EstimateResult
         The estimate; with the case's error scale, its sd widened by it.
-    budget : bayesplate.inputs.VarianceBudget or None
+    budget : bayesplate.likelihood.inputs.VarianceBudget or None
         The variance budget (at the declared deviations); None when not asked for or when
         the estimate has no covariance.
-    scale : bayesplate.error_scale.LinearisedScale or None
+    scale : bayesplate.likelihood.error_scale.LinearisedScale or None
         The inferred error scale, when the case declares one.
     """
 
@@ -47,7 +47,7 @@ def run_estimate(case, options, *, model=None, fast=None):
     ----------
     case : bayesplate.io.Case
     options : EstimateOptions
-    model : bayesplate.model.PlateModel, optional
+    model : bayesplate.plate.model.PlateModel, optional
         The full model, already built; default the case's on ``options.mesh``.
     fast : bayesplate.reduced.CertifiedModel, optional
         A fast model shared with other runs: the estimator iterates on it and the full model
@@ -59,7 +59,7 @@ def run_estimate(case, options, *, model=None, fast=None):
     EstimateRun
     """
     from ..estimators import estimate, estimate_on_fast
-    from ..model import PlateModel
+    from ..plate.model import PlateModel
     from .budget import converged_budget
 
     if model is None:

@@ -32,7 +32,7 @@ class EstimateOptions:
         Iteration cap per stage.
     convention : str
         Covariance conventions (:data:`bayesplate.estimators.CONVENTIONS`).
-    pairing : str or bayesplate.pairing.Pairing
+    pairing : str or bayesplate.matching.pairing.Pairing
         Measured-to-computed modes.
     forward : {"auto", "fast", "full"}
         The model iterated on (ignored when the run is given a shared fast model).
@@ -68,7 +68,7 @@ class SampleOptions:
         Effective samples per constant to reach.
     forward : {"reduced", "full"}
         The certified fast model around B, or the full model throughout.
-    pairing : str or bayesplate.pairing.Pairing
+    pairing : str or bayesplate.matching.pairing.Pairing
         Measured-to-computed modes.
     inputs : {"auto", "exact", "marginal"}
         The plate's measured inputs exact, or their deviations marginalised (``"auto"``:

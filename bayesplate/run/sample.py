@@ -19,7 +19,7 @@ class SampleRun:
     Attributes
     ----------
     case : bayesplate.io.Case
-    model : bayesplate.model.PlateModel
+    model : bayesplate.plate.model.PlateModel
         The full model of the run (its mesh).
     setup : bayesplate.sampling.SamplingSetup
         The sampler's problem, fast model and MAP.
@@ -27,7 +27,7 @@ class SampleRun:
         The chain and its summary.
     seed : int
         The run's seed (drawn when none was given; the result's ``seed_entropy``).
-    scale : bayesplate.error_scale.ScaleSummary or None
+    scale : bayesplate.likelihood.error_scale.ScaleSummary or None
         The error scale from the chain's draws, when the case declares one.
     mve : bayesplate.estimators.EstimateResult or None
         MVE on the sampler's model, when asked for.
@@ -64,7 +64,7 @@ def run_sample(
     seed : int or None
         Split into the run's streams by :func:`~bayesplate.run.run_seeds` (None: a fresh
         seed, once): the same seed, the chain of ``sample(case, rng=seed)``.
-    model : bayesplate.model.PlateModel, optional
+    model : bayesplate.plate.model.PlateModel, optional
         The full model, already built; default the case's on ``options.mesh``.
     fast : bayesplate.reduced.CertifiedModel, optional
         A fast model shared with other runs, used when the inputs are exact: with
@@ -83,7 +83,7 @@ def run_sample(
     -------
     SampleRun
     """
-    from ..model import PlateModel
+    from ..plate.model import PlateModel
     from ..sampling import ChainOptions, SetupOptions, prepare, resolve_inputs, sample
 
     seeds = run_seeds(seed)
@@ -108,7 +108,7 @@ def run_sample(
     noted = None if recorded is None else tuple(sorted({str(w.message) for w in recorded}))
     scale = None
     if case.measured.error_scale is not None:
-        from ..error_scale import scale_from_draws
+        from ..likelihood.error_scale import scale_from_draws
 
         scale = scale_from_draws(
             setup.problem, result.samples_b, setup.sampling_forward(), rng=seeds.error_scale

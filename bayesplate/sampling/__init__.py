@@ -1,6 +1,6 @@
 """Posterior sampling with emcee on the estimators' own Gaussian problem (issue 4).
 
-The target is ``ln f(b | Y)`` of :class:`bayesplate.posterior.GaussianProblem`: the same
+The target is ``ln f(b | Y)`` of :class:`bayesplate.likelihood.posterior.GaussianProblem`: the same
 ``V_Y``, prior and pairing as the estimators (``CONVENTIONS["paper"]`` by default), -inf
 outside the physical region. Only the forward model is swapped for a fast one; the
 log-density is still :meth:`GaussianProblem.log_posterior` of a problem built from the
@@ -27,13 +27,14 @@ Uncertain inputs
     ``inputs="marginal"`` (the default when the case gives any ``plate.*_sd`` or a mass
     with ``mass_sd``): the plate's thickness, density (or mass), length and width deviations
     are integrated out to first order, ``V_Y + J_p Sigma_p J_p^T``
-    (:mod:`bayesplate.inputs`), a constant matrix: the fast model needs no new parameters,
-    only a box placed with the marginal ``P``. ``V_Y`` is then full: the pointwise terms are
-    leave-one-out conditionals and the Ritz screen bounds the misfit on the sub-block of the
+    (:mod:`bayesplate.likelihood.inputs`), a constant matrix: the fast model needs no new
+    parameters, only a box placed with the marginal ``P``. ``V_Y`` is then full: the pointwise terms
+    are leave-one-out conditionals and the Ritz screen bounds the misfit on the sub-block of the
     eigenvalues it constrains. After the chain, the declared inputs are drawn once per kept
-    draw from their Gaussian conditional given ``b`` (:mod:`bayesplate.inputs_posterior`):
-    exact draws of the joint posterior under the linear input model (collapsed sampling),
-    whose certificate at the MAP (full solves at +- 2 sd of each input) the result carries.
+    draw from their Gaussian conditional given ``b``
+    (:mod:`bayesplate.likelihood.inputs_posterior`): exact draws of the joint posterior under the
+    linear input model (collapsed sampling), whose certificate at the MAP (full solves at +- 2 sd of
+    each input) the result carries.
 
 Parameterisation and moves
     Walkers move in whitened log coordinates (:class:`WhitenedLogPosterior`): the

@@ -1,12 +1,12 @@
 """The likelihood of all measured peaks, the assignment re-made at every point of the chain.
 
 With ``pairing="likelihood"`` the estimators settle which computed mode explains which
-measured peak (:mod:`bayesplate.assignment`); the chain then moves the constants ``b`` and the
-best assignment may change with them (a peak's mode moves away and its neighbour comes
+measured peak (:mod:`bayesplate.matching.assignment`); the chain then moves the constants ``b`` and
+the best assignment may change with them (a peak's mode moves away and its neighbour comes
 closer). :class:`ReassignedLikelihood` is the likelihood of ALL measured peaks at ``b``
-maximised over the assignments ``a``, with the model of :mod:`bayesplate.assignment` written
-in eigenvalues (the space of :class:`bayesplate.posterior.GaussianProblem`) and zero
-predictive deviation of the computed eigenvalues (at a point of the chain the constants are
+maximised over the assignments ``a``, with the model of :mod:`bayesplate.matching.assignment`
+written in eigenvalues (the space of :class:`bayesplate.likelihood.posterior.GaussianProblem`) and
+zero predictive deviation of the computed eigenvalues (at a point of the chain the constants are
 given):
 
 ``ln L(b) = max_a ln P(Y | b, a)``,
@@ -17,8 +17,8 @@ given):
 with ``Y_i`` the measured eigenvalues (rad^2/s^2) and ``v_i`` their variances (the diagonal of
 ``V_Y``, rad^4/s^4, same convention as the problem), ``g_j`` the ``n`` lowest computed
 eigenvalues, a spurious peak uniform on ``[0, B]`` (``B`` the eigenvalue of the highest
-measured frequency plus three deviations, as in :mod:`bayesplate.assignment`) and ``rho`` the
-share of the searched band a computed mode nobody paired lies in: 1 up to the highest measured
+measured frequency plus three deviations, as in :mod:`bayesplate.matching.assignment`) and ``rho``
+the share of the searched band a computed mode nobody paired lies in: 1 up to the highest measured
 eigenvalue ``Y_top``, 0 above ``B``, linear between. Its maximum is a linear assignment
 problem (Hungarian method, ``scipy.optimize.linear_sum_assignment``) on an ``m x (n + m)``
 score matrix.
@@ -30,7 +30,7 @@ dominant-term approximation of the sum over assignments, ``ln sum_a P(Y | b, a)`
 below it by at most the logarithm of the number of assignments scoring near the best (``ln
 2`` where two tie, a peak halfway between two modes: the sum counts both, the maximum one),
 and equals it to within ``exp(-gap)`` where the best leads the next by ``gap`` nats.
-Two choices differ from the letter of :mod:`bayesplate.assignment`, both for continuity:
+Two choices differ from the letter of :mod:`bayesplate.matching.assignment`, both for continuity:
 a paired computed mode counts as observed (``ln(1 - p_u)``) wherever it lies (there, a
 paired mode above the highest peak counts 0, a step of ``ln(1 - p_u)`` as it crosses the
 peak, right at the posterior's centre for the highest peak); a computed mode nobody paired
@@ -54,8 +54,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..assignment import P_SPURIOUS, P_UNOBSERVED, best_assignment, spurious_band_Hz
-from ..posterior import observation_covariance
+from ..likelihood.posterior import observation_covariance
+from ..matching.assignment import P_SPURIOUS, P_UNOBSERVED, best_assignment, spurious_band_Hz
 from ..quantities import eigenvalue_from_hz
 
 __all__ = ["REASSIGN_EXTRA_MODES", "ChainAssignment", "ReassignedLikelihood", "reassignment"]
@@ -74,7 +74,7 @@ class ReassignedLikelihood:
     n_modes : int
         ``n``: computed elastic modes offered to the peaks (the lowest ``n``).
     observation : {"variance", "deviation"}
-        Convention of ``V_Y`` (:func:`bayesplate.posterior.observation_covariance`): the
+        Convention of ``V_Y`` (:func:`bayesplate.likelihood.posterior.observation_covariance`): the
         problem's, so that ``v_i`` is its diagonal.
     p_unobserved, p_spurious : float
         Prior probabilities that a computed mode in the band is not seen and that a peak is
@@ -206,7 +206,7 @@ def reassignment(pairing, frequency_Hz, sigma_Hz, observation, full_covariance, 
 
     Parameters
     ----------
-    pairing : bayesplate.pairing.Pairing
+    pairing : bayesplate.matching.pairing.Pairing
         The settled pairing (``how``, ``modes``).
     frequency_Hz, sigma_Hz : array_like, shape (m,)
         ALL measured peaks (spurious ones included), Hz.
@@ -249,7 +249,7 @@ def _solve(pair, spurious, unpaired):
     """The assignment maximising ``sum pair + sum spurious + sum unpaired``; its total.
 
     ``sum_unpaired u_j = sum_all u_j - sum_paired u_j``: a pair scores ``pair_ij - u_j``
-    (:func:`bayesplate.assignment.best_assignment`).
+    (:func:`bayesplate.matching.assignment.best_assignment`).
     """
     modes, total = best_assignment(pair - unpaired[None, :], spurious)
     return modes, total + float(unpaired.sum())

@@ -31,7 +31,7 @@ class EigenvalueForward:
 
     Parameters
     ----------
-    model : bayesplate.forward.ForwardModel
+    model : bayesplate.plate.forward.ForwardModel
         The model evaluated (e.g. a :class:`bayesplate.reduced.CertifiedModel`).
     reduced : bayesplate.reduced.ReducedModel, optional
         A reduced model whose eigenvalues are upper bounds of ``model``'s everywhere (the
@@ -77,8 +77,8 @@ class WhitenedLogPosterior:
     models), which is what LOO needs; it equals the diagonal formula when ``V_Y`` is diagonal.
     With an error scale (``problem.error_scale``: ``s`` unknown, integrated out) the
     likelihood is a Student-t and ``pointwise`` is each one's leave-one-out density with ``s``
-    integrated out too (:func:`bayesplate.error_scale.loo_pointwise`); the sampler still moves
-    in the six constants alone.
+    integrated out too (:func:`bayesplate.likelihood.error_scale.loo_pointwise`); the sampler still
+    moves in the six constants alone.
 
     With `assigned` (a :class:`~bayesplate.sampling.assigned.ReassignedLikelihood`, pairing
     by likelihood) the log-likelihood is instead that of ALL measured peaks with the
@@ -178,7 +178,7 @@ class WhitenedLogPosterior:
         """Log-likelihood of each measured eigenvalue given paired model ones ``g``, (m,)."""
         r = self.problem.Y - g
         if self.problem.error_scale is not None:
-            from ..error_scale import loo_pointwise
+            from ..likelihood.error_scale import loo_pointwise
 
             Q = 1.0 / self._var if self._Q is None else self._Q
             return loo_pointwise(r, Q, self.problem.error_scale)

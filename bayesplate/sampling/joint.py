@@ -8,7 +8,7 @@ each its own case) inform one set of lamina constants. The joint target is
 each plate's log-likelihood on ITS OWN certified fast model (its own geometry, inputs,
 pairing and deviations, from :func:`~bayesplate.sampling.setup.prepare`), plus ONE prior.
 
-It is built as one stacked :class:`~bayesplate.posterior.GaussianProblem`
+It is built as one stacked :class:`~bayesplate.likelihood.posterior.GaussianProblem`
 (:func:`joint_problem`): ``Y`` the plates' paired eigenvalues one after another, ``V_Y``
 block-diagonal (plates are independent given ``b``; a plate's block keeps its marginalised
 inputs), the forward model :class:`JointForward` (each plate's model at the same ``b``, its

@@ -38,7 +38,7 @@ def scaled_map(setup, estimate):
     """
     if setup.problem.error_scale is None:
         return estimate
-    from ..error_scale import linearised_at
+    from ..likelihood.error_scale import linearised_at
     from ..quantities import engineering_covariance
 
     cov_b = linearised_at(setup.problem_on_fast_model(), estimate.b).covariance_b

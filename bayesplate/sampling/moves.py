@@ -240,12 +240,13 @@ class RitzScreen:
     def _likelihood_bound(self, misfit):
         """``ln f(Y | b)`` at a lower bound of ``chi2``: it decreases with ``chi2``.
 
-        With an error scale, the Student-t marginal (:func:`bayesplate.error_scale.log_marginal`).
+        With an error scale, the Student-t marginal
+        (:func:`bayesplate.likelihood.error_scale.log_marginal`).
         """
         p = self.density.problem
         if p.error_scale is None:
             return self._norm - 0.5 * misfit
-        from ..error_scale import log_marginal
+        from ..likelihood.error_scale import log_marginal
 
         return float(log_marginal(misfit, p.m, np.linalg.slogdet(p.V_Y)[1], p.error_scale))
 

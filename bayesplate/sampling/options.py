@@ -147,10 +147,10 @@ class SetupOptions:
     prior_mean, prior_sd : array_like, shape (6,), optional
         Engineering prior (SI: Pa, and dimensionless for ``nu12``) replacing the case's.
     pairing : {"auto", "mac", "likelihood", "index", "order"} or Pairing
-        As for :func:`bayesplate.estimators.estimate` (:func:`bayesplate.pairing.pair_measured`
-        at the prior mean; ``"likelihood"``: the assignment B settles on, on the working
-        model, placing the box and the MAP; the chain re-makes it at every point unless the
-        inputs are marginalised or an error scale is inferred
+        As for :func:`bayesplate.estimators.estimate`
+        (:func:`bayesplate.matching.pairing.pair_measured` at the prior mean; ``"likelihood"``: the
+        assignment B settles on, on the working model, placing the box and the MAP; the chain
+        re-makes it at every point unless the inputs are marginalised or an error scale is inferred
         (:func:`~bayesplate.sampling.assigned.reassignment`); any other pairing stays fixed,
         no modes computed beyond the paired ones. By order, the order is checked at the MAP
         and the setup made again by likelihood where the data refute it.
@@ -169,10 +169,10 @@ class SetupOptions:
         :data:`~bayesplate.sampling.setup.FAST_DEFAULTS`).
     inputs : {"auto", "exact", "marginal"}
         The plate's measured inputs as exact numbers or with the case's deviations
-        marginalised (:meth:`bayesplate.posterior.GaussianProblem.from_case`); ``"auto"``:
-        marginal when the case gives any ``plate.*_sd``. ``J_p`` is evaluated at the pilot (or
-        settling) B estimate, else at the prior mean; with a fast model built here, its box is
-        placed with the marginal problem's ``P`` there (one more full solve); then ``J_p``
+        marginalised (:meth:`bayesplate.likelihood.posterior.GaussianProblem.from_case`);
+        ``"auto"``: marginal when the case gives any ``plate.*_sd``. ``J_p`` is evaluated at the
+        pilot (or settling) B estimate, else at the prior mean; with a fast model built here, its
+        box is placed with the marginal problem's ``P`` there (one more full solve); then ``J_p``
         again at the marginal MAP, which is found again with it (:mod:`.setup`). A `fast`
         model or a `box` given is kept as it is: if it was placed for the exact posterior,
         walkers beyond it use the full model (counted in the result).

@@ -14,9 +14,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..inputs import input_jacobian, input_sources
-from ..inputs_posterior import declared_readings, input_conditional
-from ..model import PlateModel
+from ..likelihood.inputs import input_jacobian, input_sources
+from ..likelihood.inputs_posterior import declared_readings, input_conditional
+from ..plate.model import PlateModel
 from .box import posterior_box
 
 __all__ = ["PILOT_MAX_ELEMENTS", "marginal", "mesh_text", "pilot_model", "place_box", "widened"]
@@ -40,9 +40,10 @@ def pilot_model(case, model, pilot_mesh):
 def marginal(case, model, problem, at):
     """The problem with the inputs marginalised (``J_p`` at `at`), full solves, conditional.
 
-    The conditional is the readings' :class:`~bayesplate.inputs_posterior.InputConditional`
-    (None when every deviation is 0). ``V_Y + B B^T`` with ``B = J_p A``: the arithmetic of
-    :func:`bayesplate.inputs.input_covariance`, to the bit.
+    The conditional is the readings'
+    :class:`~bayesplate.likelihood.inputs_posterior.InputConditional` (None when every deviation is
+    0). ``V_Y + B B^T`` with ``B = J_p A``: the arithmetic of
+    :func:`bayesplate.likelihood.inputs.input_covariance`, to the bit.
     """
     names, A = input_sources(case.plate)
     modes = problem.pairing.modes
@@ -78,12 +79,12 @@ def widened(problem, pilot):
     """The pilot with ``P`` widened by an inferred error scale (linearised), full solves spent.
 
     With ``s`` unknown the posterior is ``s_hat`` times wider than ``P`` at ``s = 1``
-    (:func:`bayesplate.error_scale.linearised_scale`); a box placed with ``P`` would leave
-    most walkers to the full model's fallback when the misfit is large.
+    (:func:`bayesplate.likelihood.error_scale.linearised_scale`); a box placed with ``P`` would
+    leave most walkers to the full model's fallback when the misfit is large.
     """
     if problem.error_scale is None:
         return pilot, 0
-    from ..error_scale import linearised_at
+    from ..likelihood.error_scale import linearised_at
 
     return replace(pilot, covariance_b=linearised_at(problem, pilot.b).covariance_b), 1
 

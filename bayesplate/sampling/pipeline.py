@@ -7,8 +7,8 @@ fast model fell back to, its certificate, the MAP and the timings of every stage
 
 With the inputs marginalised (:class:`~bayesplate.sampling.options.SetupOptions`' ``inputs``),
 the declared readings are then drawn once per kept draw of the constants (at most 4000, a
-seeded subset) from their Gaussian conditional (:mod:`bayesplate.inputs_posterior`; the third
-stream of ``rng``): exact joint draws under the linear input model, whose certificate at the
+seeded subset) from their Gaussian conditional (:mod:`bayesplate.likelihood.inputs_posterior`; the
+third stream of ``rng``): exact joint draws under the linear input model, whose certificate at the
 MAP the result carries (``input_certificate``); ``settings["inputs"]`` says which treatment
 was used.
 """
@@ -18,7 +18,7 @@ from __future__ import annotations
 import time
 from dataclasses import replace
 
-from ..inputs_posterior import inputs_from_chain
+from ..likelihood.inputs_posterior import inputs_from_chain
 from .chain import sample_problem
 from .options import CHAIN_FIELDS, ChainOptions, SetupOptions
 from .seeding import resolve_rng, streams

@@ -96,10 +96,10 @@ class SamplingResult:
         the inputs drawn, ``input_certificate`` and ``inputs`` (their draws).
     settings : dict
         Seed entropy, walkers, moves, box, stopping settings.
-    input_posterior : bayesplate.input_summary.InputPosterior or None
+    input_posterior : bayesplate.likelihood.input_summary.InputPosterior or None
         The declared inputs' posterior (inputs marginalised; one conditional draw per kept
         draw of ``b``); None with the inputs exact or none declared.
-    input_certificate : bayesplate.inputs_posterior.InputCertificate or None
+    input_certificate : bayesplate.likelihood.inputs_posterior.InputCertificate or None
         The linear input model against full solves at the MAP.
     assignment : bayesplate.sampling.assigned.ChainAssignment or None
         With the assignment re-made at every point (pairing by likelihood): per measured

@@ -47,7 +47,7 @@ def streams(rng, n=2):
     ``walk`` the chain; :func:`~bayesplate.sampling.pipeline.sample` splits its ``rng`` so,
     and a caller that prepares the setup itself (to keep it) gets the same chain by seeding
     ``prepare`` with ``build``. With ``n=3`` a third, ``inputs``, draws the measured inputs
-    after the chain (:mod:`bayesplate.inputs_posterior`); the first two are the same
+    after the chain (:mod:`bayesplate.likelihood.inputs_posterior`); the first two are the same
     whatever ``n`` (numpy's spawned children are numbered in order).
     """
     entropy, g = generator(rng)

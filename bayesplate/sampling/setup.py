@@ -18,7 +18,7 @@ synthetic plates of ``studies/input_coverage.py``, 10 % on the spruce plate), an
 (proportional to the eigenvalues) is best where the posterior is; at the pilot it doubled the
 certificate's error on a synthetic plate (0.32 against 0.16 of a measurement deviation).
 The setup keeps the readings' conditional given ``b`` (``input_model``: the sampler draws the
-inputs from it after the chain, :mod:`bayesplate.inputs_posterior`) and the linear input
+inputs from it after the chain, :mod:`bayesplate.likelihood.inputs_posterior`) and the linear input
 model's certificate at the MAP (``input_certificate``: full solves at +- 2 sd of each
 declared reading).
 
@@ -37,13 +37,13 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..checked_order import assignment_at, checks_order, refuted_order
 from ..estimators import resolve_conventions, run, settle_pairing
-from ..inputs import input_sources
-from ..inputs_posterior import linear_input_certificate
-from ..model import PlateModel
-from ..pairing import Pairing
-from ..posterior import INPUT_TREATMENTS, GaussianProblem, prior_in_stiffness
+from ..likelihood.inputs import input_sources
+from ..likelihood.inputs_posterior import linear_input_certificate
+from ..likelihood.posterior import INPUT_TREATMENTS, GaussianProblem, prior_in_stiffness
+from ..matching.checked_order import assignment_at, checks_order, refuted_order
+from ..matching.pairing import Pairing
+from ..plate.model import PlateModel
 from ..reduced import fast_model
 from .assigned import reassignment
 from .box import check_box as _check_box
@@ -102,10 +102,10 @@ class SamplingSetup:
         the input Jacobian and its certificate).
     inputs : str
         ``"exact"`` or ``"marginal"``: how the plate's measured inputs enter ``problem``.
-    input_model : bayesplate.inputs_posterior.InputConditional or None
+    input_model : bayesplate.likelihood.inputs_posterior.InputConditional or None
         With the inputs marginalised and some deviation declared: the readings' conditional
         ``f(z | b, Y)`` (``J_p`` where the marginal problem has it), for their draws.
-    input_certificate : bayesplate.inputs_posterior.InputCertificate or None
+    input_certificate : bayesplate.likelihood.inputs_posterior.InputCertificate or None
         The linear input model against full solves at the MAP (its solves counted in
         ``n_full_solves``).
     assigned : bayesplate.sampling.assigned.ReassignedLikelihood or None

@@ -15,8 +15,8 @@ import numpy as np
 import scipy.linalg
 
 from ..estimators import run
-from ..pairing import Pairing
-from ..posterior import GaussianProblem
+from ..likelihood.posterior import GaussianProblem
+from ..matching.pairing import Pairing
 from .setup import MAP_TOL
 
 __all__ = ["JointForward", "joint_estimate", "joint_problem"]

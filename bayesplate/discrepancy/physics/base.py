@@ -2,7 +2,7 @@
 
 A candidate is a family of modified plates indexed by a few parameters ``theta`` (in the
 units their names spell). :meth:`Physics.apply` returns the modified
-:class:`~bayesplate.model.PlateModel`; its stiffness stays linear in the six lamina
+:class:`~bayesplate.plate.model.PlateModel`; its stiffness stays linear in the six lamina
 coefficients, so the estimators, the posterior and the sampler work on it unchanged.
 
 A *located* candidate (an effect at a place on the plate: a point mass, a damaged patch)

@@ -30,7 +30,7 @@ class ElasticFoundation(Physics):
 
         Prior deviation: the ``k`` that lifts every bending eigenvalue by 10 % of the
         lowest one (its Rayleigh bound,
-        :meth:`~bayesplate.model.PlateModel.lowest_eigenvalue_bound`).
+        :meth:`~bayesplate.plate.model.PlateModel.lowest_eigenvalue_bound`).
         """
         lowest = model.lowest_eigenvalue_bound(b)
         scale = 0.1 * model.density * model.thickness * lowest

@@ -17,7 +17,7 @@ def reference_stiffness(model, b):
     """The spring that lifts a mode by about its own eigenvalue: ``lambda_1 m_plate``, N/m.
 
     ``lambda_1`` is the Rayleigh bound of the lowest eigenvalue
-    (:meth:`~bayesplate.model.PlateModel.lowest_eigenvalue_bound`), ``m_plate`` the
+    (:meth:`~bayesplate.plate.model.PlateModel.lowest_eigenvalue_bound`), ``m_plate`` the
     plate's mass.
     A spring ``k`` at ``(x, y)`` lifts mode ``i`` by ``k w_i(x, y)^2`` to first order, and
     ``w_i^2`` of a mass-normalised mode is of order ``1 / m_plate``.

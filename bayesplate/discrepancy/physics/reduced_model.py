@@ -23,7 +23,7 @@ import numpy as np
 import scipy.linalg
 import scipy.sparse
 
-from ...model import ModalResult
+from ...plate.model import ModalResult
 
 __all__ = [
     "CandidatePencil",

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...posterior import observed_eigenvalues
+from ...likelihood.posterior import observed_eigenvalues
 from ...quantities import hz_from_eigenvalue
 from .joint_fit import JointProblem
 from .mesh_error import unabsorbed

@@ -37,7 +37,7 @@ def diagnose_passes(run, pairing, rng, checked):
     Parameters
     ----------
     run : Run
-    pairing : bayesplate.pairing.Pairing
+    pairing : bayesplate.matching.pairing.Pairing
         The assignment settled at the start.
     rng : numpy.random.Generator
         A second pass starts from the same state as the first (whether or not the first

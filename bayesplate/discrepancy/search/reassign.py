@@ -5,7 +5,7 @@ under the nominal model (:func:`bayesplate.estimators.settle_pairing`,
 ``pairing="likelihood"``), or is the order (the default). A plate
 with an effect the nominal model leaves out may order its modes differently: the model
 that explains the recordings may explain them under another assignment. So, after a pass,
-the assignment is made again (:func:`bayesplate.assignment.most_probable`) at the fit the
+the assignment is made again (:func:`bayesplate.matching.assignment.most_probable`) at the fit the
 verdict rests on; where it differs, diagnose runs a second pass with it, and the two passes are
 compared on one scale: the evidence of every measured peak, paired or spurious,
 
@@ -13,8 +13,8 @@ compared on one scale: the evidence of every measured peak, paired or spurious,
 ``    + n_paired ln(1 - p_s) + n_spurious (ln p_s - ln lambda_B)``
 ``    + sum over the model's computed modes in the band [ln(1 - p_u) if observed, else ln p_u]``,
 
-the terms of :mod:`bayesplate.assignment`'s model with the pairs' Gaussian densities left to
-the Laplace evidence (in eigenvalues, as the fits' data are): a spurious peak is uniform over
+the terms of :mod:`bayesplate.matching.assignment`'s model with the pairs' Gaussian densities left
+to the Laplace evidence (in eigenvalues, as the fits' data are): a spurious peak is uniform over
 ``[0, lambda_B]``, ``lambda_B`` the eigenvalue of the band's upper end. The pass whose
 verdict model scores higher is kept (the maximum over the assignments tried, not a sum over
 all of them).
@@ -40,8 +40,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ...assignment import P_SPURIOUS, P_UNOBSERVED, assignment_terms, most_probable
-from ...pairing import Pairing
+from ...matching.assignment import P_SPURIOUS, P_UNOBSERVED, assignment_terms, most_probable
+from ...matching.pairing import Pairing
 from ...quantities import eigenvalue_from_hz
 
 __all__ = [
@@ -105,7 +105,7 @@ def full_modes(pairing, m):
 
 
 def pairing_of(assignment, how):
-    """The :class:`~bayesplate.pairing.Pairing` of an assignment (its spurious peaks left out)."""
+    """The :class:`Pairing` of an assignment (its spurious peaks left out)."""
     paired = assignment.paired
     measured = None if np.array_equal(paired, np.arange(assignment.modes.size)) else paired
     return Pairing(assignment.modes[paired], how=how, measured=measured, assignment=assignment)
@@ -114,7 +114,7 @@ def pairing_of(assignment, how):
 def fitted_assignment(model, fit, measured_Hz, sigma_Hz, n_modes, prior, start=None):
     """The most probable assignment under a fit's plate, and its computed frequencies (Hz).
 
-    :func:`bayesplate.assignment.most_probable` at the fit: the plate's eigenvalues are
+    :func:`bayesplate.matching.assignment.most_probable` at the fit: the plate's eigenvalues are
     linearised at the fit's constants, which are integrated out under the prior (so that a
     fit that a wrong assignment pulled away does not hold the assignment where it is), the
     fit's physics parameters held at their values.
@@ -135,7 +135,7 @@ def fitted_assignment(model, fit, measured_Hz, sigma_Hz, n_modes, prior, start=N
 
     Returns
     -------
-    assignment : bayesplate.assignment.Assignment
+    assignment : bayesplate.matching.assignment.Assignment
     computed_Hz : numpy.ndarray, shape (n_modes,)
     """
     plate = model if fit.physics is None else fit.physics.apply(model, fit.theta)
@@ -152,7 +152,7 @@ def assignment_log_prior(
 ):
     """The assignment's terms of ``ln p(all peaks | model, a)`` (module docstring), nats.
 
-    :func:`bayesplate.assignment.assignment_terms` with the model's computed modes in the
+    :func:`bayesplate.matching.assignment.assignment_terms` with the model's computed modes in the
     band and a spurious peak's range in eigenvalues.
 
     Parameters
@@ -162,7 +162,8 @@ def assignment_log_prior(
     computed_Hz : numpy.ndarray, shape (n,)
         The model's computed frequencies at its fit, ascending, Hz.
     band_Hz : float
-        Upper end of a spurious peak's range (:func:`bayesplate.assignment.spurious_band_Hz`).
+        Upper end of a spurious peak's range
+        (:func:`bayesplate.matching.assignment.spurious_band_Hz`).
     p_unobserved, p_spurious : float
     measured_Hz : numpy.ndarray, shape (m,)
         The measured frequencies: a computed mode is in the band up to the highest of them.
@@ -192,7 +193,7 @@ def check(model, fit, label, used, measured_Hz, sigma_Hz, prior):
     Reassignment
     log_prior : float
         :func:`assignment_log_prior` of `used` under this fit's plate.
-    assignment : bayesplate.assignment.Assignment
+    assignment : bayesplate.matching.assignment.Assignment
         The fit's own most probable one.
     """
     n = int(max(used.max(), len(used) - 1)) + 1 + EXTRA_MODES
@@ -223,7 +224,7 @@ def made_again(first, one_pass, model, pairing, measured, prior, say, settled):
     one_pass : callable
         ``one_pass(pairing) -> Diagnosis``: diagnose again with another assignment.
     model : PlateModel
-    pairing : bayesplate.pairing.Pairing
+    pairing : bayesplate.matching.pairing.Pairing
         The assignment of the first pass (by likelihood, or by order checked: the order then
         stands unless the assignment at the verdict's fit pairs a peak with another mode;
         peaks it only calls spurious in their own place are outliers the verdict weighs).

@@ -147,7 +147,7 @@ def fit_digest(fit):
 
 
 def plate_digest(model):
-    """The plate a :class:`~bayesplate.model.PlateModel` stands for: geometry, layup, mesh."""
+    """The plate a :class:`~bayesplate.plate.model.PlateModel` stands for: geometry, layup, mesh."""
     mesh = model.mesh
     return digest(
         type(model).__qualname__,

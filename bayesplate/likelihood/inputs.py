@@ -52,10 +52,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import laminate
-from .model import DEFAULT_MESH, PlateModel
-from .pairing import track
-from .quantities import engineering_covariance
+from .. import laminate
+from ..matching.pairing import track
+from ..plate.model import DEFAULT_MESH, PlateModel
+from ..quantities import engineering_covariance
 
 __all__ = [
     "INPUT_NAMES",

@@ -3,14 +3,14 @@
 The paper pairs the i-th measured peak with the i-th computed mode. A one-point tap test can
 miss a mode (a node at the point) or show a peak that is no bending mode, and the order then
 shifts every pair above it. The most probable assignment of frequencies
-(:mod:`bayesplate.assignment`) sees that, but made before the fit it can also explain a
+(:mod:`bayesplate.matching.assignment`) sees that, but made before the fit it can also explain a
 concealed defect away as missed modes and spurious peaks. So the answer (an estimate, the
 sampler's MAP, diagnose's verdict fit) is made by order, and the most probable assignment is
 made again at it:
 
 - it pairs every peak it pairs with its own mode
-  (:attr:`bayesplate.assignment.Assignment.keeps_order`): the order stands, the answer as it
-  is (a peak it calls spurious in its own place is an outlier of the fit, kept: diagnose is
+  (:attr:`bayesplate.matching.assignment.Assignment.keeps_order`): the order stands, the answer as
+  it is (a peak it calls spurious in its own place is an outlier of the fit, kept: diagnose is
   what weighs it);
 - it pairs a peak with another mode: the order is set aside and the answer made by
   likelihood (:func:`refuted_order` says why).
@@ -57,7 +57,7 @@ def assignment_at(case, model, b, covariance_b, pairing):
     """The most probable assignment at `b`, over a fixed pairing's modes, searched from it.
 
     What checks a pairing by order at an answer (:func:`checks_order`): the assignment by
-    likelihood (:func:`bayesplate.assignment.most_probable`) over the ``pairing.n_modes()``
+    likelihood (:func:`bayesplate.matching.assignment.most_probable`) over the ``pairing.n_modes()``
     lowest computed modes (all that a fast model made for that pairing holds), the constants
     integrated out over `covariance_b` centred at `b`.
 
@@ -75,7 +75,7 @@ def assignment_at(case, model, b, covariance_b, pairing):
 
     Returns
     -------
-    bayesplate.assignment.Assignment
+    bayesplate.matching.assignment.Assignment
     """
     b = np.asarray(b, dtype=float)
     extra = pairing.n_modes() - case.measured.size

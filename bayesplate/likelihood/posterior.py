@@ -30,11 +30,11 @@ full prior covariance do not. The paper's ``diag(d lambda)`` and ``diag(dC_ij)``
 shorthand for diagonal matrices of squared deviations. Both are the library defaults.
 
 Error scale (optional)
-    With ``error_scale`` (an :class:`bayesplate.error_scale.ErrorScalePrior`, the case's
+    With ``error_scale`` (an :class:`bayesplate.likelihood.error_scale.ErrorScalePrior`, the case's
     ``measured.error_scale``) the errors are ``e ~ N(0, s^2 V_Y)`` with one unknown scale
     ``s`` and a conjugate inverse-gamma prior on ``s^2``; :meth:`GaussianProblem.log_likelihood`
     is then the marginal over ``s^2``, a multivariate Student-t
-    (:func:`bayesplate.error_scale.log_marginal`). Without it, ``s = 1`` (unchanged).
+    (:func:`bayesplate.likelihood.error_scale.log_marginal`). Without it, ``s = 1`` (unchanged).
 
 The forward model is one callable, ``forward(b) -> ModalResult`` (anything with
 ``eigenvalues``, ``sensitivities`` and ``vectors`` for the requested modes), so a faster
@@ -50,10 +50,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import laminate
-from .forward import ForwardModel
-from .pairing import Pairing
-from .quantities import eigenvalue_from_hz, eigenvalue_sd, stiffness_covariance
+from .. import laminate
+from ..matching.pairing import Pairing
+from ..plate.forward import ForwardModel
+from ..quantities import eigenvalue_from_hz, eigenvalue_sd, stiffness_covariance
 
 __all__ = [
     "INPUT_TREATMENTS",
@@ -143,7 +143,7 @@ class Prediction:
     S : numpy.ndarray, shape (m, 6)
         Sensitivity rows ``d g_i / d b_j`` (eq. 28), rad^2/s^2 per Pa.
     modal : object
-        The forward result (a :class:`bayesplate.model.ModalResult`).
+        The forward result (a :class:`bayesplate.plate.model.ModalResult`).
     modes : numpy.ndarray of int, shape (m,)
         0-based computed elastic mode paired with each measured one.
     """
@@ -171,7 +171,7 @@ class GaussianProblem:
         ``forward(b, n_modes) -> ModalResult``; e.g. ``PlateModel.solve``.
     pairing : Pairing
         Which computed mode goes with which measured one.
-    error_scale : bayesplate.error_scale.ErrorScalePrior, optional
+    error_scale : bayesplate.likelihood.error_scale.ErrorScalePrior, optional
         Prior of a common scale ``s`` of the deviations (module docstring); None: ``s = 1``.
 
     Attributes
@@ -221,10 +221,10 @@ class GaussianProblem:
         ----------
         case : bayesplate.io.Case
         model : object
-            Has ``solve(b, n_modes)`` (a :class:`bayesplate.model.PlateModel`).
+            Has ``solve(b, n_modes)`` (a :class:`bayesplate.plate.model.PlateModel`).
         pairing : Pairing, optional
             Default: by order, or by the case's ``measured.mode`` indices when given. Measured
-            frequencies it leaves unpaired (:func:`bayesplate.pairing.pair_measured`) are
+            frequencies it leaves unpaired (:func:`bayesplate.matching.pairing.pair_measured`) are
             left out of ``Y``.
         observation, prior : str
             Conventions for ``V_Y`` and ``V_b`` (see the module docstring).
@@ -233,8 +233,8 @@ class GaussianProblem:
         inputs : {"exact", "marginal"}
             The plate's thickness, density, length and width as exact numbers, or with the
             case's deviations (``plate.*_sd``) marginalised to first order: ``V_Y`` gains
-            ``J_p Sigma_p J_p^T`` (:mod:`bayesplate.inputs`), so every constant's posterior
-            widens by the inputs' share. Needs ``model.mesh`` (a finite-element model's).
+            ``J_p Sigma_p J_p^T`` (:mod:`bayesplate.likelihood.inputs`), so every constant's
+            posterior widens by the inputs' share. Needs ``model.mesh`` (a finite-element model's).
         inputs_at : array_like, shape (6,), optional
             Stiffness coefficients (Pa) where ``J_p`` is evaluated; default the prior mean.
             Six full solves; none when every input deviation is 0.
@@ -318,7 +318,7 @@ class GaussianProblem:
         """``ln f(Y | b)`` of eq. 3, with its normalising constant.
 
         With an error scale, its marginal over ``s^2`` (a multivariate Student-t,
-        :func:`bayesplate.error_scale.log_marginal`).
+        :func:`bayesplate.likelihood.error_scale.log_marginal`).
         """
         prediction = prediction or self.predict(b)
         r = self.Y - prediction.g

@@ -13,12 +13,13 @@ import copy
 import numpy as np
 import scipy.sparse as sp
 
-from . import laminate, plate_bounds
-from .fem.assembly import Assembler
-from .fem.eigen import lowest_modes
-from .fem.element import TSDTRectangle
-from .fem.mesh import RectangularMesh
-from .fem.submatrix import SubPattern
+from .. import laminate
+from ..fem.assembly import Assembler
+from ..fem.eigen import lowest_modes
+from ..fem.element import TSDTRectangle
+from ..fem.mesh import RectangularMesh
+from ..fem.submatrix import SubPattern
+from . import plate_bounds
 from .modal import ModalResult
 
 __all__ = ["BOUNDARIES", "DEFAULT_MESH", "ModalResult", "PlateModel"]  # ModalResult from .modal
@@ -269,7 +270,7 @@ class PlateModel:
     def lowest_eigenvalue_bound(self, b):
         """Rayleigh-Ritz bound of the lowest elastic eigenvalue, rad^2/s^2, no solve.
 
-        :func:`bayesplate.plate_bounds.lowest_eigenvalue_bound` of this plate.
+        :func:`bayesplate.plate.plate_bounds.lowest_eigenvalue_bound` of this plate.
         """
         return plate_bounds.lowest_eigenvalue_bound(
             self.laminate(b),
@@ -406,7 +407,7 @@ class PlateModel:
     def eigenvalues(self, b, n_modes=14):
         """Lowest `n_modes` elastic eigenvalues at `b`, rad^2/s^2, shape (n_modes,).
 
-        The :class:`bayesplate.forward.ForwardModel` interface: the full model has no cheaper
+        The :class:`bayesplate.plate.forward.ForwardModel` interface: the full model has no cheaper
         path than :meth:`solve`.
         """
         return self.solve(b, n_modes).eigenvalues

@@ -1,6 +1,6 @@
 """The result of a modal solve: eigenvalues, mode shapes and their sensitivities.
 
-Made by the full model (:meth:`bayesplate.model.PlateModel.solve`) and, in the same form, by
+Made by the full model (:meth:`bayesplate.plate.model.PlateModel.solve`) and, in the same form, by
 the reduced and candidate models; kept apart from them so that a result needs no model.
 """
 
@@ -10,8 +10,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import laminate
-from .quantities import hz_from_eigenvalue
+from .. import laminate
+from ..quantities import hz_from_eigenvalue
 
 __all__ = ["ModalResult"]
 

@@ -1,6 +1,6 @@
 """Prior probabilities of the assignment from a tap test's own evidence.
 
-The most probable assignment (:mod:`bayesplate.assignment`) weighs, for each measured peak,
+The most probable assignment (:mod:`bayesplate.matching.assignment`) weighs, for each measured peak,
 the prior probability ``p_s`` that it is no bending mode of the plate (spurious) and, for
 each computed mode, the probability ``p_u`` that the test did not see it (unobserved).
 Flat constants treat a clean, strong, stable pole like a pole in a coherence dip, and the
@@ -30,11 +30,11 @@ mode and growing as it looks less so:
 **A mode unobserved** (:func:`unobserved_probability`): a one-point test misses a mode when
 its tap or sensor sits near one of the mode's nodal lines, and the lowest modes have the
 fewest: ``p_u`` rises with the mode's number, :data:`UNOBSERVED_STEP` per mode, up to
-:data:`bayesplate.assignment.P_UNOBSERVED`. Where the tap and sensor points are known, the
+:data:`bayesplate.matching.assignment.P_UNOBSERVED`. Where the tap and sensor points are known, the
 mode's amplitude there decides instead (:func:`unobserved_from_amplitude`).
 
 :func:`assignment_priors` gives the pair for a measurement: these where it carries its
-peaks' ``p_spurious``, the flat constants of :mod:`bayesplate.assignment` where not.
+peaks' ``p_spurious``, the flat constants of :mod:`bayesplate.matching.assignment` where not.
 
 Pure array computation.
 """
@@ -182,9 +182,9 @@ def assignment_priors(measured, n, amplitude=None):
     p_unobserved : float or numpy.ndarray, shape (n,)
         :func:`unobserved_from_amplitude` (up to :data:`P_NODE`) with `amplitude`, else
         :func:`unobserved_probability` with ``p_spurious``, else
-        :data:`~bayesplate.assignment.P_UNOBSERVED`.
+        :data:`~bayesplate.matching.assignment.P_UNOBSERVED`.
     p_spurious : float or numpy.ndarray, shape (m,)
-        The measurement's, else :data:`~bayesplate.assignment.P_SPURIOUS`.
+        The measurement's, else :data:`~bayesplate.matching.assignment.P_SPURIOUS`.
     """
     p_spurious = getattr(measured, "p_spurious", None)
     p_s = P_SPURIOUS if p_spurious is None else np.asarray(p_spurious, dtype=float)

@@ -5,14 +5,14 @@ A case file may instead name the 1-based elastic mode of each measured frequency
 (``measured.mode``). When it carries measured mode shapes (``points_mm`` and ``shapes``),
 :func:`pair_measured` pairs by shape and frequency together: the computed ``w`` at the
 measurement points against every measured shape (MAC), scored with the frequency residual
-(:func:`bayesplate.assignment.assign_with_shapes`), one-to-one by the Hungarian method over
+(:func:`bayesplate.matching.assignment.assign_with_shapes`), one-to-one by the Hungarian method over
 more computed modes than measured, so that a mode missing from the test or an extra one is
 tolerated; a measured mode that no computed mode resembles is left unpaired and dropped.
 Without shapes or mode numbers the default is pairing by order, the paper's, *checked*
 (:func:`checks_order`): the most probable assignment of frequencies
-(:mod:`bayesplate.assignment`) is made again at the answer, and where it is not the order
+(:mod:`bayesplate.matching.assignment`) is made again at the answer, and where it is not the order
 (a mode the test missed, a spurious peak) the answer is made by that assignment instead
-(:mod:`bayesplate.checked_order`);
+(:mod:`bayesplate.matching.checked_order`);
 the assignment by likelihood throughout is an option. While an
 estimator iterates, the computed modes can change order
 (two close frequencies cross); :func:`track` follows them from one iterate to the next by the
@@ -30,10 +30,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from ..plate.forward import ForwardModel
+from ..quantities import stiffness_covariance
 from .assignment import MAC_SCALE, assign_with_shapes, most_probable, predictive_sd_Hz
-from .forward import ForwardModel
 from .peak_prior import assignment_priors
-from .quantities import stiffness_covariance
 
 __all__ = [
     "DEFAULT_EXTRA_MODES",
@@ -203,7 +203,7 @@ class Pairing:
         MAC of every measured shape against every computed mode (``how == "mac"``).
     threshold : float, optional
         The MAC a pair had to reach.
-    assignment : bayesplate.assignment.Assignment, optional
+    assignment : bayesplate.matching.assignment.Assignment, optional
         ``how`` "likelihood" or "mac": the assignment it came from (unobserved modes,
         spurious peaks, its log-probability).
     """
@@ -321,7 +321,7 @@ def resolve_pairing(measured, how="auto"):
         ``"auto"``: by shape and frequency (MAC) when the measurement has shapes, else by its
         mode numbers when it has them, else by order (the paper's), which the estimators,
         the sampler and diagnose check at their answer
-        (:func:`bayesplate.checked_order.checks_order`).
+        (:func:`bayesplate.matching.checked_order.checks_order`).
         ``"likelihood"`` (the most probable assignment of frequencies made before the fit)
         is chosen by name, or by default for a measurement that carries each peak's
         ``p_spurious`` (a tap test imported with its poles' evidence, where spurious peaks
@@ -351,8 +351,8 @@ def shape_mac(measurement, model, vectors):
     ----------
     measurement : bayesplate.io.Measurement
         With ``points`` (p, 2) in m and ``shapes`` (m, p).
-    model : bayesplate.model.PlateModel
-        Evaluates ``w`` at the points (:meth:`~bayesplate.model.PlateModel.interpolation`).
+    model : bayesplate.plate.model.PlateModel
+        Evaluates ``w`` at the points (:meth:`~bayesplate.plate.model.PlateModel.interpolation`).
     vectors : array_like, shape (n_dofs, q)
         Computed mode shapes on all unknowns.
 
@@ -383,7 +383,7 @@ def pair_measured(
     Parameters
     ----------
     case : bayesplate.io.Case
-    model : bayesplate.model.PlateModel
+    model : bayesplate.plate.model.PlateModel
         Used for ``how`` "mac" and "likelihood" (one eigen solve at `b`, unless `modal` is
         given).
     b : array_like, shape (6,)
@@ -392,9 +392,9 @@ def pair_measured(
         ``"auto"``: by shape and frequency ("mac") when the case carries measured shapes,
         else by the case's mode numbers when it has them, else by order (see
         :func:`resolve_pairing`). ``"mac"``: the assignment maximising the MAC-and-frequency
-        score of :func:`bayesplate.assignment.assign_with_shapes` (``s_MAC`` =
-        :data:`bayesplate.assignment.MAC_SCALE`). ``"likelihood"``: by frequency, the most
-        probable assignment of :func:`bayesplate.assignment.most_probable` (a computed mode
+        score of :func:`bayesplate.matching.assignment.assign_with_shapes` (``s_MAC`` =
+        :data:`bayesplate.matching.assignment.MAC_SCALE`). ``"likelihood"``: by frequency, the most
+        probable assignment of :func:`bayesplate.matching.assignment.most_probable` (a computed mode
         may go unobserved, a measured peak may be spurious and is then left out).
     threshold : float
         Smallest MAC of an allowed pair; a measured mode that pairs with no computed mode
@@ -407,7 +407,7 @@ def pair_measured(
         Modes already computed at `b` (at least ``m + extra_modes`` of them to be safe).
     prior : tuple of array_like, optional
         ``(mu_b, V_b)``, the prior mean (Pa) and covariance (Pa^2) of ``b``: the constants'
-        uncertainty that :func:`bayesplate.assignment.most_probable` integrates over
+        uncertainty that :func:`bayesplate.matching.assignment.most_probable` integrates over
         ("likelihood") and that sets the computed frequencies' predictive deviations
         ("mac"); default ``b`` and the covariance of the case's prior (first order).
     start : Pairing, optional

@@ -46,7 +46,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.stats import t as student_t
 
-from .quantities import eigenvalue_from_hz, eigenvalue_sd, hz_from_eigenvalue, predictive_sd_Hz
+from ..quantities import eigenvalue_from_hz, eigenvalue_sd, hz_from_eigenvalue, predictive_sd_Hz
 
 __all__ = [
     "P_UNOBSERVED",

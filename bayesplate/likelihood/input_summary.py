@@ -1,7 +1,7 @@
 """The declared readings' posterior summarised: :class:`InputPosterior` from their draws.
 
-The draws are those of :func:`bayesplate.inputs_posterior.inputs_from_chain` (one per kept
-draw of the constants); the summary holds their mean, deviation and 94 % highest-density
+The draws are those of :func:`bayesplate.likelihood.inputs_posterior.inputs_from_chain` (one per
+kept draw of the constants); the summary holds their mean, deviation and 94 % highest-density
 interval, and :meth:`InputPosterior.table` gives them in case units (mm, g, kg/m^3).
 """
 

@@ -1,9 +1,9 @@
 """A common, unknown scale of the frequency deviations: its prior, posterior and marginal.
 
 The measured eigenvalues deviate from the model by ``e ~ N(0, s^2 V_Y)``, with ``V_Y`` from
-the declared deviations (:func:`bayesplate.posterior.observation_covariance`) and one unknown
-scale ``s > 0`` (dimensionless; ``s = 1``: the declared deviations are right). The prior is the
-conjugate inverse gamma on ``s^2``, ``s^2 ~ InvGamma(a, beta)`` (shape ``a``, scale ``beta``),
+the declared deviations (:func:`bayesplate.likelihood.posterior.observation_covariance`) and one
+unknown scale ``s > 0`` (dimensionless; ``s = 1``: the declared deviations are right). The prior is
+the conjugate inverse gamma on ``s^2``, ``s^2 ~ InvGamma(a, beta)`` (shape ``a``, scale ``beta``),
 stated by a lab as the median and the upper 95 % bound of ``s`` (:class:`ErrorScalePrior`).
 
 Marginal likelihood
@@ -220,7 +220,7 @@ def scale_from_draws(problem, samples_b, forward, rng=None, max_draws=4000):
 
     Parameters
     ----------
-    problem : bayesplate.posterior.GaussianProblem
+    problem : bayesplate.likelihood.posterior.GaussianProblem
         The sampled problem, with ``error_scale`` set.
     samples_b : numpy.ndarray, shape (n, 6)
         Kept draws of ``b``, Pa (``SamplingResult.samples_b``).
@@ -381,7 +381,7 @@ def linearised_at(problem, b, covariance_b=None):
 
     Parameters
     ----------
-    problem : bayesplate.posterior.GaussianProblem
+    problem : bayesplate.likelihood.posterior.GaussianProblem
         With ``error_scale`` set.
     b : array_like, shape (6,)
         The estimate, Pa.

@@ -3,7 +3,7 @@
 A forward model maps the lamina stiffness coefficients ``b = (C11, C22, C12, C66, C44, C55)``
 (Pa) to the lowest elastic eigenvalues ``lambda = (2 pi f)^2`` (rad^2/s^2) of the free plate,
 with their sensitivities ``d lambda / d b`` when asked for modes. The full finite-element model
-(:class:`bayesplate.model.PlateModel`), the reduced-basis model and the certified model (full
+(:class:`bayesplate.plate.model.PlateModel`), the reduced-basis model and the certified model (full
 where the reduced one is not certified) implement it; code that needs more of one of them (the
 mass matrix for MAC tracking, the certified box) asks for it through the interface below, never
 by probing attributes.

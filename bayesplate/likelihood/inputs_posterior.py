@@ -3,14 +3,14 @@
 The plate's inputs (thickness h, density rho or the weighed mass m, length a, width b) are
 read with the case's deviations. Write the independent readings as ``q = q0 + D z`` with
 ``z ~ N(0, I)`` (``D = diag(sd)``) and their effect on ``p = (h, rho, a, b)`` as
-``p - p0 = A z`` (:func:`bayesplate.inputs.input_sources`: ``A = diag(sd)``, or with a mass
-``rho = m / (a b h)`` linearised). The linear input model is
+``p - p0 = A z`` (:func:`bayesplate.likelihood.inputs.input_sources`: ``A = diag(sd)``, or with a
+mass ``rho = m / (a b h)`` linearised). The linear input model is
 
     ``Y = lambda(b) + B z + e``,   ``B = J_p A``,   ``e ~ N(0, V_Y)``,   ``z ~ N(0, I)``,
 
 with ``V_Y`` the declared eigenvalue covariance and ``J_p = d lambda / d p``
-(:func:`bayesplate.inputs.input_jacobian`, held fixed where the sampler's setup evaluated it:
-the marginal MAP).
+(:func:`bayesplate.likelihood.inputs.input_jacobian`, held fixed where the sampler's setup evaluated
+it: the marginal MAP).
 
 Collapsed (Rao-Blackwellised) sampling
     The joint posterior factorises, ``f(b, z | Y) = f(b | Y) f(z | b, Y)``. Under the linear
@@ -32,12 +32,12 @@ Collapsed (Rao-Blackwellised) sampling
     With an error scale (the case's ``measured.error_scale``) the sampled problem is
     ``Y ~ N(lambda(b), s^2 (V_Y + B B^T))``, i.e. ``e ~ N(0, s^2 V_Y)`` and
     ``z ~ N(0, s^2 I)``: one ``s`` per kept draw from ``s^2 | b, Y`` (inverse gamma with the
-    marginal chi-square, :func:`bayesplate.error_scale.draw_scale`), then ``z`` with the
+    marginal chi-square, :func:`bayesplate.likelihood.error_scale.draw_scale`), then ``z`` with the
     same mean and covariance ``s^2 C``.
 
 Readings reported are those the case declares (a deviation above 0), in case units (mm, g,
-kg/m^3; :mod:`bayesplate.input_summary`); a reading with no deviation has ``B`` column 0 and
-stays at its value.
+kg/m^3; :mod:`bayesplate.likelihood.input_summary`); a reading with no deviation has ``B`` column 0
+and stays at its value.
 
 Certificate
     :func:`linear_input_certificate`: at the estimate ``b``, each declared reading moved by
@@ -56,10 +56,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..matching.pairing import track
+from ..plate.model import DEFAULT_MESH, PlateModel
 from .input_summary import summarise_inputs
 from .inputs import input_sd, input_sources
-from .model import DEFAULT_MESH, PlateModel
-from .pairing import track
 
 __all__ = [
     "CERTIFICATE_FRACTION",
@@ -152,7 +152,7 @@ def input_conditional(J, A, V_Y, names, value, sd, at=None) -> InputConditional:
         ``d lambda / d (h, rho, a, b)``, rad^2/s^2 per SI unit.
     A : array_like, shape (4, 4)
         One deviation of each reading's effect on ``(h, rho, a, b)``
-        (:func:`bayesplate.inputs.input_sources`).
+        (:func:`bayesplate.likelihood.inputs.input_sources`).
     V_Y : array_like, shape (m, m)
         The declared eigenvalue covariance (without the inputs), rad^4/s^4.
     names : tuple of str
@@ -214,7 +214,7 @@ def inputs_from_chain(problem, samples_b, forward, conditional, rng, max_draws=4
 
     Parameters
     ----------
-    problem : bayesplate.posterior.GaussianProblem
+    problem : bayesplate.likelihood.posterior.GaussianProblem
         The sampled (marginal) problem: its ``Y``, pairing and error scale.
     samples_b : array_like, shape (n, 6)
         Kept draws of ``b``, Pa (``SamplingResult.samples_b``).
