@@ -1,9 +1,9 @@
-"""estimate's settings as an EstimateOptions object and as keywords: the same numbers."""
+"""estimate's settings as an EstimatorOptions object and as keywords: the same numbers."""
 
 import numpy as np
 import pytest
 
-from bayesplate.estimators import EstimateOptions, estimate
+from bayesplate.estimators import EstimatorOptions, estimate
 from bayesplate.io import bundled_case_path, load_case
 from bayesplate.plate.model import PlateModel
 
@@ -22,8 +22,8 @@ def test_options_object_and_keywords_give_the_same_estimate(plate1, method, pair
     mean = case.reference * np.array([1.1, 0.9, 1.1, 1.1, 0.9, 1.1])
     settings = dict(tol=1e-4, prior_mean=mean, prior_sd=0.2 * mean, pairing=pairing, forward="full")
     by_keywords = estimate(case, method, model=model, **settings)
-    by_object = estimate(case, method, model=model, options=EstimateOptions(**settings))
-    over = EstimateOptions(**{**settings, "tol": 1e-2, "pairing": "index"})
+    by_object = estimate(case, method, model=model, options=EstimatorOptions(**settings))
+    over = EstimatorOptions(**{**settings, "tol": 1e-2, "pairing": "index"})
     by_both = estimate(case, method, model=model, options=over, tol=1e-4, pairing=pairing)
     for other in (by_object, by_both):
         np.testing.assert_array_equal(other.b, by_keywords.b)
@@ -34,11 +34,11 @@ def test_options_object_and_keywords_give_the_same_estimate(plate1, method, pair
 
 
 def test_options_of_takes_fields_by_name_and_refuses_others():
-    base = EstimateOptions(tol=1e-4)
-    assert EstimateOptions.of(base) is base
-    assert EstimateOptions.of(base, pairing="order").pairing == "order"
-    assert EstimateOptions.of(base, pairing="order").tol == 1e-4
+    base = EstimatorOptions(tol=1e-4)
+    assert EstimatorOptions.of(base) is base
+    assert EstimatorOptions.of(base, pairing="order").pairing == "order"
+    assert EstimatorOptions.of(base, pairing="order").tol == 1e-4
     with pytest.raises(TypeError, match=r"estimate\(\) got unexpected keyword.*tolerance"):
         estimate(None, "B", tolerance=1e-3)
-    with pytest.raises(TypeError, match="must be a EstimateOptions"):
-        EstimateOptions.of({"tol": 1e-3})
+    with pytest.raises(TypeError, match="options must be a"):
+        EstimatorOptions.of({"tol": 1e-3})

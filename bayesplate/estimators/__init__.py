@@ -47,7 +47,7 @@ from .fast import (
     resolve_forward,
 )
 from .iteration import DEFAULT_MAX_ITER, TRACKING, run
-from .options import EstimateOptions
+from .options import EstimatorOptions
 from .result import METHODS, STATUSES, EstimateResult, FullModelCheck
 from .steps import b_step, mve_step
 
@@ -59,7 +59,7 @@ __all__ = [
     "Conventions",
     "CONVENTIONS",
     "resolve_conventions",
-    "EstimateOptions",
+    "EstimatorOptions",
     "EstimateResult",
     "FullModelCheck",
     "FitStatement",

@@ -17,13 +17,13 @@ from .assess import assess
 from .assignment_rounds import most_probable, settle_assignment
 from .conventions import resolve_conventions
 from .fast import case_fast_model, confirmed_run, modes_to_certify, resolve_forward
-from .options import EstimateOptions
+from .options import EstimatorOptions
 from .paired import estimate_paired
 from .result import METHODS
 
 log = logging.getLogger(__name__)
 
-__all__ = ["EstimateOptions", "OrderRefuted", "estimate", "estimate_on_fast", "settle_pairing"]
+__all__ = ["EstimatorOptions", "OrderRefuted", "estimate", "estimate_on_fast", "settle_pairing"]
 
 
 class OrderRefuted(Exception):
@@ -67,16 +67,16 @@ def estimate(
     method : {"B", "MVE", "MVE-mod"}
     model : PlateModel, optional
         Forward model; default ``PlateModel.from_case(case)`` (the case's mesh).
-    options : EstimateOptions, optional
+    options : EstimatorOptions, optional
         The stopping rule, conventions, prior, MVE-mod's stages, pairing, tracking and
-        forward model (default ``EstimateOptions()``).
+        forward model (default ``EstimatorOptions()``).
     fast : bayesplate.reduced.CertifiedModel, optional
         A fast model already built for this case (implies the fast path); see
         :func:`estimate_on_fast` to get it back enriched.
     rng : numpy.random.Generator or int, optional
         Seed of the fast model's design (default 0: the same model every time).
     **settings
-        Any field of :class:`~bayesplate.estimators.options.EstimateOptions` by name, over
+        Any field of :class:`~bayesplate.estimators.options.EstimatorOptions` by name, over
         `options`: ``tol`` (TOL of section 2.4), ``max_iter``, ``convention`` (``"paper"``,
         ``"consistent"`` or :class:`Conventions`), ``prior_mean`` and ``prior_sd`` (SI),
         ``stage1_tol``, ``stage2_factor``, ``stage2_sd`` (MVE-mod), ``pairing`` (``"auto"``,
@@ -93,9 +93,9 @@ def estimate(
     Raises
     ------
     TypeError
-        A keyword that is no field of :class:`~bayesplate.estimators.options.EstimateOptions`.
+        A keyword that is no field of :class:`~bayesplate.estimators.options.EstimatorOptions`.
     """
-    options = EstimateOptions.of(options, "estimate", **settings)
+    options = EstimatorOptions.of(options, "estimate", **settings)
     return assess(_estimate(case, method, model, options, fast=fast, rng=rng), case)
 
 
@@ -205,7 +205,7 @@ def estimate_on_fast(
         mean and checks the answer.
     fast : bayesplate.reduced.CertifiedModel, optional
         Built over the prior's box when not given (:func:`.fast.case_fast_model`).
-    options : EstimateOptions, optional
+    options : EstimatorOptions, optional
         As for :func:`estimate` (its ``forward`` is not used).
     rng : numpy.random.Generator or int, optional
         Seed of the build.
@@ -219,7 +219,7 @@ def estimate_on_fast(
     fast : CertifiedModel
         The fast model, enriched where the full model corrected it: share it.
     """
-    options = EstimateOptions.of(options, "estimate_on_fast", **settings)
+    options = EstimatorOptions.of(options, "estimate_on_fast", **settings)
     result, fast = _estimate_on_fast(case, method, model, fast, rng, options)
     return assess(result, case), fast
 

@@ -1,9 +1,11 @@
 """The settings of :func:`~bayesplate.estimators.estimate.estimate` in one frozen object.
 
-:class:`EstimateOptions` holds what an estimate runs by: its stopping rule and iteration cap,
-its conventions, its prior, MVE-mod's two stages, the pairing, the tracking and the forward
-model. :func:`~bayesplate.estimators.estimate.estimate` takes one as ``options``, and each
-field by name as a keyword over it (``estimate(case, "MVE", tol=1e-4)``): the keywords it
+:class:`EstimatorOptions` (the estimator's settings; :class:`bayesplate.run.EstimateOptions`
+is a whole run's: method, mesh, budget and these) holds what an estimate runs by: its
+stopping rule and iteration cap, its conventions, its prior, MVE-mod's two stages, the
+pairing, the tracking and the forward model.
+:func:`~bayesplate.estimators.estimate.estimate` takes one as ``options``, and each field by
+name as a keyword over it (``estimate(case, "MVE", tol=1e-4)``): the keywords it
 took before the object existed, with the same defaults and the same numbers.
 """
 
@@ -13,11 +15,11 @@ from dataclasses import dataclass, fields, replace
 
 from .iteration import DEFAULT_MAX_ITER
 
-__all__ = ["EstimateOptions"]
+__all__ = ["EstimatorOptions"]
 
 
 @dataclass(frozen=True, eq=False)
-class EstimateOptions:
+class EstimatorOptions:
     """How :func:`~bayesplate.estimators.estimate.estimate` runs: its settings.
 
     The case, the method, the model, a fast model and the seed are arguments of their own.
@@ -84,7 +86,7 @@ class EstimateOptions:
 
         Parameters
         ----------
-        options : EstimateOptions, optional
+        options : EstimatorOptions, optional
         caller : str
             Name of the function, for the messages.
         **overrides
@@ -92,12 +94,12 @@ class EstimateOptions:
 
         Returns
         -------
-        EstimateOptions
+        EstimatorOptions
 
         Raises
         ------
         TypeError
-            An override that is no field of :class:`EstimateOptions`, or `options` of
+            An override that is no field of :class:`EstimatorOptions`, or `options` of
             another type.
         """
         unknown = sorted(set(overrides) - {f.name for f in fields(cls)})
