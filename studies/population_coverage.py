@@ -246,14 +246,15 @@ def main(out_dir=None, quick=False, replicates=None, seed0=4200, workers=2, n_pl
     if quick:
         return _summary([_safe_replicate(s, n_plates) for s in seeds])
     load = " ".join(f"{x:.2f}" for x in os.getloadavg())
+    version = code_version()  # the rows' code: commits made while it runs do not count
     started = time.perf_counter()
-    rows = run(seeds, n_plates, workers, cache_path(n_plates))
+    rows = run(seeds, n_plates, workers, cache_path(n_plates, version))
     summary = _summary(rows)
     if out_dir is not None:
         run_info = {
             "when": utc_now(),
             "load": load,
-            "version": code_version(),
+            "version": version,
             "wall": time.perf_counter() - started,
             "workers": workers,
         }
@@ -324,7 +325,8 @@ def _write(out, s, n_plates, info):
         f"Target 94 %, accepted 90-97 % (pooled over constants). A calibrated interval would "
         f"give {lo:.1f}-{hi:.1f} % pooled over {6 * s['n']} intervals (two binomial sd; the "
         "six constants of a replicate are not independent, so the band is a little wider). "
-        f"Chains: {s['converged']} of {s['n'] - len(s['failed'])} met the stopping rule; "
+        f"Chains: {s['converged']} of {s['n'] - len(s['failed'])} met the stopping rule within "
+        f"{CHAIN['max_steps']} steps (the others' intervals are counted as they are); "
         f"largest R-hat {s['rhat_max']:.4f}, smallest bulk ESS {s['ess_min']:.0f}; "
         f"{s['refined']} plate fits linearised again.",
     ]
