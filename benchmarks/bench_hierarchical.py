@@ -84,7 +84,9 @@ def write_report(bench, info, mesh, out_dir):
         f"Load average (1, 5, 15 min) at start and after each stage: {load} (a shared machine: "
         "the times are upper bounds of an idle one's).",
         "",
-        f"Ten synthetic plates, {mesh[0]} x {mesh[1]} mesh, 8 frequencies, 0.5 % noise, seed "
+        f"Ten synthetic plates, {mesh[0]} x {mesh[1]} mesh, 8 frequencies, 0.5 % noise, each "
+        "frequency labelled with its mode (as `studies/population_coverage.py` makes them, so "
+        "each plate is paired by its labels, not by likelihood over assignments), seed "
         f"{SEED} (`python benchmarks/bench_hierarchical.py`). One run of each stage.",
         "",
         "| stage | wall time (s) |",
