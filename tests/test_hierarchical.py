@@ -374,3 +374,24 @@ def test_mixture_in_y_puts_both_forms_on_one_level(study, rng):
     # at the plate's own point and no spread, the z form is the b form's likelihood there
     q = lap.z0 @ (lap.h - 0.5 * lap.H @ lap.z0)
     np.testing.assert_allclose(q + plates.offset[0], loglik(lap.z0), rtol=1e-12)
+
+
+@pytest.mark.slow
+def test_batch_population_step_writes_the_population(case_files, tmp_path, capsys):
+    """``batch --steps population``: the folder's cases as one population, as ``--hierarchical``."""
+    import json
+    from pathlib import Path
+
+    from bayesplate.cli.main import main
+
+    out = tmp_path / "out"
+    argv = ["batch", str(case_files[0].parent), "-o", str(out), "--steps", "population"]
+    argv += ["--seed", "1", "--workers", "2", "--min-ess", "400", "--max-steps", "20000"]
+    assert main(argv) == 0
+    assert "4 plates of one material" in capsys.readouterr().out
+    doc = json.loads((out / "population.json").read_text())
+    assert doc["status"] == "converged" and len(doc["plates"]) == 4
+    names = sorted(Path(p["file"]).name for p in doc["plates"])
+    assert names == sorted(f.name for f in case_files)
+    assert (out / "population.nc").stat().st_size > 0
+    assert (out / "population.png").stat().st_size > 0

@@ -16,8 +16,9 @@ from .options import (
 
 __all__ = ["register"]
 
-#: :data:`bayesplate.batch.STEPS`, spelled here so that ``--help`` imports no numerics.
-STEP_CHOICES = ("estimate", "sample", "diagnose")
+#: :data:`bayesplate.batch.STEPS`, spelled here so that ``--help`` imports no numerics, and
+#: ``population``: every case as one plate of a population (``sample --hierarchical``).
+STEP_CHOICES = ("estimate", "sample", "diagnose", "population")
 
 
 def steps_list(text):
@@ -32,11 +33,43 @@ def steps_list(text):
 
 
 def run(args):
-    """Run the batch; the exit status is 1 when any case failed (the others finished)."""
+    """Run the batch; the exit status is 1 when any case failed (the others finished).
+
+    The ``population`` step runs after the per-case steps, on all the cases at once.
+    """
+    per_case = tuple(s for s in args.steps if s != "population")
+    status = run_cases(args, per_case) if per_case else 0
+    if "population" in args.steps:
+        status = max(status, run_population_step(args))
+    return status
+
+
+def run_population_step(args):
+    """The cases as one population: ``OUT/population.json``, ``.nc`` and ``population.png``."""
+    import pathlib
+
+    from ..batch.run import find_cases
+    from ..io import load_case
+    from .sample_plates import run_population
+
+    out = pathlib.Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    cases = [load_case(path) for path in find_cases(args.cases)]
+    population = argparse.Namespace(**vars(args))
+    population.json = str(out / "population.json")
+    population.out = str(out / "population.nc")
+    population.output = str(out)
+    population.full = args.forward == "full"
+    population.inputs = None
+    return run_population(population, cases)
+
+
+def run_cases(args, steps):
+    """The per-case steps on the Dask cluster; 1 when any case failed."""
     from ..batch import BatchOptions, run_batch
 
     options = BatchOptions(
-        steps=args.steps,
+        steps=steps,
         mesh=mesh_of(args),
         method=args.method,
         forward=args.forward,
@@ -72,7 +105,9 @@ def register(sub):
         "single-case command's --json), OUT/summary.csv (summary.parquet with pyarrow) and "
         "OUT/summary.png. A re-run skips every step whose case file and options are "
         "unchanged; a failed case is recorded with its reason and the others go on (exit "
-        "status 1 when any failed). Progress goes to standard error.",
+        "status 1 when any failed). The step population takes every case as one plate of a "
+        "material (as sample --hierarchical): OUT/population.json, population.nc and "
+        "population.png. Progress goes to standard error.",
     )
     p.add_argument(
         "cases",
