@@ -17,6 +17,7 @@ NUMERICS = (
     "quantities",
     "laminate",
     "parallel",
+    "settings",
     "fem",
     "plate",
     "matching",
@@ -27,7 +28,7 @@ NUMERICS = (
     "discrepancy",
 )
 #: The numerics' root modules, which everything uses: they import no group below.
-ROOT = ("quantities", "laminate", "parallel")
+ROOT = ("quantities", "laminate", "parallel", "settings")
 #: The root's groups by idea, in order: each imports only the root, ``fem`` and the groups
 #: before it (the plate model; matching measured peaks with its modes; the likelihood).
 GROUPS = ("plate", "matching", "likelihood")

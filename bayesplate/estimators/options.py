@@ -11,8 +11,9 @@ took before the object existed, with the same defaults and the same numbers.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass
 
+from ..settings import with_overrides
 from .iteration import DEFAULT_MAX_ITER
 
 __all__ = ["EstimatorOptions"]
@@ -102,11 +103,4 @@ class EstimatorOptions:
             An override that is no field of :class:`EstimatorOptions`, or `options` of
             another type.
         """
-        unknown = sorted(set(overrides) - {f.name for f in fields(cls)})
-        if unknown:
-            raise TypeError(f"{caller}() got unexpected keyword argument(s) {', '.join(unknown)}")
-        if options is None:
-            return cls(**overrides)
-        if not isinstance(options, cls):
-            raise TypeError(f"{caller}(): options must be a {cls.__name__}, not {type(options)}")
-        return replace(options, **overrides) if overrides else options
+        return with_overrides(cls, options, caller, overrides)

@@ -11,8 +11,9 @@ object existed, with the same defaults and the same numbers.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass
 
+from ..settings import with_overrides
 from .certify import DEFAULT_TOLERANCE
 
 __all__ = ["FastModelOptions"]
@@ -113,14 +114,7 @@ class FastModelOptions:
             An override that is no field of :class:`FastModelOptions`, or `options` of
             another type.
         """
-        unknown = sorted(set(overrides) - {f.name for f in fields(cls)})
-        if unknown:
-            raise TypeError(f"{caller}() got unexpected keyword argument(s) {', '.join(unknown)}")
-        if options is None:
-            return cls(**overrides)
-        if not isinstance(options, cls):
-            raise TypeError(f"{caller}(): options must be a {cls.__name__}, not {type(options)}")
-        return replace(options, **overrides) if overrides else options
+        return with_overrides(cls, options, caller, overrides)
 
     def build_settings(self):
         """The keywords of :meth:`~bayesplate.reduced.model.ReducedModel.build` among these."""

@@ -11,25 +11,15 @@ keywords it took before the objects existed, with the same defaults and the same
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, fields
+
+from ..settings import with_overrides
 
 __all__ = ["TUNE_ROUNDS", "TUNE_STEPS", "ChainOptions", "SetupOptions"]
 
 #: Tuning of the Laplace proposal: rounds and steps per round (discarded afterwards).
 TUNE_ROUNDS = 3
 TUNE_STEPS = 30
-
-
-def _of(cls, options, caller, overrides):
-    """`options` (default: ``cls()``) with `overrides`, each a field's name; else a TypeError."""
-    unknown = sorted(set(overrides) - {f.name for f in fields(cls)})
-    if unknown:
-        raise TypeError(f"{caller}() got unexpected keyword argument(s) {', '.join(unknown)}")
-    if options is None:
-        return cls(**overrides)
-    if not isinstance(options, cls):
-        raise TypeError(f"{caller}(): options must be a {cls.__name__}, not {type(options)}")
-    return replace(options, **overrides) if overrides else options
 
 
 @dataclass(frozen=True)
@@ -126,7 +116,7 @@ class ChainOptions:
         TypeError
             An override that is no field of :class:`ChainOptions`.
         """
-        return _of(cls, options, caller, overrides)
+        return with_overrides(cls, options, caller, overrides)
 
 
 @dataclass(frozen=True, eq=False)
@@ -220,7 +210,7 @@ class SetupOptions:
         TypeError
             An override that is no field of :class:`SetupOptions`.
         """
-        return _of(cls, options, caller, overrides)
+        return with_overrides(cls, options, caller, overrides)
 
 
 #: The names of :class:`ChainOptions`' fields (:func:`~.pipeline.sample` parts its keywords).

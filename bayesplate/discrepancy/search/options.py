@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, fields
 
+from ...settings import with_overrides
 from .mesh_error import MESH_ERROR_PARTS
 from .nominal import N_STARTS
 
@@ -86,12 +87,10 @@ class DiagnoseOptions:
         Raises
         ------
         TypeError
-            An override that is no field of :class:`DiagnoseOptions`.
+            An override that is no field of :class:`DiagnoseOptions`, or `options` of
+            another type.
         """
-        unknown = sorted(set(overrides) - {f.name for f in fields(cls)})
-        if unknown:
-            raise TypeError(f"diagnose() got unexpected keyword argument(s) {', '.join(unknown)}")
-        return replace(options if options is not None else cls(), **overrides)
+        return with_overrides(cls, options, "diagnose", overrides)
 
     def store_key(self):
         """What of the options the stored stages depend on (:mod:`.store`), as before."""
