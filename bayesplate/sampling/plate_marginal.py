@@ -47,7 +47,7 @@ import numpy as np
 from scipy.special import logsumexp
 
 from .. import laminate
-from .population import _gradient, _integrated, component_log_weights, component_spreads
+from .population import component_log_weights, component_spreads, marginal_log_likelihood
 
 __all__ = [
     "NEWTON_STEPS",
@@ -68,21 +68,24 @@ MAX_STEP = 3.0
 
 def coordinates(c):
     """``y = (C11, C22, C12, C66, 1 / C44, 1 / C55)`` of engineering constants `c` (..., 6), SI."""
-    b = laminate.stiffness_from_engineering(c)
+    return _of_stiffness(laminate.stiffness_from_engineering(c))
+
+
+def _of_stiffness(b):
+    """``y`` of stiffness coefficients `b` (..., 6)."""
     return np.concatenate([b[..., :4], 1.0 / b[..., 4:]], axis=-1)
 
 
-def coordinates_jacobian(c):
-    """``d y / d z`` at engineering constants `c` (``z = ln c``), shape (..., 6, 6)."""
+def coordinates_jacobian(c, b=None):
+    """``d y / d z`` at engineering constants `c` (``z = ln c``), shape (..., 6, 6).
+
+    `b`: their stiffness coefficients, when the caller has them already.
+    """
     c = np.asarray(c, dtype=float)
     J = laminate.stiffness_jacobian(c) * c[..., None, :]
-    b = laminate.stiffness_from_engineering(c)
-    return (
-        J
-        * np.concatenate([np.ones(c.shape[:-1] + (4,)), -1.0 / b[..., 4:] ** 2], axis=-1)[
-            ..., :, None
-        ]
-    )
+    b = laminate.stiffness_from_engineering(c) if b is None else b
+    dy_db = np.concatenate([np.ones(c.shape[:-1] + (4,)), -1.0 / b[..., 4:] ** 2], axis=-1)
+    return J * dy_db[..., :, None]
 
 
 def stiffness_per_coordinate(b):
@@ -91,22 +94,22 @@ def stiffness_per_coordinate(b):
     return np.concatenate([np.ones(b.shape[:-1] + (4,)), -(b[..., 4:] ** 2)], axis=-1)
 
 
-def _terms(m, s, u, A, a, with_M=True):
+def _terms(m, s, u, A, a):
     """``F(u)``, its gradient in ``u`` and ``M = I + s J^T A J s`` (broadcast (..., 6))."""
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # far points: -inf
-        return _terms_at(m, s, u, A, a, with_M)
+        return _terms_at(m, s, u, A, a)
 
 
-def _terms_at(m, s, u, A, a, with_M):
+def _terms_at(m, s, u, A, a):
     c = np.exp(m + s * u)
     b = laminate.stiffness_from_engineering(c)
-    y = np.concatenate([b[..., :4], 1.0 / b[..., 4:]], axis=-1)
-    Js = coordinates_jacobian(c) * s[..., None, :]  # d y / d u
+    y = _of_stiffness(b)
+    Js = coordinates_jacobian(c, b) * s[..., None, :]  # d y / d u
     JsT = np.swapaxes(Js, -1, -2)
     Ay = (A @ y[..., None])[..., 0]
     log_l = np.sum(y * (a - 0.5 * Ay), axis=-1)
     grad = (JsT @ (a - Ay)[..., None])[..., 0] - u
-    M = np.eye(6) + JsT @ A @ Js if with_M else None
+    M = np.eye(6) + JsT @ A @ Js
     ok = laminate.is_physical(b) & np.isfinite(log_l) & np.all(np.isfinite(grad), axis=-1)
     return np.where(ok, log_l - 0.5 * np.sum(u * u, axis=-1), -np.inf), grad, M, ok
 
@@ -235,8 +238,8 @@ def mixture_y(log_mu, tau, plates, prior, scale):
     each[..., 0] = own + weights[0]
     if np.isfinite(weights[1:]).any():
         wide = component_spreads(tau, scale)[:, None, 1:, :]  # (n, 1, 7, 6)
-        q, r = _gradient(log_mu[:, None, None, :], plates.H[None, :, None], plates.h[None, :, None])
-        z_form = _integrated(q, r, wide, plates.H[None, :, None])
+        H, h = plates.H[None, :, None], plates.h[None, :, None]
+        z_form = marginal_log_likelihood(log_mu[:, None, None, :], wide, H, h)
         each[..., 1:] = z_form + plates.offset[None, :, None] + weights[1:]
     else:
         each[..., 1:] = -np.inf
