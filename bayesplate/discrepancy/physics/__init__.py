@@ -12,6 +12,7 @@ it could sit (:mod:`.location`, :mod:`.ritz_scan`) and has a reduced form
 - ``elastic_foundation``: a soft support under the whole plate
 - ``local_stiffness_loss``: a rectangular region that lost stiffness (located)
 - ``cutout``: a circular through-hole (located)
+- ``cut_corner``: a corner cut off, the triangle across it
 - ``point_support``: a transverse spring at a point (located)
 - ``combined``: two effects at once, as one candidate
 - ``reduced_model``: a modified plate solved in a small Ritz basis
