@@ -16,6 +16,7 @@ from bayesplate.discrepancy import (
 )
 from bayesplate.discrepancy.physics.base import plate_symmetries
 from bayesplate.discrepancy.physics.combined import Pair
+from bayesplate.discrepancy.physics.delamination import Delamination
 from bayesplate.discrepancy.physics.local_stiffness_loss import area_fractions
 from bayesplate.plate.model import PlateModel
 
@@ -32,7 +33,14 @@ def _f(model, n=8):
     return model.solve(B_REF, n).frequency_Hz
 
 
-@pytest.mark.parametrize("physics", candidates(), ids=lambda c: f"{c.name}")
+def _every_candidate():
+    """``candidates()`` and those not registered there yet (each once)."""
+    registered = candidates()
+    names = {c.name for c in registered}
+    return [*registered, *(c for c in [Delamination()] if c.name not in names)]
+
+
+@pytest.mark.parametrize("physics", _every_candidate(), ids=lambda c: f"{c.name}")
 def test_parameters_have_units_priors_and_bounds(physics):
     model = _model()
     params = physics.parameters(model, B_REF)
@@ -50,6 +58,7 @@ def test_parameters_have_units_priors_and_bounds(physics):
         (PlyMisalignment(), [0.0]),
         (ElasticFoundation(), [0.0]),
         (LocalStiffnessLoss(), [50.0, 26.5, 20.0, 10.0, 1.0]),
+        (Delamination(), [50.0, 26.5, 20.0, 10.0, 1.0]),
         (Cutout(), [31.0, 17.0, 0.0]),
         (PointSupport(), [-np.inf, 30.0, 20.0]),
     ],
@@ -197,7 +206,7 @@ def _generic_theta(physics, model):
 @pytest.mark.parametrize(
     "physics",
     [
-        *candidates(),
+        *_every_candidate(),
         Pair(PointMass(), ThicknessTaper("x"), B_REF),
         Pair(PlyMisalignment(), Cutout(), B_REF),
         Pair(PointSupport(), PointMass(), B_REF),

@@ -11,6 +11,7 @@ it could sit (:mod:`.location`, :mod:`.ritz_scan`) and has a reduced form
 - ``ply_misalignment``: every ply turned by the same small angle
 - ``elastic_foundation``: a soft support under the whole plate
 - ``local_stiffness_loss``: a rectangular region that lost stiffness (located)
+- ``delamination``: a rectangular region that lost transverse shear stiffness (located)
 - ``cutout``: a circular through-hole (located)
 - ``cut_corner``: a corner cut off, the triangle across it
 - ``point_support``: a transverse spring at a point (located)

@@ -17,7 +17,8 @@ __all__ = [
     "stiffness_loss_scan",
 ]
 
-#: The matrix-dominated coefficients that the factor multiplies: C22, C12, C66, C44, C55.
+#: Which of ``(C11, C22, C12, C66, C44, C55)`` a local stiffness loss keeps (1) rather than
+#: multiplies by its factor (0): the factor takes the matrix-dominated C22, C12, C66, C44, C55.
 _KEPT = np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
 
 
@@ -52,18 +53,25 @@ class LocalStiffnessLoss(Physics):
     frequencies vary smoothly with position and size. Kept linear in the lamina
     coefficients: ``K_j -> K_j + (d_j - 1) sum_e frac_e K_j^e``.
 
+    A subclass changes which coefficients the factor multiplies through :attr:`kept` (and
+    its priors and scan grid); everything else is shared (:mod:`.delamination`).
+
     Attributes
     ----------
+    kept : numpy.ndarray, shape (6,)
+        1 for the coefficients of ``(C11, C22, C12, C66, C44, C55)`` left as they are, 0 for
+        those the factor multiplies (here all but C11).
     scan_sizes : tuple of (float, float)
         Patch sides the scan tries, as fractions of the plate's sides ``(a, b)``.
     scan_factors : tuple of float
-        Fractions of ``C22, C12, C66, C44, C55`` kept that the scan tries.
+        Fractions of the multiplied coefficients kept that the scan tries.
     scan_stride : int
         The scan tries every ``scan_stride``-th element centre each way.
     """
 
     name = "local_stiffness_loss"
     description = "a rectangular region keeping a fraction of E2, G12, G13, G23"
+    kept = _KEPT
     scan_sizes = ((0.1, 0.1), (0.2, 0.2), (0.4, 0.4), (0.2, 0.4), (0.4, 0.2))
     scan_factors = (0.2, 0.4, 0.6, 0.8, 0.9)
     scan_stride = 2
@@ -86,7 +94,8 @@ class LocalStiffnessLoss(Physics):
         inside = np.flatnonzero(frac > 0)
         if inside.size == 0:
             return model
-        multiplier = _KEPT + (1.0 - _KEPT) * factor
+        kept = np.asarray(self.kept, dtype=float)
+        multiplier = kept + (1.0 - kept) * factor
         terms = model.element_stiffness_terms()
         region = [
             model.assembler.element_data(inside, frac[inside, None, None] * Ke[None])
@@ -104,7 +113,7 @@ class LocalStiffnessLoss(Physics):
         difference in a place or a side only the elements along the edges that moved.
         """
         terms, constant, mass = project(model, basis)
-        lost = np.flatnonzero(_KEPT == 0.0)
+        lost = np.flatnonzero(np.asarray(self.kept, dtype=float) == 0.0)
         region = RegionProjection(model, basis, model.element_stiffness_terms()[lost])
         zero = np.zeros_like(constant)
 
@@ -140,14 +149,26 @@ class LocalStiffnessLoss(Physics):
 
     def location_map(self, model, paired, b, residual_whitened, sigma_lambda, projector):
         """A small loss at each element (:func:`stiffness_loss_map`)."""
-        return stiffness_loss_map(model, paired, b, residual_whitened, sigma_lambda, projector)
+        return stiffness_loss_map(
+            model, paired, b, residual_whitened, sigma_lambda, projector, kept=self.kept
+        )
 
     def scan(self, model, basis, b, Y, sigma, modes, projector):
         """Every ``scan_stride``-th element centre, ``scan_sizes`` and ``scan_factors``."""
         a_mm, b_mm = 1e3 * model.mesh.a, 1e3 * model.mesh.b
         sizes = [(a_mm * sx, b_mm * sy) for sx, sy in self.scan_sizes]
         return stiffness_loss_scan(
-            model, basis, b, Y, sigma, modes, projector, sizes, self.scan_factors, self.scan_stride
+            model,
+            basis,
+            b,
+            Y,
+            sigma,
+            modes,
+            projector,
+            sizes,
+            self.scan_factors,
+            self.scan_stride,
+            kept=self.kept,
         )
 
 
@@ -172,11 +193,12 @@ def element_energies(model, paired, weights):
     return np.einsum("eai,ab,ebi->ie", q, Ke, q)
 
 
-def stiffness_loss_map(model, result, b, residual_whitened, sigma_lambda, projector):
-    """Map of a local loss of the matrix-dominated stiffness at each element.
+def stiffness_loss_map(model, result, b, residual_whitened, sigma_lambda, projector, kept=_KEPT):
+    """Map of a local loss of stiffness at each element.
 
     Column ``e``: ``d lambda_i / d alpha_e = -a_i^T K_loss^e a_i`` for losing a fraction
-    ``alpha`` of ``C22, C12, C66, C44, C55`` in element ``e``.
+    ``alpha`` of the coefficients ``kept`` does not keep (by default the matrix-dominated
+    ``C22, C12, C66, C44, C55``) in element ``e``.
 
     Parameters
     ----------
@@ -188,13 +210,16 @@ def stiffness_loss_map(model, result, b, residual_whitened, sigma_lambda, projec
     residual_whitened : numpy.ndarray, shape (m,)
     sigma_lambda : numpy.ndarray, shape (m,)
     projector : numpy.ndarray, shape (m, m)
+    kept : array_like, shape (6,)
+        1 for the coefficients the loss leaves, 0 for those it takes
+        (:attr:`LocalStiffnessLoss.kept`).
 
     Returns
     -------
     LocationMap
         On the element centres, shape ``(ny, nx)``.
     """
-    weights = np.asarray(b, dtype=float) * np.array([0, 1, 1, 1, 1, 1])
+    weights = np.asarray(b, dtype=float) * (1.0 - np.asarray(kept, dtype=float))
     energy = element_energies(model, result, weights)
     mesh = model.mesh
     return effect_map(
@@ -207,8 +232,10 @@ def stiffness_loss_map(model, result, b, residual_whitened, sigma_lambda, projec
     )
 
 
-def stiffness_loss_scan(model, basis, b, Y, sigma, modes, projector, sizes_mm, factors, stride=2):
-    """Scan a patch that lost matrix-dominated stiffness over centres, sizes and factors.
+def stiffness_loss_scan(
+    model, basis, b, Y, sigma, modes, projector, sizes_mm, factors, stride=2, kept=_KEPT
+):
+    """Scan a patch that lost stiffness over centres, sizes and factors.
 
     In the Ritz basis: ``(Lambda - (1 - factor) Phi^T K_loss Phi) q = lambda q``. The patch
     is made of whole elements (those whose centre lies inside); centres are element centres
@@ -228,8 +255,11 @@ def stiffness_loss_scan(model, basis, b, Y, sigma, modes, projector, sizes_mm, f
         Onto what the constants cannot absorb (:func:`.location.absorbable_projector`).
     sizes_mm : sequence of (dx_mm, dy_mm)
     factors : array_like
-        Fractions of ``C22, C12, C66, C44, C55`` kept inside.
+        Fractions of the coefficients ``kept`` does not keep (by default ``C22, C12, C66,
+        C44, C55``) left inside.
     stride : int
+    kept : array_like, shape (6,)
+        1 for the coefficients the loss leaves, 0 for those it takes.
 
     Returns
     -------
@@ -237,7 +267,8 @@ def stiffness_loss_scan(model, basis, b, Y, sigma, modes, projector, sizes_mm, f
         ``theta = (x_mm, y_mm, dx_mm, dy_mm, factor)``.
     """
     mesh = model.mesh
-    Ke = np.einsum("j,jab->ab", np.asarray(b) * (1.0 - _KEPT), model.element_stiffness_terms())
+    lost = np.asarray(b) * (1.0 - np.asarray(kept, dtype=float))
+    Ke = np.einsum("j,jab->ab", lost, model.element_stiffness_terms())
     q = basis.vectors[mesh.element_dofs]  # (n_el, 32, n)
     reduced = q.transpose(0, 2, 1) @ (Ke @ q)
     ix = np.floor(mesh.centroids[:, 0] / mesh.dx).astype(int)
