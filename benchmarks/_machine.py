@@ -16,10 +16,11 @@ import tempfile
 
 import numpy as np
 
-# the studies' helper dates their reports; the benchmarks date theirs by the same function
-# (appended, not put first: the studies' modules never shadow another import)
-sys.path.append(str(pathlib.Path(__file__).resolve().parents[1] / "studies"))
-from _study_host import utc_now  # noqa: E402
+# the studies' helper dates their reports; the benchmarks date theirs by the same function.
+# The repository's root is appended, not put first: a base checkout on PYTHONPATH keeps its
+# own package, and the studies (a package there) are found after it
+sys.path.append(str(pathlib.Path(__file__).resolve().parents[1]))
+from studies._study_host import utc_now  # noqa: E402
 
 __all__ = ["add_base_arguments", "base_checkout", "commit", "machine", "utc_now"]
 

@@ -54,10 +54,8 @@ def one(index, workers, quick=False, mesh=None, frequencies=None):
     working mesh, or only the lowest ``frequencies`` recorded (the scaling rows).
     """
 
-    sys.path.insert(0, str(ROOT / "studies"))
-    from concealment import NOISE, SEED, blind_recording, scenarios
-
     from bayesplate.discrepancy.diagnose import diagnose
+    from studies.concealment import NOISE, SEED, blind_recording, scenarios
 
     label, _, size, _ = scenarios()[index]
     blind, model = blind_recording(index, quick, mesh)
@@ -322,8 +320,7 @@ if __name__ == "__main__":
         mesh = tuple(int(v) for v in args.mesh.split("x")) if args.mesh else None
         one(args.one, args.workers, args.quick, mesh, args.frequencies)
     else:
-        sys.path.insert(0, str(ROOT / "studies"))
-        from concealment import scenarios
+        from studies.concealment import scenarios
 
         runs = args.runs if args.runs is not None else list(range(len(scenarios())))
         main(

@@ -36,8 +36,7 @@ TRUE_TAU = np.array([0.04, 0.05, 0.04, 0.03, 0.06, 0.06])
 
 def cases(mesh):
     """The ten plates' cases (their constants drawn around TRUE_MU with TRUE_TAU)."""
-    sys.path.insert(0, str(ROOT / "studies"))
-    import population_coverage as study
+    from studies import population_coverage as study
 
     rng = np.random.default_rng(SEED)
     out = []

@@ -9,8 +9,8 @@ concealed-effect recordings of the concealment study (Frederiksen plate, recordi
 the default, so that fingerprints from either side of that change compare. Writes JSON
 with every number in full precision (floats as hex, so that a comparison is bit for bit).
 
-Run: ``python studies/behaviour_fingerprint.py OUT.json [--no-diagnose]``; compare two
-files with ``python studies/behaviour_fingerprint.py --compare A.json B.json``.
+Run: ``python -m studies.behaviour_fingerprint OUT.json [--no-diagnose]``; compare two
+files with ``python -m studies.behaviour_fingerprint --compare A.json B.json``.
 """
 
 from __future__ import annotations
@@ -22,21 +22,17 @@ import time
 
 import numpy as np
 
-from bayesplate import PlateModel, bundled_case_path, load_case, stiffness_from_engineering
-from bayesplate.discrepancy import LocalStiffnessLoss, PlyMisalignment, PointMass, ThicknessTaper
+from bayesplate import PlateModel, bundled_case_path, load_case
 from bayesplate.discrepancy.diagnose import diagnose
 from bayesplate.estimators import estimate
+from studies import concealment
+from studies import recordings as rec
 
 SI = np.array([1e9, 1e9, 1.0, 1e9, 1e9, 1e9])
-NOISE = 0.002
-SEED = 20261121  # the concealment study's
-SCENARIOS = [  # (index in the concealment study, physics, theta)
-    (0, None, None),
-    (3, PointMass(), [1.0, 23.0, 14.0]),
-    (5, ThicknessTaper("x"), [0.08]),
-    (7, PlyMisalignment(), [8.0]),
-    (11, LocalStiffnessLoss(), [70.0, 35.0, 20.0, 15.0, 0.4]),
-]
+SEED = concealment.SEED
+#: The concealment study's scenarios diagnosed, by index: the control, the 1 g point mass,
+#: the 0.08 thickness taper, the 8 degree misalignment and the stiffness loss keeping 40 %.
+SCENARIOS = (0, 3, 5, 7, 11)
 
 
 def _hex(a):
@@ -77,22 +73,16 @@ def chain():
     }
 
 
-def _recordings(case, fine, physics, theta, rng):
-    plate = fine if physics is None else physics.apply(fine, np.asarray(theta, dtype=float))
-    f = plate.solve(stiffness_from_engineering(case.reference), case.measured.size).frequency_Hz
-    return np.sort(f * (1 + NOISE * rng.standard_normal(f.size)))
-
-
 def diagnoses(quick=False):
     case = load_case(bundled_case_path("frederiksen_t300"))
     mesh = (12, 6) if quick else case.mesh
-    model = PlateModel.from_case(case, mesh=mesh)
-    fine = PlateModel.from_case(case, mesh=(2 * mesh[0], 2 * mesh[1]))
+    model, fine = rec.meshes(case, mesh)
+    scenarios = concealment.scenarios()
     out = {}
-    for index, physics, theta in SCENARIOS[:2] if quick else SCENARIOS:
-        rng = np.random.default_rng(np.random.SeedSequence(SEED).spawn(index + 1)[index])
-        f = _recordings(case, fine, physics, theta, rng)
-        blind = case.with_measured(frequency_Hz=f, sigma_Hz=NOISE * f)
+    for index in SCENARIOS[:2] if quick else SCENARIOS:
+        _, physics, _, theta = scenarios[index]
+        f = rec.recordings(case, fine, physics, theta, rec.stream(SEED, index))
+        blind = rec.blind(case, f)
         start = time.perf_counter()
         d = diagnose(blind, model=model, rng=SEED, pairing="order")
         top = d.candidates[0] if d.candidates else None

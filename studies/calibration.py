@@ -1,9 +1,10 @@
 """Calibration of ``diagnose`` (issue 13): false alarms, power against size, refit coverage.
 
-Recordings are made by a model the diagnosis does not use: the plate (with the effect, if any)
-on a mesh twice as fine each way as diagnose's, its lowest 14 frequencies times
-``1 + 0.002 N(0, 1)``, sorted (a test lists what it measured in ascending order), declared
-with their 0.2 % deviation; diagnose runs blind on the nominal case, pairing by order.
+Recordings are made by a model the diagnosis does not use (:mod:`studies.recordings`): the
+plate (with the effect, if any) on a mesh twice as fine each way as diagnose's, its lowest 14
+frequencies times ``1 + 0.002 N(0, 1)``, sorted (a test lists what it measured in ascending
+order), declared with their 0.2 % deviation; diagnose runs blind on the nominal case, pairing
+by order.
 
 - **False alarms**: plates with nothing wrong, ``N_CLEAN`` replicates in each of two families,
   the unidirectional Frederiksen T300/epoxy plate (100.1 x 53.0 x 3.36 mm, diagnosed on
@@ -23,19 +24,21 @@ with their 0.2 % deviation; diagnose runs blind on the nominal case, pairing by 
   interval (estimate +- 1.881 sd)?
 
 Every replicate is an independent task on :func:`bayesplate.batch.map_tasks` (two workers by
-default), seeded by its own ``SeedSequence(SEED, spawn_key=...)``; each row is stored as it
-arrives in ``out_dir/.cache/calibration*.json`` (atomic writes), so an interrupted run resumes,
-and the report is rewritten from the finished rows after each one. The tasks run clean
+default), seeded by its own ``SeedSequence(SEED, spawn_key=...)``. The rows are cached by
+code version: each is appended as it arrives to
+``out_dir/.cache/calibration/<code version>[-quick].jsonl`` (one JSON row a line; the size
+table and the runs' times beside it in ``<code version>[-quick].json``), so a stopped run
+resumes from the rows of its own code, rows of other code are never read, and the report is
+rewritten from this version's finished rows after each one. The tasks run clean
 replicates first, then the first two power sizes together replicate by replicate, then the
 third, so that a partial run has even counts.
 
 Writes ``calibration.md`` and ``calibration.png`` to ``out_dir``. Run:
-``python studies/calibration.py [--quick] [--workers W] [--out DIR] [--report-only]``
+``python -m studies.calibration [--quick] [--workers W] [--out DIR] [--report-only]``
 (quick: 6 x 3 and 8 x 4 meshes, 2 clean replicates, the point mass at one size, in this
 process: the regression run of the tests).
 """
 
-# no `from __future__ import annotations`: loaded by tests with spec_from_file_location
 import argparse
 import datetime
 import functools
@@ -51,29 +54,17 @@ import zlib
 import numpy as np
 from scipy.stats import binomtest, chi2, ncx2
 
-from bayesplate import PlateModel, bundled_case_path, load_case, stiffness_from_engineering
+from bayesplate import bundled_case_path, load_case, stiffness_from_engineering
 from bayesplate.batch import map_tasks
-from bayesplate.discrepancy import (
-    Cutout,
-    ElasticFoundation,
-    LocalStiffnessLoss,
-    PlyMisalignment,
-    PointMass,
-    PointSupport,
-    ThicknessTaper,
-)
 from bayesplate.discrepancy.diagnose import DEFAULTS, diagnose, mesh_error
 from bayesplate.discrepancy.physics.location import absorbable_projector
 from bayesplate.io import atomic_write_text
 from bayesplate.likelihood.posterior import prior_in_stiffness
-
-_HERE = pathlib.Path(__file__).resolve().parent
-if str(_HERE) not in sys.path:
-    sys.path.insert(0, str(_HERE))
-from _study_host import code_version, cpu  # noqa: E402  (this folder's helper, not a package)
+from studies import recordings as rec
+from studies._study_host import code_version, cpu
+from studies.recordings import NOISE  # relative deviation of each recorded frequency
 
 SEED = 20261125
-NOISE = 0.002  # relative deviation of each recorded frequency
 ALPHA = DEFAULTS["alpha"]
 Z94 = 1.881  # half-width of a 94 % normal interval, in sd
 N_CLEAN = 20  # per family
@@ -89,159 +80,11 @@ SIZES = (
     ("ideal 0.5", "ideal", 0.5, 1.0),
 )
 N_CONSTANTS = 6  # the constants diagnose fits (its stiffness coefficients)
-#: Rows of these code versions are kept in the cache but not counted: diagnose has changed
-#: since in ways that change its answers (its label: why).
-RETIRED = {
-    "7d8ca6b": (
-        "made on 2026-11-26 by the code of 7d8ca6b: since then the rivals of a candidate "
-        "that may be named are refined when their coarse gain is within 10 nats (a point "
-        "support left on its coarse model was named a foundation)"
-    ),
-    "65fcabd": (
-        "made on 2026-11-26 by the code of 65fcabd: since then a candidate's evidence gain "
-        "counts the posterior modes its mirror images make (up to ln 4 for a located "
-        "candidate), and diagnose makes a likelihood assignment again at its verdict's fit"
-    ),
-    **dict.fromkeys(
-        ("1a9717d", "369bb3e"),
-        (
-            "made on 2026-11-26 by the code of 1a9717d and 369bb3e: since then the elastic "
-            "foundation's and the point support's priors scale on a Rayleigh bound of the lowest "
-            "eigenvalue, where a lower estimate 14 times low had shrunk the foundation's prior "
-            "(a strong foundation was named a point support), which changes every replicate's "
-            "evidences"
-        ),
-    ),
-    "2026-11-25 (b454113-6b495b0)": (
-        "made on 2026-11-25 by the code of b454113-6b495b0: since then diagnose's fits are "
-        "settled on reduced models (58b7f36), every promising candidate is settled in two "
-        "phases (7882a0d, b5719b8), a rejected refit is searched again (b88761d) and the "
-        "nominal fit's global stage shares its first round (9433d2b)"
-    ),
-}
-#: The code versions whose located candidates started from three places of their scans.
-THREE_STARTS = ("3b28b25", "b9a300c", "7d51a9c", "d373176", "ff4f0ea", "087f58f", "6d608ea")
-
-
-def _six_starts(rows):
-    """Why ``rows`` made with three located starts are run again."""
-    return (
-        f"made on 2026-11-26 and 2026-11-27 by code whose located candidates started from "
-        f"the three best places of their scans; since 1cd1ff4 they start from six (a "
-        f"concealed point support's best basin had been missed): {rows} run again with "
-        f"six, as the point support's rows were"
-    )
-
-
-#: Rows of one candidate (or ``"clean"``: the clean plates') made by these code versions,
-#: kept but not counted, and why: for each, ``(codes, why)`` pairs.
-RETIRED_EFFECT = {
-    "point_support": (
-        (
-            ("3b28b25", "b9a300c", "7d51a9c"),
-            "made on 2026-11-26 by the code of 3b28b25, b9a300c or 7d51a9c: since then a rival "
-            "that fits the recordings as well as the best candidate and lies within 4 nats of it "
-            "makes the verdict ambiguous (three point supports had been named a foundation by "
-            "its prior volume alone); rows of other candidates are kept, as the change can only "
-            "turn an explained verdict ambiguous",
-        ),
-        (
-            ("d373176", "087f58f"),
-            "made on 2026-11-27 by the code of d373176 or 087f58f: since then located "
-            "candidates start from the six best places of their scans instead of three (a "
-            "concealed point support's best basin had been missed and it was named a "
-            "foundation); run again for the candidate the change was made for. Rows of other "
-            "candidates are kept, not run again: a search from more places can only find "
-            "better optima, but which of two look-alikes leads can change",
-        ),
-    ),
-    "cutout": (
-        (
-            THREE_STARTS,
-            "made on 2026-11-26 and 2026-11-27 by code whose located candidates started from the "
-            "three best places of their scans; since 1cd1ff4 they start from six, and a concealed "
-            "hole's test saw the stiffness loss come within 1.4 nats of it (2.5 before): run "
-            "again with six, as the point support's rows were",
-        ),
-    ),
-    "local_stiffness_loss": ((THREE_STARTS, _six_starts("the local stiffness loss's rows")),),
-    "point_mass": ((THREE_STARTS, _six_starts("the point mass's rows")),),
-    "clean": (
-        (
-            THREE_STARTS,
-            _six_starts(
-                "the clean plates' rows, where any located candidate could raise a false alarm,"
-            ),
-        ),
-    ),
-    # not located themselves, but a located rival that now reaches a better basin can take
-    # the name from them or tie with them
-    "thickness_taper": (
-        (
-            THREE_STARTS,
-            _six_starts("the thickness taper's rows, whose located rivals search more places now,"),
-        ),
-    ),
-    "ply_misalignment": (
-        (
-            THREE_STARTS,
-            _six_starts(
-                "the ply misalignment's rows, whose located rivals search more places now,"
-            ),
-        ),
-    ),
-    "elastic_foundation": (
-        (
-            THREE_STARTS,
-            _six_starts(
-                "the elastic foundation's rows, whose "
-                "located rivals (the point support "
-                "above all) search more places now,"
-            ),
-        ),
-    ),
-}
-#: Single rows set aside to run again first, by (code, key), and why: a change since can
-#: alter their outcome and no other row's on the measure the report counts.
-RETIRED_ROWS = {
-    ("d373176", "power/frederiksen_t300/point_support/32000/1"): (
-        "made on 2026-11-27 by the code of d373176, whose ambiguous verdict named two "
-        "candidates; since f977bab it names every one that ties, which can add a name to an "
-        "ambiguous row and change no other row's count: this one, whose stored gains and "
-        "chi-squares show a third tie (the point support), is the one row it concerns"
-    ),
-}
-LEGACY_CODE = "2026-11-25 (b454113-6b495b0)"  # the label of rows stored without one
 FAMILIES = {"frederiksen_t300": (40, 20), "crossply": (32, 16)}  # diagnose's mesh
 QUICK_FAMILIES = {"frederiksen_t300": (6, 3), "crossply": (8, 4)}
 POWER_FAMILY = "frederiksen_t300"
 
-#: Each candidate: (physics, theta of a size, size unit, grid of sizes for the ideal test).
-#: Places on the Frederiksen plate (100.1 x 53.0 mm) away from its lines of symmetry.
-EFFECTS = {
-    "point_mass": (PointMass, lambda s: [s, 23.0, 14.0], "g", np.geomspace(0.01, 3.0, 8)),
-    "thickness_taper": (
-        lambda: ThicknessTaper("x"),
-        lambda s: [s],
-        "",
-        np.geomspace(0.002, 0.3, 8),
-    ),
-    "ply_misalignment": (PlyMisalignment, lambda s: [s], "deg", np.geomspace(0.02, 10.0, 8)),
-    "elastic_foundation": (ElasticFoundation, lambda s: [s], "N/m^3", np.geomspace(1e4, 1e9, 11)),
-    "local_stiffness_loss": (
-        LocalStiffnessLoss,
-        lambda s: [70.0, 35.0, 20.0, 15.0, 1.0 - s],
-        "stiffness lost",
-        np.geomspace(0.01, 0.95, 8),
-    ),
-    "cutout": (Cutout, lambda s: [70.0, 20.0, s], "mm", np.geomspace(0.5, 17.0, 8)),
-    "point_support": (
-        PointSupport,
-        lambda s: [np.log10(s), 80.0, 40.0],
-        "N/m",
-        np.geomspace(1.0, 1e7, 15),
-    ),
-}
+EFFECTS = rec.EFFECTS  # the candidates, their places and sizes
 
 
 # ---------------------------------------------------------------- the ideal test
@@ -411,15 +254,13 @@ def _case(family):
 
 
 def _models(family, quick):
+    """The family's case, diagnose's plate and the recordings' (twice as fine each way)."""
     case = _case(family)
-    mesh = (QUICK_FAMILIES if quick else FAMILIES)[family]
-    model = PlateModel.from_case(case, mesh=mesh)
-    fine = PlateModel.from_case(case, mesh=(2 * mesh[0], 2 * mesh[1]))
+    model, fine = rec.meshes(case, (QUICK_FAMILIES if quick else FAMILIES)[family])
     return case, model, fine
 
 
-def _frequencies(case, plate):
-    return plate.solve(stiffness_from_engineering(case.reference), case.measured.size).frequency_Hz
+_frequencies = rec.frequencies  # the plate's frequencies at the case's reference constants
 
 
 def sizes(quick=False):
@@ -649,7 +490,7 @@ def run_task_recorded(task, quick=False, code=None, options=None):
 
 
 def recordings(task, quick=False):
-    """One replicate's recordings and what made them.
+    """One replicate's recordings and what made them (:mod:`studies.recordings`).
 
     Returns
     -------
@@ -667,16 +508,15 @@ def recordings(task, quick=False):
     kind, family, effect, label, size, rep = task
     case, model, fine = _models(family, quick)
     rng = np.random.default_rng(_seed(task))
-    f0 = _frequencies(case, fine)
+    f0 = rec.frequencies(case, fine)
     physics, theta = None, None
     if effect is not None:
         make, theta_of, _, _ = EFFECTS[effect]
         physics, theta = make(), np.asarray(theta_of(size), dtype=float)
-        f_true = _frequencies(case, physics.apply(fine, theta))
+        f_true = rec.frequencies(case, rec.concealed(fine, physics, theta))
     else:
         f_true = f0
-    f = np.sort(f_true * (1.0 + NOISE * rng.standard_normal(f_true.size)))
-    blind = case.with_measured(frequency_Hz=f, sigma_Hz=NOISE * f)
+    blind = rec.blind(case, rec.noisy(f_true, rng))
     return blind, model, f_true, f0, physics, theta, int(rng.integers(2**31))
 
 
@@ -779,8 +619,18 @@ def wilson(k, n):
 # ---------------------------------------------------------------- the study
 
 
-def _cache_path(out_dir, quick):
-    return pathlib.Path(out_dir) / ".cache" / f"calibration{'-quick' if quick else ''}.json"
+def cache_paths(out_dir, quick, version=None):
+    """The rows (JSON lines) and the head (JSON) of one code version's run.
+
+    ``out_dir/.cache/calibration/<version>[-quick].jsonl`` and ``.json``; ``version``: the
+    code's (:func:`studies._study_host.code_version`) when not given. The head holds what
+    the rows are read with: the settings, the size table, the runs' times and the
+    fitted-constants figures computed from the table.
+    """
+    version = version or code_version()
+    folder = pathlib.Path(out_dir) / ".cache" / "calibration"
+    name = f"{version}{'-quick' if quick else ''}"
+    return folder / f"{name}.jsonl", folder / f"{name}.json"
 
 
 def _settings(quick):
@@ -788,130 +638,103 @@ def _settings(quick):
     return json.loads(json.dumps(settings))  # as read back from the cache (lists, not tuples)
 
 
-def _empty(quick):
+def _empty(quick, version):
     return {
+        "version": version,
         "settings": _settings(quick),
         "sizes": None,
         "rows": {},
-        "retired": {},
         "seconds": 0.0,
         "runs": [],
     }
 
 
-def load(out_dir, quick):
-    path = _cache_path(out_dir, quick)
-    if path.exists():
-        stored = json.loads(path.read_text())
-        if stored.get("settings") == _settings(quick):
-            return {**_empty(quick), **stored}
-    return _empty(quick)
+def load(out_dir, quick, version=None):
+    """One code version's run (its head and its rows by key; empty when it has none).
 
-
-def _row_key(row):
-    """A row's key from its content (the keys of older caches held the size's place)."""
-    if row["kind"] == "clean":
-        return f"clean/{row['family']}/{row['rep']}"
-    return f"power/{row['family']}/{row['effect']}/{size_key(row['size'])}/{row['rep']}"
-
-
-def migrate(stored):
-    """Bring the cache's rows to the current size table and code, in place; return it.
-
-    Each row is keyed by the size's value. A power row whose (effect, size) is still in the
-    table is kept (labelled with the size's current label); one whose size is no longer
-    run, and every row of a code version in ``RETIRED``, is moved to ``stored["retired"]``
-    (kept, not counted) with the reason. Rows stored without a code label are labelled
-    ``LEGACY_CODE``, and the wall time stored with them goes with them.
+    Rows of other versions are never read: a run resumes from the rows of its own code. A
+    line cut short (the run killed while writing it) is skipped, its replicate run again.
     """
-    table = stored.get("sizes") or {}
-    labels = {}  # (effect, size key) -> the first label of SIZES with that size
-    for effect, entry in table.items():
-        for (label, *_), size in zip(SIZES, entry["sizes"], strict=True):
-            if size is not None:
-                labels.setdefault((effect, size_key(size)), label)
-    retired = stored.setdefault("retired", {})
-    legacy = [r for r in stored["rows"].values() if "code" not in r]
-    if legacy:
-        spent = stored.setdefault("retired_seconds", {})
-        spent[LEGACY_CODE] = spent.get(LEGACY_CODE, 0.0) + stored.get("seconds", 0.0)
-        stored["seconds"] = 0.0
-    for run in stored.get("runs", []):  # the wall time of retired code goes with its rows
-        if run.get("code") in RETIRED and not run.get("retired") and run.get("end"):
-            took = (
-                datetime.datetime.fromisoformat(run["end"])
-                - datetime.datetime.fromisoformat(run["start"])
-            ).total_seconds()
-            spent = stored.setdefault("retired_seconds", {})
-            spent[run["code"]] = spent.get(run["code"], 0.0) + took
-            stored["seconds"] = max(0.0, stored.get("seconds", 0.0) - took)
-            run["retired"] = True
-    kept = {}
-    for row in stored["rows"].values():
-        row.setdefault("code", LEGACY_CODE)
-        if "size_index" in row:  # older rows: the size's place in the SIZES of their day
-            row.pop("size_index")
-        key = _row_key(row)
-        row["key"] = key
-        why = _retired(row, key)
-        if why is None and row["kind"] == "power":
-            label = labels.get((row["effect"], size_key(row["size"])))
-            if label is None:
-                why = "its size is no longer run"
-            else:
-                row["size_label"] = label
-        if why is None:
-            kept[key] = row
-        else:
-            retired[f"{row['code']}|{key}"] = {**row, "retired": why}
-    stored["rows"] = kept
+    version = version or code_version()
+    rows_path, head_path = cache_paths(out_dir, quick, version)
+    stored = _empty(quick, version)
+    if head_path.exists():
+        head = json.loads(head_path.read_text())
+        if head.get("settings") != stored["settings"]:
+            return stored
+        stored.update(head)
+    if rows_path.exists():
+        for line in rows_path.read_text().splitlines():
+            try:
+                row = json.loads(line)
+            except json.JSONDecodeError:
+                continue
+            stored["rows"][row["key"]] = row
     return stored
 
 
-def _retired(row, key):
-    """Why a cached row is set aside (its code, its candidate's rows of that code, or it
-    alone), or None."""
-    group = row.get("effect") or row["kind"]  # a candidate's power rows, or "clean"
-    because = next(
-        (why for codes, why in RETIRED_EFFECT.get(group, ()) if row["code"] in codes), None
-    )
-    return RETIRED.get(row["code"]) or because or RETIRED_ROWS.get((row["code"], key))
+def _write_head(out_dir, quick, stored):
+    _, head_path = cache_paths(out_dir, quick, stored["version"])
+    head = {k: v for k, v in stored.items() if k != "rows"}
+    atomic_write_text(head_path, json.dumps(head))
+
+
+def _append(out_dir, quick, stored, row):
+    rows_path, _ = cache_paths(out_dir, quick, stored["version"])
+    rows_path.parent.mkdir(parents=True, exist_ok=True)
+    with rows_path.open("a") as out:
+        out.write(json.dumps(row) + "\n")
+        out.flush()
+
+
+def save(out_dir, quick, stored):
+    """Write ``stored`` (:func:`load`'s form) as its version's head and rows, afresh."""
+    stored = {**_empty(quick, stored.get("version") or code_version()), **stored}
+    rows_path, _ = cache_paths(out_dir, quick, stored["version"])
+    rows_path.parent.mkdir(parents=True, exist_ok=True)
+    rows = [{**row, "key": row.get("key", key)} for key, row in stored["rows"].items()]
+    atomic_write_text(rows_path, "".join(json.dumps(row) + "\n" for row in rows))
+    _write_head(out_dir, quick, stored)
+    return stored
 
 
 def _now():
     return datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
 
 
-def main(out_dir="reports", quick=False, workers=None, report_only=False, effects=None):
-    """Run what is not in the cache, write the report and figure; return the report's path.
+#: What :func:`write_report` computes from the size table once and keeps in the head.
+FIGURES = ("absorbed", "widening", "widened_power", "widened_grid_power", "mesh_error_left")
 
-    ``effects``: run only the power replicates of these candidates (default: every replicate).
+
+def main(out_dir="reports", quick=False, workers=None, report_only=False, effects=None):
+    """Run what this code has not run yet, write the report and figure; return its path.
+
+    The rows are those of the code version running (:func:`load`): each replicate's row is
+    appended to its file as it finishes, so a stopped run resumes where it stopped, and the
+    report is built from this version's rows alone. ``effects``: run only the power
+    replicates of these candidates (default: every replicate).
     """
     logging.getLogger("bayesplate").setLevel(logging.ERROR)
     workers = workers or (1 if quick else 2)
-    stored = load(out_dir, quick)
-    path = _cache_path(out_dir, quick)
+    code = code_version()  # the rows' code: commits made while it runs do not count
+    stored = load(out_dir, quick, code)
     spec = [list(entry) for entry in SIZES]
     if (stored["sizes"] is None or stored.get("size_spec") != spec) and not report_only:
         stored["sizes"], stored["size_spec"] = sizes(quick), spec
-    if stored["sizes"] is not None:
-        migrate(stored)  # rows keyed by the size's value: those of sizes still run are kept
-        if not report_only:
-            atomic_write_text(path, json.dumps(stored))
+        for key in FIGURES:  # computed from the table
+            stored.pop(key, None)
+        _write_head(out_dir, quick, stored)
     todo = (
         []
-        if report_only
+        if report_only or stored["sizes"] is None
         else [
             t
             for t in tasks(stored["sizes"], quick)
             if task_key(t) not in stored["rows"] and (effects is None or t[2] in effects)
         ]
     )
-    again = {key for _, key in RETIRED_ROWS}
-    todo.sort(key=lambda t: task_key(t) not in again)  # rows set aside to run again first
     print(f"{len(todo)} replicates to run ({len(stored['rows'])} cached)", flush=True)
     start, base = time.perf_counter(), stored.get("seconds", 0.0)
-    code = code_version()
     if todo:
         stored["runs"].append(
             {
@@ -925,10 +748,11 @@ def main(out_dir="reports", quick=False, workers=None, report_only=False, effect
         )
 
     def keep(position, row):  # each row stored as it comes: an interrupted run resumes
+        _append(out_dir, quick, stored, row)
         stored["rows"][row["key"]] = row
         stored["seconds"] = base + time.perf_counter() - start
         stored["runs"][-1].update(end=_now(), rows=stored["runs"][-1]["rows"] + 1)
-        atomic_write_text(path, json.dumps(stored))
+        _write_head(out_dir, quick, stored)
         print(
             f"{_now()} {row['key']:48s} {row['verdict']:12s} {row['chosen'] or '-':22s} "
             f"{row['seconds']:5.0f} s ({position + 1}/{len(todo)})"
@@ -950,7 +774,8 @@ def main(out_dir="reports", quick=False, workers=None, report_only=False, effect
 
 
 def _ship_by_value():
-    """Let Dask workers run this script's functions without importing it (not a package)."""
+    """Let Dask workers run this study's functions without importing it (a worker on
+    another machine need not have the studies)."""
     import cloudpickle
 
     module = sys.modules.get(__name__)
@@ -962,32 +787,26 @@ def _machine():
     return f"the {os.cpu_count()}-core development machine ({cpu()})"
 
 
+def _figures(stored, quick):
+    """The size table's fitted-constants figures (:data:`FIGURES`), into ``stored``."""
+    table = stored["sizes"]
+    stored["absorbed"] = absorbed(table, quick)
+    # the fitted test at diagnose's widened deviations, with the noise as recorded (not widened)
+    widen = widening(quick)
+    stored["widening"] = list(map(float, widen))
+    stored["widened_power"] = absorbed(table, quick, widen, power=True)
+    on_grid = {e: {"sizes": entry["grid"]} for e, entry in table.items()}
+    stored["widened_grid_power"] = absorbed(on_grid, quick, widen, power=True)
+    stored["mesh_error_left"] = mesh_error_left(quick)  # how much of that the constants absorb
+
+
 def write_report(out_dir, stored, quick, workers):
     out = pathlib.Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    if stored["sizes"] is not None:  # the fitted-constants noncentralities, kept beside
-        side = _cache_path(out_dir, quick).with_name(
-            f"calibration{'-quick' if quick else ''}-absorbed.json"
-        )
-        kept = json.loads(side.read_text()) if side.exists() else {}
-        if kept.get("sizes") != stored["sizes"]:
-            kept = {"sizes": stored["sizes"], "absorbed": absorbed(stored["sizes"], quick)}
-            atomic_write_text(side, json.dumps(kept))
-        if "widened_power" not in kept:  # the fitted test at diagnose's widened deviations,
-            # with the noise as recorded (not widened)
-            widen = widening(quick)
-            for older in ("widened", "widened_grid"):  # (noncentralities read as if the noise
-                kept.pop(older, None)  # were widened too: they overstated the power)
-            kept["widening"] = list(map(float, widen))
-            kept["widened_power"] = absorbed(stored["sizes"], quick, widen, power=True)
-            on_grid = {e: {"sizes": entry["grid"]} for e, entry in stored["sizes"].items()}
-            kept["widened_grid_power"] = absorbed(on_grid, quick, widen, power=True)
-            atomic_write_text(side, json.dumps(kept))
-        if "mesh_error_left" not in kept:  # how much of that error the constants absorb
-            kept["mesh_error_left"] = mesh_error_left(quick)
-            atomic_write_text(side, json.dumps(kept))
-        keys = ("absorbed", "widening", "widened_power", "widened_grid_power", "mesh_error_left")
-        stored = {**stored, **{k: kept[k] for k in keys}}
+    if stored["sizes"] is not None and any(key not in stored for key in FIGURES):
+        _figures(stored, quick)
+        if stored.get("version"):
+            _write_head(out_dir, quick, stored)
     rows = list(stored["rows"].values())
     name = "calibration-quick" if quick else "calibration"
     text = report(rows, stored, quick, workers)
@@ -1065,7 +884,7 @@ def _partial(done, n_tasks):
         f"A partial run ({done} of {n_tasks} replicates): the counts below are of the "
         "replicates finished, in the running order (the fitted 0.9 size round by round "
         "with the clean replicates between its rounds, then the other sizes replicate by "
-        "replicate); the rest resume from the cache on the next run.",
+        "replicate); the rest resume from the cache on the next run of the same code.",
         "",
     ]
 
@@ -1079,7 +898,7 @@ def report(rows, stored, quick, workers):
     lines = [
         "# Calibration of `diagnose`: false alarms, power, coverage of the refit",
         "",
-        f"Made by `python studies/calibration.py{' --quick' if quick else ''}` (seed {SEED}) "
+        f"Made by `python -m studies.calibration{' --quick' if quick else ''}` (seed {SEED}) "
         f"on {today}, on {_machine()}, {workers} worker(s); {len(rows)} of {n_tasks} replicates "
         f"finished in {stored.get('seconds', 0.0) / 60:.0f} min of wall time (the runs' time "
         f"to their last finished row); load averages (1, 5, 15 min) when this report was "
@@ -1228,7 +1047,7 @@ def report(rows, stored, quick, workers):
 
 
 def _provenance(rows, stored):
-    """Which code made which rows; the rows set aside and why."""
+    """Which code made the rows: the run's own version alone (rows are cached by version)."""
     out = ["## Which code made the rows", ""]
     by_code = {}
     for r in rows:
@@ -1236,27 +1055,17 @@ def _provenance(rows, stored):
     for code, mine in sorted(by_code.items(), key=lambda kv: str(kv[0])):
         days = sorted({(r.get("finished") or "")[:10] for r in mine} - {""})
         out.append(
-            f"- counted: {len(mine)} rows ({sum(r['kind'] == 'clean' for r in mine)} "
+            f"- {len(mine)} rows ({sum(r['kind'] == 'clean' for r in mine)} "
             f"clean, {sum(r['kind'] == 'power' for r in mine)} power) made by `{code}`"
             + (f" on {', '.join(days)}" if days else "")
             + "."
         )
-    retired = list((stored.get("retired") or {}).values())
-    reasons = {}
-    for r in retired:
-        reasons.setdefault((r["code"], r["retired"]), []).append(r)
-    spent = stored.get("retired_seconds") or {}
-    for (code, why), mine in reasons.items():
-        clean = [r for r in mine if r["kind"] == "clean"]
-        power = [r for r in mine if r["kind"] == "power"]
-        k = sum(r["verdict"] != "consistent" for r in clean)
-        out.append(
-            f"- set aside, not counted: {len(mine)} rows of `{code}` ({why}): {len(clean)} "
-            f"clean, {k} not `consistent`; {len(power)} power, named right in "
-            f"{sum(named(r) for r in power)}, wrong names {sum(wrong_name(r) for r in power)}"
-            + (f"; {spent[code] / 60:.0f} min of wall time" if code in spent else "")
-            + "."
-        )
+    out += [
+        "",
+        f"Rows are cached by code version (`.cache/calibration/{stored.get('version')}"
+        "*.jsonl` beside this report): a stopped run resumes from the rows of its own code, "
+        "and rows of other code are never read.",
+    ]
     return [*out, ""]
 
 

@@ -4,7 +4,8 @@ Issue 16: without shapes or mode numbers the default pairing is by order, checke
 answer (:mod:`bayesplate.matching.checked_order`): diagnose's first pass pairs by order and the most
 probable assignment is made again at its verdict's fit, a further pass made only where it
 pairs a peak with another mode. This study asks two things of that default, on recordings
-diagnose did not make (`studies/calibration.py`'s: the finer mesh, 0.2 % noise, its seeds):
+diagnose did not make (`studies.calibration`'s, made by :mod:`studies.recordings`: the finer
+mesh, 0.2 % noise, its seeds):
 
 - **Does it change what the order said on complete tests?** Clean replicates and power
   replicates at two sizes, diagnosed again with the default; their verdicts and names
@@ -19,8 +20,9 @@ diagnose did not make (`studies/calibration.py`'s: the finer mesh, 0.2 % noise, 
 
 The report is ``reports/checked_order.md``; rows are kept in
 ``reports/.cache/checked_order.json`` as they come (a run again resumes). Run:
-``python studies/checked_order.py [--workers 2]`` after the calibration study (its cache
-holds the sizes and the order's rows).
+``python -m studies.checked_order [--workers 2]`` after the calibration study of the same
+code version (its cache holds the sizes and the order's rows; without it, the sizes anew and
+no rows of the order to compare).
 """
 
 from __future__ import annotations
@@ -31,19 +33,16 @@ import json
 import logging
 import os
 import pathlib
-import sys
 import time
 import traceback
 
 import numpy as np
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-import calibration as cal  # noqa: E402  (this folder's study: its recordings and seeds)
-from _study_host import code_version, cpu  # noqa: E402
-
-from bayesplate.batch import map_tasks  # noqa: E402
-from bayesplate.discrepancy.diagnose import diagnose  # noqa: E402
-from bayesplate.io import atomic_write_text  # noqa: E402
+from bayesplate.batch import map_tasks
+from bayesplate.discrepancy.diagnose import diagnose
+from bayesplate.io import atomic_write_text
+from studies import calibration as cal  # its recordings and seeds
+from studies._study_host import code_version, cpu
 
 #: Replicates per family (clean) and per candidate and size (power), and the sizes.
 N_CLEAN, N_POWER, N_ALTERED = 10, 2, 1
@@ -170,10 +169,11 @@ def main(out_dir="reports", workers=2, quick=False, order_dir=None):
     import cloudpickle
 
     cloudpickle.register_pickle_by_value(cal)  # Dask workers need not import the study
-    stored_order = json.loads(cal._cache_path(order_dir or out_dir, quick).read_text())
+    stored_order = cal.load(order_dir or out_dir, quick)  # the calibration's rows of this code
+    sizes = stored_order["sizes"] or cal.sizes(quick)
     path = _cache(out_dir, quick)
     done = json.loads(path.read_text()) if path.exists() else {"rows": {}, "runs": []}
-    todo = [r for r in plan(stored_order["sizes"], quick) if key(r) not in done["rows"]]
+    todo = [r for r in plan(sizes, quick) if key(r) not in done["rows"]]
     print(f"{len(todo)} rows to run ({len(done['rows'])} cached)", flush=True)
     if todo:
         done["runs"].append(
@@ -232,7 +232,7 @@ def report(rows, order_rows, runs):
     lines = [
         "# diagnose with the default pairing (by order, checked)",
         "",
-        f"Made by `python studies/checked_order.py` on {_machine()}; runs: "
+        f"Made by `python -m studies.checked_order` on {_machine()}; runs: "
         + "; ".join(
             f"{r['start']} to {r.get('end', '?')} (code {r['code']}, {r['workers']} "
             f"workers, load at start {r['load'][0]:.1f})"

@@ -9,7 +9,7 @@ every one of them, sorted: diagnose pairs them by order (named; by default it wo
 settle the most probable assignment, issue 16).
 
 The plate is the Frederiksen T300/epoxy plate (bundled case `frederiksen_t300`); the truth
-is Frederiksen's own estimate of its constants. Run: `python studies/concealment.py`.
+is Frederiksen's own estimate of its constants. Run: `python -m studies.concealment`.
 """
 
 from __future__ import annotations
@@ -26,25 +26,13 @@ import numpy as np
 
 from bayesplate import PlateModel, bundled_case_path, load_case, stiffness_from_engineering
 from bayesplate.batch import map_tasks
-from bayesplate.discrepancy import (
-    Cutout,
-    ElasticFoundation,
-    LocalStiffnessLoss,
-    PlyMisalignment,
-    PointMass,
-    PointSupport,
-    ThicknessTaper,
-)
 from bayesplate.discrepancy.diagnose import diagnose
 from bayesplate.discrepancy.physics.combined import Pair
 from bayesplate.io import atomic_write_text
+from studies import recordings as rec
+from studies._study_host import code_version, cpu
+from studies.recordings import NOISE, recordings  # noqa: F401  (recordings: tests call it here)
 
-_HERE = Path(__file__).resolve().parent
-if str(_HERE) not in sys.path:
-    sys.path.insert(0, str(_HERE))
-from _study_host import code_version, cpu  # noqa: E402  (this folder's helper, not a package)
-
-NOISE = 0.002
 SEED = 20261121
 NAMES = ("E1", "E2", "nu12", "G12", "G13", "G23")
 #: Rows made by these code versions are run again (diagnose has changed since in ways that
@@ -77,46 +65,46 @@ def scenarios(quick=False):
     """(label, physics, size label, theta) of every run; physics None for a control."""
     truth = load_case(bundled_case_path("frederiksen_t300")).reference
     b_true = stiffness_from_engineering(truth)  # where the pair checks its mirror images
+
+    def at(name, label, size):  # the candidate at its place (recordings.EFFECTS), this size
+        physics, theta = rec.effect(name, size)
+        return (name, physics, label, theta)
+
+    mass, mass_theta = rec.effect("point_mass", 1.0)
+    ply, ply_theta = rec.effect("ply_misalignment", 3.0)
     runs = [
         ("control", None, "-", None),
         ("control", None, "-", None),
-        ("point_mass", PointMass(), "0.3 g", [0.3, 23.0, 14.0]),
-        ("point_mass", PointMass(), "1.0 g", [1.0, 23.0, 14.0]),
-        ("thickness_taper", ThicknessTaper("x"), "e = 0.03", [0.03]),
-        ("thickness_taper", ThicknessTaper("x"), "e = 0.08", [0.08]),
-        ("ply_misalignment", PlyMisalignment(), "3 deg", [3.0]),
-        ("ply_misalignment", PlyMisalignment(), "8 deg", [8.0]),
-        ("elastic_foundation", ElasticFoundation(), "1.3e6 N/m^3", [1.3e6]),
-        ("elastic_foundation", ElasticFoundation(), "5e6 N/m^3", [5.0e6]),
-        ("local_stiffness_loss", LocalStiffnessLoss(), "keeps 70 %", [70.0, 35.0, 20.0, 15.0, 0.7]),
-        ("local_stiffness_loss", LocalStiffnessLoss(), "keeps 40 %", [70.0, 35.0, 20.0, 15.0, 0.4]),
+        at("point_mass", "0.3 g", 0.3),
+        at("point_mass", "1.0 g", 1.0),
+        at("thickness_taper", "e = 0.03", 0.03),
+        at("thickness_taper", "e = 0.08", 0.08),
+        at("ply_misalignment", "3 deg", 3.0),
+        at("ply_misalignment", "8 deg", 8.0),
+        at("elastic_foundation", "1.3e6 N/m^3", 1.3e6),
+        at("elastic_foundation", "5e6 N/m^3", 5.0e6),
+        at("local_stiffness_loss", "keeps 70 %", 0.3),  # the share of stiffness lost
+        at("local_stiffness_loss", "keeps 40 %", 0.6),
         # added with the candidates of issue 13 (rows 12-14)
-        ("cutout", Cutout(), "d = 10 mm", [70.0, 20.0, 10.0]),
-        ("point_support", PointSupport(), "1e5 N/m", [5.0, 80.0, 40.0]),
+        at("cutout", "d = 10 mm", 10.0),
+        at("point_support", "1e5 N/m", 1e5),
         (
             "point_mass+ply_misalignment",
-            Pair(PointMass(), PlyMisalignment(), b_true),
+            Pair(mass, ply, b_true),
             "1.0 g + 3 deg",
-            [1.0, 23.0, 14.0, 3.0],
+            mass_theta + ply_theta,
         ),
     ]
     return [runs[0], runs[3]] if quick else runs
 
 
-def recordings(case, fine, physics, theta, rng):
-    """Frequencies of the plate with the effect on the fine mesh, with 0.2 % noise."""
-    plate = fine if physics is None else physics.apply(fine, np.asarray(theta, dtype=float))
-    f = plate.solve(stiffness_from_engineering(case.reference), case.measured.size).frequency_Hz
-    # a test lists what it measured in ascending order: noise can swap two close modes
-    return np.sort(f * (1 + NOISE * rng.standard_normal(f.size)))
-
-
 def blind_recording(index, quick=False, mesh=None):
     """Scenario ``index``'s recordings as a case that does not know the effect.
 
-    Its noise comes from its own stream of ``SeedSequence(SEED)``, so a recording does not
-    depend on which other scenarios ran, in which order or in which process. ``mesh``:
-    another working mesh than the case's (the recordings on one twice as fine each way).
+    Made by :mod:`studies.recordings`, its noise from its own stream of ``SeedSequence(SEED)``
+    (:func:`.recordings.stream`), so a recording does not depend on which other scenarios
+    ran, in which order or in which process. ``mesh``: another working mesh than the case's
+    (the recordings on one twice as fine each way).
 
     Returns
     -------
@@ -128,11 +116,9 @@ def blind_recording(index, quick=False, mesh=None):
     _, physics, _, theta = scenarios(quick)[index]
     case = load_case(bundled_case_path("frederiksen_t300"))
     mesh = (12, 6) if quick else tuple(mesh or case.mesh)
-    model = PlateModel.from_case(case, mesh=mesh)
-    fine = PlateModel.from_case(case, mesh=(2 * mesh[0], 2 * mesh[1]))
-    rng = np.random.default_rng(np.random.SeedSequence(SEED).spawn(index + 1)[index])
-    f = recordings(case, fine, physics, theta, rng)
-    return case.with_measured(frequency_Hz=f, sigma_Hz=NOISE * f), model
+    model, fine = rec.meshes(case, mesh)
+    f = rec.recordings(case, fine, physics, theta, rec.stream(SEED, index))
+    return rec.blind(case, f), model
 
 
 def run_scenario(index, quick=False):
@@ -189,7 +175,8 @@ def main(out_dir="reports", quick=False, workers=1, scheduler=None, first=()):
 
 
 def _ship_by_value():
-    """Let Dask workers run this script's functions without importing it (not a package)."""
+    """Let Dask workers run this study's functions without importing it (a worker on
+    another machine need not have the studies)."""
     module = sys.modules.get(__name__)
     if __name__ != "__main__" and module is not None:
         import cloudpickle
@@ -321,7 +308,7 @@ def _report(rows, mesh, quick):
     head = [
         "# Concealed effects: does `diagnose` find what it was not told?",
         "",
-        f"Made by `python studies/concealment.py{' --quick' if quick else ''}` (seed {SEED}).",
+        f"Made by `python -m studies.concealment{' --quick' if quick else ''}` (seed {SEED}).",
         f"Plate: Frederiksen T300/epoxy, 100.1 x 53.0 x 3.36 mm, truth = Frederiksen's "
         f"constants. diagnose mesh {mesh[0]} x {mesh[1]}; recordings on "
         f"{2 * mesh[0]} x {2 * mesh[1]} with {100 * NOISE:.1f} % Gaussian noise on each of "

@@ -7,11 +7,10 @@ whether anything the model leaves out shows once the recordings are taken more s
 Each run writes its residual figure and its location maps.
 
 Writes ``diagnose_frederiksen.md`` and ``diagnose_frederiksen_{1pc,0p2pc}_*.png`` to
-``out_dir``. Run: ``python studies/diagnose_frederiksen.py [--quick] [--out DIR]`` (quick:
+``out_dir``. Run: ``python -m studies.diagnose_frederiksen [--quick] [--out DIR]`` (quick:
 half the case's mesh each way, one random start).
 """
 
-# no `from __future__ import annotations`: loaded by tests with spec_from_file_location
 import argparse
 import os
 import pathlib
@@ -27,9 +26,7 @@ from bayesplate.io import atomic_write_text, bundled_case_path, load_case
 from bayesplate.laminate import stiffness_from_engineering
 from bayesplate.likelihood.posterior import observed_eigenvalues, prior_in_stiffness
 from bayesplate.plate.model import PlateModel
-
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from _study_host import code_version, cpu, utc_now  # noqa: E402  (this folder's helper)
+from studies._study_host import code_version, cpu, utc_now
 
 matplotlib.use("Agg")  # files only, never a window
 
@@ -90,7 +87,7 @@ def main(out_dir="reports", quick=False):
         local = from_published(case, model, d)
         results[f"{key}_published"] = local
         sections.append(_section(label, model, d, seconds, figures, local))
-    cmd = f"python studies/diagnose_frederiksen.py{' --quick' if quick else ''}"
+    cmd = f"python -m studies.diagnose_frederiksen{' --quick' if quick else ''}"
     head = [
         "# diagnose on the measured Frederiksen plate",
         "",

@@ -22,17 +22,15 @@ A cell is the share of intervals holding the true value, with its Wilson 95 % in
 95 % band of a binomial share around 0.94 for that number of replicates is printed beside it.
 
 Writes ``error_scale.md`` to ``out_dir``. Run:
-``python studies/error_scale.py [--quick] [--replicates N] [--sampler-minutes M] [--out DIR]``
+``python -m studies.error_scale [--quick] [--replicates N] [--sampler-minutes M] [--out DIR]``
 (quick: 8 plate replicates, 400 toy replicates, no sampler).
 """
 
-# no `from __future__ import annotations`: loaded by tests with spec_from_file_location
 import argparse
 import datetime
 import logging
 import os
 import pathlib
-import sys
 import time
 import warnings
 
@@ -46,11 +44,7 @@ from bayesplate.likelihood.error_scale import ErrorScalePrior, linearised_at, li
 from bayesplate.likelihood.posterior import GaussianProblem
 from bayesplate.plate.model import PlateModel
 from bayesplate.quantities import ENGINEERING_KEYS, engineering_covariance, hz_from_eigenvalue
-
-_HERE = pathlib.Path(__file__).resolve().parent
-if str(_HERE) not in sys.path:
-    sys.path.insert(0, str(_HERE))
-from _study_host import cpu  # noqa: E402  (this folder's helper, not a package)
+from studies._study_host import cpu
 
 REPORT = "error_scale.md"
 SEED = 20261117
@@ -295,7 +289,7 @@ def report(toys, plates, sampled, b_seconds, sampler_seconds, command):
         )
     out += [
         "",
-        "Regenerate: `python studies/error_scale.py` (the numbers above come from the "
+        "Regenerate: `python -m studies.error_scale` (the numbers above come from the "
         "command at the top).",
     ]
     return "\n".join(out) + "\n"
@@ -307,7 +301,7 @@ def main(out_dir, quick=False, replicates=None, sampler_minutes=None, workers=1)
     minutes = 0.0 if quick else (10.0 if sampler_minutes is None else sampler_minutes)
     n_toy = 400 if quick else TOY_REPLICATES
     toys, plates, sampled, b_s, s_s = run(n, n_toy, minutes, workers=workers)
-    command = "python studies/error_scale.py" + (" --quick" if quick else "")
+    command = "python -m studies.error_scale" + (" --quick" if quick else "")
     if replicates:
         command += f" --replicates {replicates}"
     if sampler_minutes is not None:

@@ -13,7 +13,7 @@ Writes ``forward_model.md``, ``forward_model_differences.png`` and
 - mesh convergence of the Frederiksen plate with a Richardson estimate of the discretisation
   error of each mode, against the 1 % measurement deviation.
 
-Run: ``python studies/forward_model.py [--quick] [--out DIR]``.
+Run: ``python -m studies.forward_model [--quick] [--out DIR]``.
 """
 
 from __future__ import annotations
@@ -430,8 +430,8 @@ def write_report(results, out_dir, quick=False):
     t = results["tables"]
     flag = " --quick" if quick else ""
     parts = [
-        f"Made by `python studies/forward_model.py{flag}` (every report: "
-        f"`python studies/run_all.py{flag}`); no random numbers (ARPACK's start vector "
+        f"Made by `python -m studies.forward_model{flag}` (every report: "
+        f"`python -m studies.run_all{flag}`); no random numbers (ARPACK's start vector "
         "aside: results repeat to rounding).",
         "",
         "# Forward model against the paper",

@@ -27,11 +27,10 @@ sampler's) is stored as it comes in ``out_dir/.cache/input_coverage.json`` (atom
 so an interrupted run resumes where it stopped.
 
 Writes ``input_coverage.md`` to ``out_dir``. Run:
-``python studies/input_coverage.py [--quick] [--replicates N] [--sampler-minutes M] [--out DIR]``
+``python -m studies.input_coverage [--quick] [--replicates N] [--sampler-minutes M] [--out DIR]``
 (quick: 6 replicates, no sampler).
 """
 
-# no `from __future__ import annotations`: loaded by tests with spec_from_file_location
 import argparse
 import dataclasses
 import datetime
@@ -39,7 +38,6 @@ import json
 import logging
 import os
 import pathlib
-import sys
 import time
 import traceback
 import warnings
@@ -52,11 +50,7 @@ from bayesplate.io import Case, Measurement, Plate, Prior, atomic_write_text
 from bayesplate.likelihood.posterior import GaussianProblem
 from bayesplate.plate.model import PlateModel
 from bayesplate.quantities import ENGINEERING_KEYS, hz_from_eigenvalue
-
-_HERE = pathlib.Path(__file__).resolve().parent
-if str(_HERE) not in sys.path:
-    sys.path.insert(0, str(_HERE))
-from _study_host import cpu  # noqa: E402  (this folder's helper, not a package)
+from studies._study_host import cpu
 
 REPORT = "input_coverage.md"
 SEED = 20261125
@@ -429,7 +423,7 @@ def main(out_dir, quick=False, replicates=None, sampler_minutes=None):
     minutes = sampler_minutes if sampler_minutes is not None else (0.0 if quick else None)
     start = time.perf_counter()
     rows, errors, _ = run(out_dir, n, minutes, quick)
-    command = "python studies/input_coverage.py" + (" --quick" if quick else "")
+    command = "python -m studies.input_coverage" + (" --quick" if quick else "")
     text = report(rows, n, errors, time.perf_counter() - start, command)
     path = pathlib.Path(out_dir) / REPORT
     atomic_write_text(path, text)

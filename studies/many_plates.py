@@ -11,7 +11,7 @@ plate's leave-one-out predictive p-value (the flag at 1 %).
 
 Writes ``reports/many_plates.md`` and ``reports/many_plates.png``. About two minutes on two
 cores (119 s, load 3.9, 2026-11-25).
-``python studies/many_plates.py [--quick]`` (``--quick``: fewer effective samples).
+``python -m studies.many_plates [--quick]`` (``--quick``: fewer effective samples).
 """
 
 from __future__ import annotations
@@ -25,8 +25,6 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 #: The material: (E1, E2, nu12, G12, G13, G23), SI (the constants of the paper's plate 1).
 TRUE = np.array([150e9, 10e9, 0.25, 3e9, 3e9, 2e9])
@@ -159,12 +157,11 @@ def main(argv=()):
     """Run the study; write the report and the figure."""
     import warnings
 
-    from _study_host import cpu
-
     from bayesplate.io import save_figure
     from bayesplate.plots.plates import plate_rows, plates_figure
     from bayesplate.quantities import ENGINEERING_KEYS, to_case_units
     from bayesplate.sampling import sample, sample_hierarchical, sample_plates
+    from studies._study_host import cpu
 
     warnings.simplefilter("ignore")
     quick = "--quick" in argv
@@ -184,7 +181,7 @@ def main(argv=()):
         "# One material, many plates: joint posterior and the plate that disagrees",
         "",
         f"{date.today().isoformat()}, {cpu()}, load average at start {load}; "
-        f"{elapsed:.0f} s in all (`python studies/many_plates.py{' --quick' if quick else ''}`).",
+        f"{elapsed:.0f} s in all (`python -m studies.many_plates{' --quick' if quick else ''}`).",
         "",
         f"Plates: single-layer, one material (E1 {TRUE[0] / 1e9:g}, E2 {TRUE[1] / 1e9:g}, "
         f"nu12 {TRUE[2]:g}, G12 {TRUE[3] / 1e9:g}, G13 {TRUE[4] / 1e9:g}, G23 "

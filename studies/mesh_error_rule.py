@@ -11,16 +11,16 @@ mesh_error`).
 
 This study diagnoses the calibration study's own recordings again with the other rule (the
 same recordings, seeds and meshes: :func:`calibration.recordings`) and pairs every row with
-the calibration study's row of the same replicate (the default rule, its counted rows in
-``reports/.cache/calibration.json``):
+the calibration study's row of the same replicate (the default rule, its rows of the same
+code version in ``reports/.cache/calibration/``):
 
 - false alarms: the clean replicates of both plate families;
 - power: every candidate at the size where the fitted test rejects with probability 0.9
   (the calibration study's achievable reference), 10 replicates each.
 
 Rows arrive in ``out_dir/.cache/mesh_error_rule*.json`` as each finishes (an interrupted run
-resumes); the report is ``out_dir/mesh_error_rule.md``. Run: ``python
-studies/mesh_error_rule.py [--workers 2] [--quick] [--report-only]``; ``--quick`` runs the
+resumes); the report is ``out_dir/mesh_error_rule.md``. Run: ``python -m
+studies.mesh_error_rule [--workers 2] [--quick] [--report-only]``; ``--quick`` runs the
 calibration study's quick replicates (coarse meshes; a regression run, not a measurement).
 """
 
@@ -33,17 +33,14 @@ import json
 import logging
 import os
 import pathlib
-import sys
 import time
 
 import numpy as np
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-import calibration as cal  # noqa: E402  (this folder's study: its recordings and readings)
-from _study_host import code_version, cpu  # noqa: E402
-
-from bayesplate.batch import map_tasks  # noqa: E402
-from bayesplate.io import atomic_write_text  # noqa: E402
+from bayesplate.batch import map_tasks
+from bayesplate.io import atomic_write_text
+from studies import calibration as cal  # its recordings and readings
+from studies._study_host import code_version, cpu
 
 RULE = {"mesh_error_part": "unabsorbed"}
 REPORT = "mesh_error_rule.md"
@@ -61,9 +58,7 @@ def selected(size_table, quick=False):
 
 def baseline(out_dir, quick):
     """The calibration study's counted rows (the default rule), keyed; its size table."""
-    stored = cal.load(out_dir, quick)
-    if stored["sizes"] is not None:
-        cal.migrate(stored)
+    stored = cal.load(out_dir, quick)  # the rows of this code version
     return stored["rows"], stored["sizes"]
 
 
@@ -123,7 +118,7 @@ def write_report(out_dir, stored, base_rows, quick, workers):
     lines = [
         "# diagnose's mesh-error rule: the whole error or the part the constants leave",
         "",
-        f"Made by `python studies/mesh_error_rule.py` on {stored['made']}, on the "
+        f"Made by `python -m studies.mesh_error_rule` on {stored['made']}, on the "
         f"{os.cpu_count()}-core development machine ({cpu()}), {workers} worker(s), code "
         f"{', '.join(sorted({r['code'] for r in stored['rows'].values()})) or '-'}; "
         f"{len(stored['rows'])} of {stored['planned']} replicates finished in "

@@ -14,10 +14,10 @@ exact eigenvalues (the recordings' mesh of the calibration study, no noise, the 
 - with the case's prior (Gaussian on the engineering constants), as diagnose's nominal fit
   has it: its chi-square part and its prior part.
 
-Each row is an effect at one of the calibration study's sizes (its size table, cached in
-``reports/.cache/calibration.json``, or computed anew). The rows are kept in
-``out_dir/.cache/nonlinear_absorption.json``, the report is
-``out_dir/nonlinear_absorption.md``. Run: ``python studies/nonlinear_absorption.py
+Each row is an effect at one of the calibration study's sizes (its size table, cached with
+its rows of the same code version in ``reports/.cache/calibration/``, or computed anew).
+The rows are kept in ``out_dir/.cache/nonlinear_absorption.json``, the report is
+``out_dir/nonlinear_absorption.md``. Run: ``python -m studies.nonlinear_absorption
 [--quick] [--workers 2] [--effect NAME] [--report-only]``; ``--quick`` uses the
 calibration study's coarse meshes and the point mass alone (a regression run, not a
 measurement).
@@ -29,25 +29,22 @@ import argparse
 import json
 import os
 import pathlib
-import sys
 import time
 from typing import NamedTuple
 
 import numpy as np
 from scipy.optimize import least_squares
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-import calibration as cal  # noqa: E402  (this folder's study: its effects, sizes and meshes)
-from _study_host import code_version, cpu, utc_now  # noqa: E402
-
-from bayesplate.io import atomic_write_text  # noqa: E402
-from bayesplate.laminate import (  # noqa: E402
+from bayesplate.io import atomic_write_text
+from bayesplate.laminate import (
     engineering_from_stiffness,
     stiffness_from_engineering,
     stiffness_jacobian,
 )
-from bayesplate.parallel import fork_map  # noqa: E402
-from bayesplate.quantities import ENGINEERING_NAMES  # noqa: E402
+from bayesplate.parallel import fork_map
+from bayesplate.quantities import ENGINEERING_NAMES
+from studies import calibration as cal  # its effects, sizes and meshes
+from studies._study_host import code_version, cpu, utc_now
 
 REPORT = "nonlinear_absorption.md"
 LABELS = ("fitted 0.9", "3 x ideal 0.9")  # the calibration study's sizes compared here
@@ -216,11 +213,9 @@ def tasks(size_table, quick=False, effects=None):
 def calibration(out_dir, quick):
     """The calibration study's size table and counted rows: from its cache when it holds a
     size table (else the table anew and no rows)."""
-    path = cal._cache_path(out_dir, quick)
-    if path.exists():
-        stored = json.loads(path.read_text())
-        if stored.get("sizes") is not None:
-            return stored["sizes"], list(stored["rows"].values())
+    stored = cal.load(out_dir, quick)  # the rows of this code version
+    if stored["sizes"] is not None:
+        return stored["sizes"], list(stored["rows"].values())
     return cal.sizes(quick), []
 
 
@@ -280,7 +275,7 @@ def report(rows, quick, facts):
     lines = [
         "# How much of an effect the six constants absorb: linearised against exact",
         "",
-        f"Made by `python studies/nonlinear_absorption.py{' --quick' if quick else ''}` on "
+        f"Made by `python -m studies.nonlinear_absorption{' --quick' if quick else ''}` on "
         f"{facts['made']}, on {facts['cpu']}, {facts['workers']} worker(s), code "
         f"{facts['code']}; {len(rows)} rows in {facts['minutes']:.1f} min of wall time; load "
         f"averages (1, 5, 15 min) when the rows were done: {load}.",

@@ -15,11 +15,9 @@ Writes to ``out_dir``:
   full model's run: the largest relative difference of the constants, the iterations, and
   whether the row still reproduces the paper.
 
-Run: ``python studies/paper_tables.py [--quick] [--out DIR]`` (quick: a subset, seconds).
+Run: ``python -m studies.paper_tables [--quick] [--out DIR]`` (quick: a subset, seconds).
 """
 
-# no `from __future__ import annotations`: the dataclasses below must not need their module
-# in sys.modules (tests load this file with importlib.util.spec_from_file_location)
 import argparse
 import os
 import pathlib
@@ -397,7 +395,7 @@ def _summary(lines):
 
 
 def _header(quick, what):
-    command = "python studies/paper_tables.py" + (" --quick" if quick else "")
+    command = "python -m studies.paper_tables" + (" --quick" if quick else "")
     return (
         f"Made by `{command}` (no randomness). {what}\n\n"
         'Conventions (`convention="paper"`, the library default, settled by the comparison '

@@ -15,7 +15,7 @@ there (:func:`bayesplate.sampling.plate_laplace.linearise`), and the population 
 check a calibration check: a 94 % interval must cover about 94 % of replicates for every
 parameter, the weakly identified ones (whose posterior is close to the prior) included.
 
-Writes ``reports/population_coverage.md``. ``python studies/population_coverage.py
+Writes ``reports/population_coverage.md``. ``python -m studies.population_coverage
 [--quick] [--replicates N] [--plates P] [--workers W]`` (``--quick``: one replicate; the
 full run: 100 on two worker processes). Each replicate's row is appended, as it ends, to
 ``.bayesplate-cache/population_coverage/<code version>-p<plates>.jsonl``: a stopped run
@@ -33,7 +33,6 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 #: The cases' prior (mean, sd; SI): wide, as ``studies/many_plates.py``.
 PRIOR_MEAN = np.array([140e9, 9e9, 0.30, 3.5e9, 3.5e9, 2.5e9])
@@ -193,7 +192,7 @@ def _safe_replicate(seed, n_plates):
 
 def cache_path(n_plates, version=None):
     """The replicates' rows of one code version and population size (JSON lines)."""
-    from _study_host import code_version
+    from studies._study_host import code_version
 
     version = version or code_version()
     return ROOT / ".bayesplate-cache" / "population_coverage" / f"{version}-p{n_plates}.jsonl"
@@ -238,7 +237,7 @@ def main(out_dir=None, quick=False, replicates=None, seed0=4200, workers=2, n_pl
 
     ``quick``: one replicate in this process, nothing cached or written.
     """
-    from _study_host import code_version, utc_now
+    from studies._study_host import code_version, utc_now
 
     n_plates = n_plates or (QUICK_PLATES if quick else N_PLATES)
     n = replicates or (QUICK_REPLICATES if quick else REPLICATES)
@@ -290,9 +289,8 @@ def _band(n, p=0.94, z=2.0):
 
 def _write(out, s, n_plates, info):
     """The report: the current table alone, with its code version, date, machine and load."""
-    from _study_host import cpu
-
     from bayesplate.quantities import ENGINEERING_NAMES
+    from studies._study_host import cpu
 
     lo, hi = _band(6 * s["n"])
     secs = np.array(s["seconds"])
@@ -301,8 +299,8 @@ def _write(out, s, n_plates, info):
         "",
         f"{info['when']}, {cpu()}, code {info['version']}, load average at start "
         f"{info['load']}; {s['n']} seeded replicates (seeds {s['seeds'][0]}-{s['seeds'][1]}) of "
-        f"{n_plates} plates, {info['workers']} worker processes (`python "
-        "studies/population_coverage.py`; rows cached by code version, so a stopped run "
+        f"{n_plates} plates, {info['workers']} worker processes (`python -m "
+        "studies.population_coverage`; rows cached by code version, so a stopped run "
         "resumes). Chains: "
         f"min_ess {CHAIN['min_ess']:g}, R-hat < {CHAIN['max_rhat']:g}, {CHAIN['n_walkers']} "
         f"walkers, at most {CHAIN['max_steps']} steps. One replicate: median "
@@ -341,7 +339,6 @@ def _write(out, s, n_plates, info):
 if __name__ == "__main__":
     import argparse
 
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true", help="one replicate, nothing written")
     parser.add_argument("--replicates", type=int, default=None)

@@ -35,11 +35,10 @@ interrupted run resumes. Replicate ``i`` of design ``d`` draws from its own
 in which order.
 
 Writes ``posterior_coverage.md`` and ``posterior_coverage.png`` to ``out_dir``. Run:
-``python studies/posterior_coverage.py [--quick] [--replicates N] [--design drawn|fixed|both]
+``python -m studies.posterior_coverage [--quick] [--replicates N] [--design drawn|fixed|both]
 [--workers W] [--out DIR]`` (quick: 2 replicates of ``drawn`` in this process).
 """
 
-# no `from __future__ import annotations`: loaded by tests with spec_from_file_location
 import argparse
 import datetime
 import functools
@@ -53,18 +52,13 @@ import traceback
 
 import numpy as np
 
-HERE = pathlib.Path(__file__).resolve().parent
-if str(HERE) not in sys.path:
-    sys.path.insert(0, str(HERE))
-
-import input_coverage as ic  # noqa: E402  (a study of this folder, not a package)
-
-from bayesplate import laminate  # noqa: E402
-from bayesplate.batch import map_tasks  # noqa: E402
-from bayesplate.io import atomic_write_text  # noqa: E402
-from bayesplate.likelihood.posterior import GaussianProblem  # noqa: E402
-from bayesplate.plate.model import PlateModel  # noqa: E402
-from bayesplate.quantities import ENGINEERING_KEYS  # noqa: E402
+from bayesplate import laminate
+from bayesplate.batch import map_tasks
+from bayesplate.io import atomic_write_text
+from bayesplate.likelihood.posterior import GaussianProblem
+from bayesplate.plate.model import PlateModel
+from bayesplate.quantities import ENGINEERING_KEYS
+from studies import input_coverage as ic
 
 REPORT = "posterior_coverage.md"
 FIGURE = "posterior_coverage.png"
@@ -207,10 +201,11 @@ def main(
 
 
 def _ship_by_value():
-    """Let Dask workers run this script's functions without importing it (not a package)."""
+    """Let Dask workers run this study's functions without importing it (a worker on
+    another machine need not have the studies)."""
     import cloudpickle
 
-    for name in (__name__, "input_coverage"):
+    for name in (__name__, ic.__name__):
         module = sys.modules.get(name)
         if name != "__main__" and module is not None:
             cloudpickle.register_pickle_by_value(module)
@@ -269,7 +264,7 @@ def write_report(out_dir, rows, n, quick, workers):
     """Write the Markdown report and the figure from the rows; return the report's path."""
     rows = sorted(rows.values(), key=lambda r: (DESIGNS.index(r["design"]), r["index"]))
     designs = [d for d in DESIGNS if any(r["design"] == d for r in rows)]
-    command = "python studies/posterior_coverage.py" + (" --quick" if quick else "")
+    command = "python -m studies.posterior_coverage" + (" --quick" if quick else "")
     if designs and designs != ["drawn"]:
         command += " --design " + ("both" if len(designs) == 2 else designs[0])
     out_dir = pathlib.Path(out_dir)
@@ -491,7 +486,7 @@ if __name__ == "__main__":
     parser.add_argument("--replicates", type=int, default=None, help="default 200")
     parser.add_argument("--design", choices=("drawn", "fixed", "both"), default="drawn")
     parser.add_argument("--workers", type=int, default=None, help="default 2 (quick: 1)")
-    parser.add_argument("--out", default=HERE.parent / "reports")
+    parser.add_argument("--out", default=pathlib.Path(__file__).resolve().parents[1] / "reports")
     parser.add_argument("--report-only", action="store_true", help="from the cached rows")
     args = parser.parse_args()
     chosen = DESIGNS if args.design == "both" else (args.design,)

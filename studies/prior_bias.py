@@ -9,11 +9,10 @@ were computed from; Frederiksen: his own two-specimen estimate), and a corner pl
 posterior with the B and MVE Gaussian ellipses and the target.
 
 Writes ``prior_bias.md`` and ``prior_bias_{plate1,frederiksen}_d{3,6,10}.png`` to
-``out_dir``. Run: ``python studies/prior_bias.py [--quick] [--out DIR]`` (quick: Plate 1 at
+``out_dir``. Run: ``python -m studies.prior_bias [--quick] [--out DIR]`` (quick: Plate 1 at
 d = 1/3 only, shorter chains, seconds).
 """
 
-# no `from __future__ import annotations`: loaded by tests with spec_from_file_location
 import argparse
 import pathlib
 import sys
@@ -30,9 +29,7 @@ from bayesplate.plate.model import PlateModel
 from bayesplate.reduced import Box, fast_model
 from bayesplate.sampling import posterior_box, prepare, sample
 from bayesplate.sampling.setup import FAST_DEFAULTS, PILOT_TOL
-
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from _study_host import utc_now  # noqa: E402  (this folder's helper)
+from studies._study_host import utc_now
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -237,7 +234,7 @@ def _summary_rows(runs):
 def write_report(results, out_dir):
     """``prior_bias.md``."""
     runs = results["runs"]
-    command = "python studies/prior_bias.py" + (" --quick" if results["quick"] else "")
+    command = "python -m studies.prior_bias" + (" --quick" if results["quick"] else "")
     date = utc_now()
     fast = results["fast"]
     lines = [

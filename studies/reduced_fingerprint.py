@@ -5,7 +5,7 @@ tests/test_reduced.py does, evaluates it at five fixed points of the box and rec
 certificate; also a reduced model with a stiffness independent of ``b`` (elastic foundation).
 Prints the sha256 of all their bytes: it must not change when the code is only moved.
 
-Run: ``python studies/reduced_fingerprint.py``.
+Run: ``python -m studies.reduced_fingerprint``.
 """
 
 import hashlib

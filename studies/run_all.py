@@ -1,4 +1,4 @@
-"""Regenerate every study's report: ``python studies/run_all.py [--quick] [--out DIR]``.
+"""Regenerate every study's report: ``python -m studies.run_all [--quick] [--out DIR]``.
 
 Each study is a module of this folder with ``main(out_dir, quick=False)``. To add one, add
 its module name to ``STUDIES``.
@@ -10,7 +10,6 @@ import argparse
 import importlib
 import logging
 import pathlib
-import sys
 import time
 
 import matplotlib
@@ -35,10 +34,8 @@ STUDIES = [
 
 
 def load(name):
-    """Import the study module ``name`` from this folder."""
-    if str(HERE) not in sys.path:
-        sys.path.insert(0, str(HERE))
-    return importlib.import_module(name)
+    """The study module ``studies.<name>``."""
+    return importlib.import_module(f"studies.{name}")
 
 
 def main(out_dir=REPORTS, quick=False, only=None):

@@ -5,7 +5,7 @@ and ``sensitivity_frederiksen.png`` to ``out_dir``: ``s_ij = (d lambda_i / d C_j
 lambda_i`` of the first 14 modes at the case's reference constants, and a check, computed from the
 numbers, of what section 4.1 says about them.
 
-Run: ``python studies/sensitivity_figures.py [--quick] [--out DIR]``.
+Run: ``python -m studies.sensitivity_figures [--quick] [--out DIR]``.
 """
 
 from __future__ import annotations
@@ -176,8 +176,8 @@ def write_report(results, out_dir, quick=False):
     runs = results["runs"]
     agree = all(c["agree"] for c in results["claims"])
     parts = [
-        f"Made by `python studies/sensitivity_figures.py{flag}` (every report: "
-        f"`python studies/run_all.py{flag}`); no random numbers (ARPACK's start vector "
+        f"Made by `python -m studies.sensitivity_figures{flag}` (every report: "
+        f"`python -m studies.run_all{flag}`); no random numbers (ARPACK's start vector "
         "aside: results repeat to rounding).",
         "",
         "# Normalised sensitivities (eq. 29; paper Figs. 2-3)",

@@ -11,11 +11,10 @@ The source's constants are not an independent reference (a 3D FE model and a neu
 surrogate fitted to 12 peaks and their amplitudes, coefficients of variation 2.5 to 30 %).
 
 Writes ``spruce_badiane.md`` to ``out_dir``. Run:
-``python studies/spruce_badiane.py [--quick] [--out DIR]`` (quick: B only, by likelihood:
+``python -m studies.spruce_badiane [--quick] [--out DIR]`` (quick: B only, by likelihood:
 no posterior, no diagnosis).
 """
 
-# no `from __future__ import annotations`: loaded by tests with spec_from_file_location
 import argparse
 import os
 import pathlib
@@ -28,11 +27,7 @@ from bayesplate.estimators import METHODS, estimate
 from bayesplate.io import atomic_write_text, bundled_case_path, load_case
 from bayesplate.plate.model import PlateModel
 from bayesplate.quantities import ENGINEERING_NAMES, ENGINEERING_UNITS, to_case_units
-
-_HERE = pathlib.Path(__file__).resolve().parent
-if str(_HERE) not in sys.path:
-    sys.path.insert(0, str(_HERE))
-from _study_host import cpu  # noqa: E402  (this folder's helper, not a package)
+from studies._study_host import cpu
 
 REPORT = "spruce_badiane.md"
 CASE = "badiane_spruce_5R"
@@ -113,7 +108,7 @@ def report(case, model, rows, diagnosed, quick):
     """The Markdown text."""
     reference, factor = rescaled_reference(case)
     lines = [
-        f"Made by `python studies/spruce_badiane.py{' --quick' if quick else ''}` "
+        f"Made by `python -m studies.spruce_badiane{' --quick' if quick else ''}` "
         f"on {time.strftime('%Y-%m-%d')} ({cpu()}, {os.cpu_count()} cores, load "
         f"{' '.join(f'{x:.2f}' for x in os.getloadavg())} at writing).",
         "",

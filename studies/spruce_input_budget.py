@@ -23,16 +23,14 @@ posterior variance of E1, E2 and G12 from those joint draws, and the linear inpu
 certificate.
 
 Writes ``spruce_input_budget.md`` to ``out_dir``. Run:
-``python studies/spruce_input_budget.py [--quick] [--out DIR]`` (quick: B only, no sampler).
+``python -m studies.spruce_input_budget [--quick] [--out DIR]`` (quick: B only, no sampler).
 """
 
-# no `from __future__ import annotations`: loaded by tests with spec_from_file_location
 import argparse
 import dataclasses
 import datetime
 import os
 import pathlib
-import sys
 import time
 
 import numpy as np
@@ -44,11 +42,7 @@ from bayesplate.likelihood.inputs import input_jacobian
 from bayesplate.plate.model import PlateModel
 from bayesplate.quantities import ENGINEERING_KEYS, to_case_units
 from bayesplate.run.budget import estimate_budget
-
-_HERE = pathlib.Path(__file__).resolve().parent
-if str(_HERE) not in sys.path:
-    sys.path.insert(0, str(_HERE))
-from _study_host import cpu  # noqa: E402  (this folder's helper, not a package)
+from studies._study_host import cpu
 
 REPORT = "spruce_input_budget.md"
 CASE = "badiane_spruce_5R"
@@ -272,7 +266,7 @@ def report(case, rows, seconds, posteriors=None):
     out = [
         "# The spruce plate's uncertain inputs: variance budget of B and MVE",
         "",
-        f"Made by `python studies/spruce_input_budget.py` on {datetime.date.today()}, "
+        f"Made by `python -m studies.spruce_input_budget` on {datetime.date.today()}, "
         f"{cpu()}, {os.cpu_count()} cores, load "
         f"{load:.1f}, {seconds:.0f} s. Case `{CASE}` with the sheet's deviations: h "
         f"{SD_H_MM} mm, a {SD_A_MM} mm, b {SD_B_MM} mm, mass {SD_MASS_G} g. Linearised at "

@@ -18,14 +18,12 @@ finite-element model (the candidate's own ``Physics.apply``, a full eigen solve)
 The plate's constants are the B estimate of its taps, given in :data:`CONSTANTS_GPA` (what
 ``bayesplate import`` then ``bayesplate diagnose`` gave on the shared taps; the study does
 not depend on their last digits). Writes ``spruce_what_shows.md``. Run:
-``python studies/spruce_what_shows.py [--out DIR] [--mesh NX NY]``.
+``python -m studies.spruce_what_shows [--out DIR] [--mesh NX NY]``.
 """
 
-# no `from __future__ import annotations`: loaded by tests with spec_from_file_location
 import argparse
 import os
 import pathlib
-import sys
 import time
 
 import numpy as np
@@ -35,11 +33,7 @@ from bayesplate.discrepancy import PointMass, ThicknessTaper
 from bayesplate.io import atomic_write_text, bundled_case_path
 from bayesplate.plate.model import PlateModel
 from bayesplate.quantities import CASE_SCALE
-
-_HERE = pathlib.Path(__file__).resolve().parent
-if str(_HERE) not in sys.path:
-    sys.path.insert(0, str(_HERE))
-from _study_host import code_version, cpu, utc_now  # noqa: E402  (this folder's helper)
+from studies._study_host import code_version, cpu, utc_now
 
 REPORT = "spruce_what_shows.md"
 CASE = "badiane_spruce_5R"
@@ -109,7 +103,7 @@ def report(model, rows, seconds):
         "",
         f"{utc_now()}, code {code_version()}, {cpu()}, {os.cpu_count()} cores, load "
         f"{os.getloadavg()[0]:.1f}; {seconds:.0f} s. Made by "
-        f"`python studies/{pathlib.Path(__file__).name}`.",
+        f"`python -m studies.{pathlib.Path(__file__).stem}`.",
         "",
         f"The plate: {model.mesh.a * 1e3:.0f} x {model.mesh.b * 1e3:.0f} x "
         f"{model.thickness * 1e3:.2f} mm, {grams:.0f} g, on a {model.mesh.nx} x "

@@ -1,15 +1,12 @@
 import hashlib
 import os
 import re
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 os.environ.setdefault("MPLBACKEND", "Agg")
-# the independent closed-form references live in tests/reference
-sys.path.insert(0, str(Path(__file__).parent))
 
 
 @pytest.fixture

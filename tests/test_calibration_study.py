@@ -1,13 +1,14 @@
 """studies/calibration.py: the ideal test's power, the size search, the reading of the rows,
 and a quick run of the study (issue 13)."""
 
+import json
+import logging
+
 import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from tests._studies import load_study
-
-cal = load_study("calibration", "calibration_study")
+from studies import calibration as cal
 
 
 def test_ideal_power_is_the_rejection_rate_of_simulated_recordings():
@@ -177,117 +178,78 @@ def _table():
     }
 
 
-def _row(kind, effect, size_index, size, rep, **extra):
+def _row(task, code, verdict="consistent"):
+    kind, family, effect, label, size, rep = task
     return {
-        "key": f"{kind}/frederiksen_t300/{effect}/{size_index}/{rep}",
+        "key": cal.task_key(task),
         "kind": kind,
-        "family": "frederiksen_t300",
+        "family": family,
         "effect": effect,
-        "size_index": size_index,
+        "size_label": label,
         "size": size,
         "rep": rep,
-        "verdict": "consistent",
+        "verdict": verdict,
         "chosen": None,
         "rival": None,
-        **extra,
+        "code": code,
+        "seconds": 1.0,
     }
 
 
-def test_the_cache_keeps_the_rows_of_sizes_still_run_keyed_by_value():
-    """Rows of an older cache keyed by the size's place in SIZES: those whose (effect, size)
-    is still run are kept under the size's value and current label, the others set aside;
-    rows of a retired code version are set aside with their reason, never counted."""
-    code = "abc1234"
-    rows = [
-        _row("power", "point_mass", 1, 0.42, 0, code=code),  # 3 x ideal 0.9: still run
-        _row("power", "point_mass", 0, 0.14, 3, code=code),  # ideal 0.9, once in place 0
-        _row("power", "cutout", 2, 2.9, 0, code=code),  # a size no longer run
-        _row("clean", None, None, None, 5, code=code),
-    ]
-    stored = {"sizes": _table(), "rows": {r["key"]: r for r in rows}, "seconds": 60.0}
-    cal.migrate(stored)
-    assert set(stored["rows"]) == {
-        "power/frederiksen_t300/point_mass/0.42/0",
-        "power/frederiksen_t300/point_mass/0.14/3",
-        "clean/frederiksen_t300/5",
-    }
-    assert stored["rows"]["power/frederiksen_t300/point_mass/0.14/3"]["size_label"] == "ideal 0.9"
-    assert stored["rows"]["power/frederiksen_t300/point_mass/0.42/0"]["size_label"] == (
-        "3 x ideal 0.9"
-    )
-    assert all("size_index" not in r for r in stored["rows"].values())
-    (gone,) = stored["retired"].values()
-    assert gone["size"] == 2.9 and gone["retired"] == "its size is no longer run"
-    assert stored["seconds"] == 60.0  # rows of a current code: their time stays
-    # the keys are those the tasks of the table would make: nothing kept is run again
-    todo = {cal.task_key(t) for t in cal.tasks(stored["sizes"])}
-    assert set(stored["rows"]) <= todo
-    again = {k: dict(v) for k, v in stored["rows"].items()}
-    assert cal.migrate(stored)["rows"] == again  # a second migration changes nothing
+def test_a_run_reads_the_rows_of_its_own_code_version_alone(tmp_path):
+    """Each code version's rows in their own file: another version's are never read, and a
+    line cut short (a run killed while writing it) is skipped."""
+    one, two = cal.tasks(_table(), quick=True)[:2]
+    cal.save(tmp_path, True, {"version": "aaaaaaa", "sizes": _table(), "rows": {}})
+    cal.save(tmp_path, True, {"version": "bbbbbbb", "sizes": None, "rows": {}})
+    rows_a, head_a = cal.cache_paths(tmp_path, True, "aaaaaaa")
+    assert rows_a.name == "aaaaaaa-quick.jsonl" and head_a.name == "aaaaaaa-quick.json"
+    assert rows_a.parent == tmp_path / ".cache" / "calibration"
+    with rows_a.open("a") as out:
+        out.write(json.dumps(_row(one, "aaaaaaa")) + "\n" + json.dumps(_row(two, "aaaaaaa"))[:40])
+    stored = cal.load(tmp_path, True, "aaaaaaa")
+    assert list(stored["rows"]) == [cal.task_key(one)] and stored["sizes"] == _table()
+    assert cal.load(tmp_path, True, "bbbbbbb")["rows"] == {}
+    assert cal.load(tmp_path, True, "ccccccc") == cal._empty(True, "ccccccc")
+    assert cal.load(tmp_path, False, "aaaaaaa")["sizes"] is None  # the full run's own files
 
 
-def test_rows_stored_without_a_code_are_the_retired_legacy_rows():
-    legacy = [_row("power", "point_mass", 0, 0.14, 0), _row("clean", None, None, None, 0)]
-    stored = {"sizes": _table(), "rows": {r["key"]: r for r in legacy}, "seconds": 2770.0}
-    cal.migrate(stored)
-    assert stored["rows"] == {} and len(stored["retired"]) == 2
-    assert all(
-        r["code"] == cal.LEGACY_CODE and r["retired"] == cal.RETIRED[cal.LEGACY_CODE]
-        for r in stored["retired"].values()
-    )
-    assert stored["seconds"] == 0.0 and stored["retired_seconds"] == {cal.LEGACY_CODE: 2770.0}
+@pytest.fixture
+def package_log_level():
+    """The package's log level restored after the test (the study's main quiets it)."""
+    logger = logging.getLogger("bayesplate")
+    level = logger.level
+    yield
+    logger.setLevel(level)
 
 
-@pytest.mark.parametrize(
-    "effect, codes, why",
-    [(effect, codes, why) for effect, pairs in cal.RETIRED_EFFECT.items() for codes, why in pairs],
-)
-def test_one_candidates_rows_of_a_retired_code_are_set_aside_with_their_reason(effect, codes, why):
-    # ``effect`` is a candidate (its power rows) or "clean" (the clean plates' rows); a row
-    # of the same kind made by a code no rule sets aside is kept
-    kept = "0000000"
-    assert not any(kept in c for pairs in cal.RETIRED_EFFECT.values() for c, _ in pairs)
-    table = _table()
-    if effect == "clean":
-        rows = [
-            _row("clean", None, None, None, 0, code=codes[0]),
-            _row("clean", None, None, None, 1, code=kept),
-        ]
-    else:
-        rows = [
-            _row("power", effect, 0, 48000.0, 0, code=codes[0]),
-            _row("power", effect, 0, 48000.0, 1, code=kept),
-        ]
-        table = {**table, effect: {"sizes": [48000.0, None, None, None]}}
-    stored = {"sizes": table, "rows": {r["key"]: r for r in rows}, "seconds": 60.0}
-    cal.migrate(stored)
-    assert [r["code"] for r in stored["rows"].values()] == [kept]
-    (gone,) = stored["retired"].values()
-    assert gone["retired"] == why and gone["code"] == codes[0]
-    assert (gone["kind"], gone["effect"]) == (
-        ("clean", None) if effect == "clean" else ("power", effect)
-    )
-    todo = [t for t in cal.tasks(stored["sizes"]) if cal.task_key(t) not in stored["rows"]]
-    assert (gone["kind"], gone["effect"]) in {(t[0], t[2]) for t in todo}  # run again
+def test_a_run_resumes_from_its_versions_rows_and_a_new_version_starts_afresh(
+    tmp_path, monkeypatch, package_log_level
+):
+    table, ran = _table(), []
 
+    def fake(task, quick=False, code=None, options=None):
+        ran.append(cal.task_key(task))
+        return _row(task, code)
 
-def test_a_single_row_set_aside_is_the_only_one_of_its_code_run_again(monkeypatch):
-    # the study's own entry under a code no other rule sets aside (the point support's rows
-    # of its code are all set aside since, by RETIRED_EFFECT)
-    (((_, key), why),) = cal.RETIRED_ROWS.items()
-    code = "0000000"
-    monkeypatch.setattr(cal, "RETIRED_ROWS", {(code, key): why})
-    effect, size, rep = key.split("/")[2], float(key.split("/")[3]), int(key.split("/")[4])
-    rows = [
-        _row("power", effect, 0, size, rep, code=code),
-        _row("power", effect, 0, size, rep + 1, code=code),
-    ]
-    table = {**_table(), effect: {"sizes": [size, None, None, None]}}
-    stored = {"sizes": table, "rows": {r["key"]: r for r in rows}, "seconds": 60.0}
-    cal.migrate(stored)
-    assert list(stored["rows"]) == [key.replace(f"/{rep}", f"/{rep + 1}")]
-    (gone,) = stored["retired"].values()
-    assert gone["key"] == key and gone["retired"] == why
+    monkeypatch.setattr(cal, "sizes", lambda quick=False: table)
+    monkeypatch.setattr(cal, "run_task_recorded", fake)
+    monkeypatch.setattr(cal, "write_report", lambda out_dir, stored, quick, workers: stored)
+    keys = [cal.task_key(t) for t in cal.tasks(table, quick=True)]
+    monkeypatch.setattr(cal, "code_version", lambda: "abc1234")
+    cal.save(tmp_path, True, {"version": "abc1234", "sizes": table, "rows": {}})
+    rows_path, _ = cal.cache_paths(tmp_path, True, "abc1234")
+    rows_path.write_text(json.dumps(_row(cal.tasks(table, quick=True)[0], "abc1234")) + "\n")
+    stored = cal.main(tmp_path, quick=True, workers=1)
+    assert ran == keys[1:]  # the cached row is not run again
+    assert set(stored["rows"]) == set(keys) and stored["runs"][-1]["rows"] == len(keys) - 1
+    assert len(rows_path.read_text().splitlines()) == len(keys)  # each row appended
+    ran.clear()
+    assert set(cal.main(tmp_path, quick=True, workers=1)["rows"]) == set(keys) and ran == []
+    monkeypatch.setattr(cal, "code_version", lambda: "def5678")  # a commit since
+    stored = cal.main(tmp_path, quick=True, workers=1)
+    assert ran == keys and {r["code"] for r in stored["rows"].values()} == {"def5678"}
+    assert len(rows_path.read_text().splitlines()) == len(keys)  # the older rows untouched
 
 
 def test_tasks_run_the_fitted_size_first_with_clean_replicates_between_its_rounds():

@@ -5,9 +5,7 @@ import logging
 import numpy as np
 import pytest
 
-from tests._studies import load_study
-
-co = load_study("checked_order", "checked_order_study")
+from studies import checked_order as co
 
 
 class _Measured:

@@ -338,9 +338,8 @@ def test_the_estimate_with_the_key_widens_its_deviations():
 
 
 def test_the_study_quick(tmp_path):
-    from _studies import load_study
+    from studies import error_scale as study
 
-    study = load_study("error_scale", "error_scale_study")
     text = study.main(tmp_path, quick=True).read_text()
     # toy, noise 3x declared, prior (1, 5), 400 replicates: without the scale ~0.47 (the
     # Gaussian P(|Z| < 1.88 / 3)), with it ~0.915 (4,000 replicates); bands of 2,400 intervals

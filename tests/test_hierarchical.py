@@ -2,7 +2,6 @@
 
 import numpy as np
 import pytest
-from _studies import load_study
 from scipy.stats import multivariate_normal
 
 from bayesplate import laminate
@@ -13,6 +12,7 @@ from bayesplate.sampling.population import (
     marginal_log_likelihood,
     mixture_log_likelihood,
 )
+from studies import many_plates, population_coverage
 
 
 def _plate(rng, rank=6, scale=100.0, info=10.0):
@@ -113,7 +113,7 @@ def test_population_prior_is_the_case_prior_carried_to_log_mu():
 
 @pytest.fixture(scope="module")
 def study():
-    return load_study("population_coverage")
+    return population_coverage
 
 
 def test_linearised_likelihood_has_the_exact_gradient_at_its_point(study, rng):
@@ -299,7 +299,7 @@ def test_study_quick_tier(study):
 @pytest.fixture(scope="module")
 def case_files(tmp_path_factory):
     """Four plates' case files (the fourth E1 15 % low), on a 12 x 6 mesh."""
-    many = load_study("many_plates")
+    many = many_plates
     folder = tmp_path_factory.mktemp("plates")
     return many.write_cases(folder, odd=True, mesh=(12, 6), data_mesh=(24, 12))
 

@@ -2,20 +2,21 @@
 
 import numpy as np
 import pytest
-from _studies import load_study
 from scipy import stats
+
+from studies import input_coverage
 
 
 @pytest.fixture(scope="module")
 def study():
-    return load_study("input_coverage")
+    return input_coverage
 
 
 def test_quick_report(study, tmp_path):
     path = study.main(tmp_path, quick=True)
     text = path.read_text()
     made = text.split("\n\n")[1]
-    assert made.startswith("Made by `python studies/input_coverage.py --quick`")
+    assert made.startswith("Made by `python -m studies.input_coverage --quick`")
     assert "| marginal | 6 (0) |" in text and "| exact | 6 (0) |" in text
 
 

@@ -10,7 +10,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
-from _studies import load_study
 
 from bayesplate import laminate
 from bayesplate.likelihood.posterior import GaussianProblem, prior_in_stiffness
@@ -25,8 +24,8 @@ from bayesplate.sampling import (
     sample_problem,
 )
 from bayesplate.sampling.plate_checks import predictive_check
+from studies import many_plates as study
 
-study = load_study("many_plates")
 TRUE = study.TRUE
 B_TRUE = laminate.stiffness_from_engineering(TRUE)
 

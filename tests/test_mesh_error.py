@@ -114,9 +114,8 @@ def test_a_concealed_point_support_reaches_its_best_basin_and_is_named():
     from bayesplate.discrepancy.physics.point_support import PointSupport
     from bayesplate.discrepancy.search.joint_fit import JointProblem, fit
     from bayesplate.likelihood.posterior import observed_eigenvalues, prior_in_stiffness
-    from tests._studies import load_study
+    from studies import concealment
 
-    concealment = load_study("concealment", "concealment_study")
     index = next(i for i, s in enumerate(concealment.scenarios()) if s[0] == "point_support")
     _, support, _, theta = concealment.scenarios()[index]
     blind, model = concealment.blind_recording(index, mesh=(50, 50))  # recorded on 100 x 100

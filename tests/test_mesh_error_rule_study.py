@@ -1,8 +1,6 @@
 """studies/mesh_error_rule.py: which replicates it runs again and how it pairs the rows."""
 
-from tests._studies import load_study
-
-mer = load_study("mesh_error_rule", "mesh_error_rule_study")
+from studies import mesh_error_rule as mer
 
 
 def _row(key, kind, family, effect, verdict, chosen=None, p=0.5, widening=(1.0, 1.2)):

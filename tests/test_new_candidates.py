@@ -341,12 +341,10 @@ def test_a_strong_misalignment_is_named_once_its_rejected_refit_is_searched_agai
     # (p = 5e-4, rejected; 39.3 on 50 x 50); the global search of its constants at the
     # fitted misalignment (discrepancy/anew.py) must find the true basin (chi-square 1.4).
     # The reference is the concealed truth: 8 degrees, Frederiksen's constants.
-    from _studies import load_study
-
     from bayesplate import bundled_case_path, load_case
     from bayesplate.discrepancy.diagnose import diagnose
+    from studies import concealment as study
 
-    study = load_study("concealment")
     label, physics, _, theta = study.scenarios()[7]
     assert label == "ply_misalignment" and theta == [8.0]
     case = load_case(bundled_case_path("frederiksen_t300"))

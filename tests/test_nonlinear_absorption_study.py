@@ -6,9 +6,8 @@ import numpy as np
 import pytest
 
 from bayesplate.laminate import stiffness_from_engineering
-from tests._studies import load_study
+from studies import nonlinear_absorption as na
 
-na = load_study("nonlinear_absorption", "nonlinear_absorption_study")
 cal = na.cal
 
 
@@ -123,9 +122,7 @@ def test_quick_run_writes_its_report(tmp_path):
         f"r{j}": {"effect": "point_mass", "size": size, "widening": [1.0] * m, "p_value": 0.5}
         for j, size in enumerate(table["point_mass"]["sizes"])
     }
-    cache = cal._cache_path(tmp_path, True)
-    cache.parent.mkdir(parents=True)
-    cache.write_text(json.dumps({"sizes": table, "rows": rows}))
+    cal.save(tmp_path, True, {"sizes": table, "rows": rows})  # this code version's rows
     path = na.main(out_dir=tmp_path, quick=True)
     stored = json.loads((tmp_path / ".cache" / "quick_nonlinear_absorption.json").read_text())
     for r in stored["rows"]:

@@ -5,20 +5,21 @@ import json
 
 import numpy as np
 import pytest
-from _studies import load_study
 from scipy import stats
+
+from studies import posterior_coverage
 
 
 @pytest.fixture(scope="module")
 def study():
-    return load_study("posterior_coverage")
+    return posterior_coverage
 
 
 @pytest.mark.slow  # two sampler runs: ~20 s of CPU, 129 s measured at load 11 on 2 cores
 def test_quick_report_and_resume(study, tmp_path):
     path = study.main(tmp_path, quick=True)
     text = path.read_text()
-    assert "Made by `python studies/posterior_coverage.py --quick`" in text
+    assert "Made by `python -m studies.posterior_coverage --quick`" in text
     assert "| method | replicates (failed) | band at 0.94 | E1_GPa |" in text
     for label in ("sampler", "B", "MVE (TOL 1e-6)", "MVE (TOL 1e-3)"):
         assert f"\n| {label} | " in text

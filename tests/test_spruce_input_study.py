@@ -4,16 +4,15 @@ import types
 
 import numpy as np
 import pytest
-from _studies import load_study
 
 from bayesplate.laminate import stiffness_from_engineering
+from studies import spruce_input_budget as study
 
 
 def test_input_shares_are_squared_correlations(rng):
     # E1 = e0 + c x + noise with x the drawn input: the share of E1's variance x explains is
     # c^2 var(x) / (c^2 var(x) + var(noise)) = 0.8 here; the sample estimate of a squared
     # correlation rho^2 has sd about 2 rho (1 - rho^2) / sqrt(n) = 0.0036 at n = 20000: 4 of it
-    study = load_study("spruce_input_budget")
     n = 20_000
     x = rng.standard_normal(n)
     e = np.tile([12e9, 1e9, 0.3, 0.9e9, 0.6e9, 0.03e9], (n, 1))

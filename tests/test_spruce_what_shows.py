@@ -2,18 +2,18 @@
 
 import numpy as np
 import pytest
-from _studies import load_study
 
 from bayesplate import stiffness_from_engineering
 from bayesplate.discrepancy import PointMass, ThicknessTaper
 from bayesplate.quantities import CASE_SCALE
+from studies import spruce_what_shows
 
 MESH = (20, 8)
 
 
 @pytest.fixture(scope="module")
 def study():
-    return load_study("spruce_what_shows")
+    return spruce_what_shows
 
 
 @pytest.fixture(scope="module")

@@ -1,27 +1,36 @@
 """Each study (and the forward benchmark) in quick mode against a number from the paper."""
 
+import importlib
+import importlib.util
 import inspect
 from pathlib import Path
 
 import numpy as np
 import pytest
-from _studies import load_study
 
 ROOT = Path(__file__).resolve().parents[1]
 MIN_PNG_BYTES = 10_000  # an empty or failed figure is a few kB; ours are 35-250 kB
 
 
+def _benchmark(name):
+    """The script ``benchmarks/<name>.py`` (a folder of scripts, not a package), executed."""
+    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 @pytest.fixture(scope="module")
 def forward(tmp_path_factory):
     out = tmp_path_factory.mktemp("forward_model")
-    module = load_study(ROOT / "studies" / "forward_model.py")
+    module = importlib.import_module("studies.forward_model")
     return module, module.main(out, quick=True), out
 
 
 @pytest.fixture(scope="module")
 def sensitivity(tmp_path_factory):
     out = tmp_path_factory.mktemp("sensitivity")
-    module = load_study(ROOT / "studies" / "sensitivity_figures.py")
+    module = importlib.import_module("studies.sensitivity_figures")
     return module, module.main(out, quick=True), out
 
 
@@ -55,7 +64,7 @@ def test_forward_crossply_reading(forward):
 def test_forward_report_and_figures(forward):
     module, _, out = forward
     text = (out / module.REPORT).read_text()
-    assert text.startswith("Made by `python studies/forward_model.py --quick`")
+    assert text.startswith("Made by `python -m studies.forward_model --quick`")
     assert "33 plies [(0/90)8/0/(90/0)8]**" in text  # the computed verdict
     _assert_pngs(out, [module.FIGURE, module.SHAPES])
 
@@ -69,12 +78,12 @@ def test_sensitivity_claims_and_figures(sensitivity):
         np.testing.assert_allclose(run["s"].sum(axis=1), 1.0, atol=1e-8)
     assert results["runs"]["plate1"]["frequency_Hz"][0] == pytest.approx(611.23, rel=1e-4)
     text = (out / module.REPORT).read_text()
-    assert text.startswith("Made by `python studies/sensitivity_figures.py --quick`")
+    assert text.startswith("Made by `python -m studies.sensitivity_figures --quick`")
     _assert_pngs(out, [entry[0] for entry in module.CASES.values()])
 
 
 def test_run_all_lists_studies_with_main():
-    run_all = load_study(ROOT / "studies" / "run_all.py")
+    run_all = importlib.import_module("studies.run_all")
     assert "forward_model" in run_all.STUDIES
     for name in run_all.STUDIES:
         main = run_all.load(name).main
@@ -82,7 +91,7 @@ def test_run_all_lists_studies_with_main():
 
 
 def test_benchmark_quick(tmp_path):
-    bench = load_study(ROOT / "benchmarks" / "bench_forward.py")
+    bench = _benchmark("bench_forward")
     result = bench.main(tmp_path, quick=True)
     rows = result["by_mesh"]
     assert [tuple(r["mesh"]) for r in rows] == bench.QUICK_MESHES
@@ -96,7 +105,7 @@ def test_benchmark_quick(tmp_path):
 def test_benchmark_diagnose_pairs_table_gives_the_ratio_of_medians(tmp_path):
     # two runs of this code (100 and 120 s) and two of the base (400 and 500 s), made here:
     # the report's ratio is that of the medians, 450 / 110
-    bench = load_study(ROOT / "benchmarks" / "bench_diagnose.py")
+    bench = _benchmark("bench_diagnose")
     info = {
         "cpu": "test cpu",
         "nproc": 2,
@@ -129,7 +138,7 @@ def test_benchmark_diagnose_pairs_table_gives_the_ratio_of_medians(tmp_path):
 def test_benchmark_diagnose_quick(tmp_path):
     # a control recording of the concealment study on the quick mesh lands in the table with
     # its verdict (nothing concealed: consistent) and the time is written with its target
-    bench = load_study(ROOT / "benchmarks" / "bench_diagnose.py")
+    bench = _benchmark("bench_diagnose")
     rows, base_rows, scaling = bench.main(tmp_path, [0], 2, quick=True)
     assert [r["index"] for r in rows] == [0] and base_rows == [] and scaling == []
     assert rows[0]["verdict"] == "consistent" and rows[0]["chosen"] is None
@@ -142,7 +151,7 @@ def test_benchmark_diagnose_quick(tmp_path):
 def test_benchmark_diagnose_scaling_table_fits_the_growth(tmp_path):
     # rows whose wall time grows as unknowns**1.5 (made here, not measured): the report's
     # log-log slope is 1.5, and each row lands with its mesh, unknowns and verdict
-    bench = load_study(ROOT / "benchmarks" / "bench_diagnose.py")
+    bench = _benchmark("bench_diagnose")
     info = {
         "cpu": "test cpu",
         "nproc": 2,
@@ -181,7 +190,7 @@ def test_forward_full_convergence(tmp_path):
     # Paper section 6.3: the 50 x 50 mesh "satisfactorily resolves the first 14 modes".
     # Richardson on 25/50/100 puts its largest error at 0.16 % (0.16 sigma); 0.3 sigma bounds
     # it with room for the extrapolation's own uncertainty.
-    module = load_study(ROOT / "studies" / "forward_model.py")
+    module = importlib.import_module("studies.forward_model")
     results = module.main(tmp_path, quick=False)
     conv = results["convergence"]
     i50 = conv["meshes"].index((50, 50))
@@ -192,7 +201,7 @@ def test_paper_tables_quick(tmp_path):
     # Table 4 (Plate 1, test 2, d = 1/3): the paper prints B E1 = 152.4 GPa after 10
     # iterations; 0.2 % covers its 4 printed figures plus our 0.003 % frequency difference.
     # Table 3: d = 1/3 from test 1's initial values does not converge ("-").
-    module = load_study(ROOT / "studies" / "paper_tables.py")
+    module = importlib.import_module("studies.paper_tables")
     results = module.main(tmp_path, quick=True)
     lines = {(x.spec.table, x.spec.label, x.stage): x for x in results["lines"]}
     b = lines[("4", "B 1/3", "")]
@@ -207,7 +216,7 @@ def test_paper_tables_quick(tmp_path):
     assert verdicts["V_b = diag(dC), as printed"]["agree"] < paper["n"]
     for report in (module.TABLES, module.CONVENTIONS_REPORT, module.TIMING):
         text = (tmp_path / report).read_text()
-        assert text.startswith("Made by `python studies/paper_tables.py --quick`")
+        assert text.startswith("Made by `python -m studies.paper_tables --quick`")
     assert "UNEXPLAINED" not in (tmp_path / module.TABLES).read_text()
 
 
@@ -216,13 +225,13 @@ def test_concealment_quick(tmp_path):
     # regression of the concealed-effect study on a 12 x 6 mesh: the control must stay
     # consistent; the 12 x 6 mesh's own error is far above the 0.2 % noise, so diagnose widens
     # the deviations and may not see the 1 g mass there (the full study uses the 50 x 50 mesh)
-    rows = load_study(ROOT / "studies" / "concealment.py").main(tmp_path, quick=True)
+    rows = importlib.import_module("studies.concealment").main(tmp_path, quick=True)
     assert rows[0]["effect"] == "control" and rows[0]["verdict"] == "consistent"
     assert (tmp_path / "concealment.md").read_text().count("| control |") == 1
 
 
 def test_concealment_runs_again_a_single_retired_row_and_no_other():
-    study = load_study(ROOT / "studies" / "concealment.py")
+    study = importlib.import_module("studies.concealment")
     (((code, key), why),) = study.RETIRED_ROWS.items()
     assert study._retired(key, {"code": code}) == why
     assert study._retired(str(int(key) + 1), {"code": code}) is None  # its neighbour is kept
@@ -235,7 +244,7 @@ def test_diagnose_frederiksen_quick(tmp_path):
     # The measured plate on half the mesh: Frederiksen's own constants reproduce every
     # measured frequency within 0.20 % (forward-model study), so nothing is missing at the
     # case's 1 % nor at 0.2 %; every run is checked against a fit from his constants.
-    module = load_study(ROOT / "studies" / "diagnose_frederiksen.py")
+    module = importlib.import_module("studies.diagnose_frederiksen")
     results = module.main(tmp_path, quick=True)
     assert results["1pc"].verdict == results["0p2pc"].verdict == "consistent"
     for key in ("1pc", "0p2pc"):
@@ -256,7 +265,7 @@ def test_prior_bias_quick(tmp_path):
     # 150.0 GPa; 0.2 % covers 4 printed figures plus our 0.003 % frequency difference. The
     # sampled posterior of the same problem keeps the target inside its 94 % interval for
     # every constant, while B misses G23 by 13 %.
-    module = load_study(ROOT / "studies" / "prior_bias.py")
+    module = importlib.import_module("studies.prior_bias")
     results = module.main(tmp_path, quick=True)
     (run,) = results["runs"]
     assert run.b.constants[0] == pytest.approx(152.4e9, rel=2e-3)
@@ -266,7 +275,7 @@ def test_prior_bias_quick(tmp_path):
     assert np.all((p.hdi[0] <= run.target) & (run.target <= p.hdi[1]))
     assert abs(run.b.constants[5] / run.target[5] - 1) > 0.1
     text = (tmp_path / module.REPORT).read_text()
-    assert text.startswith("Made by `python studies/prior_bias.py --quick`")
+    assert text.startswith("Made by `python -m studies.prior_bias --quick`")
     _assert_pngs(tmp_path, [module.FIGURE.format("plate1", 3)])
 
 
@@ -275,7 +284,7 @@ def test_spruce_badiane_quick(tmp_path):
     # The measured spruce plate (issue 16): B, its peaks assigned by likelihood (all ten in
     # order), within 3 % of the source's constants rescaled to the case's h and rho on E1,
     # E2 and G12 (the source is the authors' own vibration-based identification).
-    module = load_study(ROOT / "studies" / "spruce_badiane.py")
+    module = importlib.import_module("studies.spruce_badiane")
     rows = module.main(tmp_path, quick=True)
     case = module.load_case(module.bundled_case_path(module.CASE))
     reference, factor = module.rescaled_reference(case)
@@ -284,4 +293,4 @@ def test_spruce_badiane_quick(tmp_path):
     assert b["status"] == "converged" and b["spurious"] == [] and b["unobserved"] == []
     np.testing.assert_allclose(b["constants"][[0, 1, 3]], reference[[0, 1, 3]], rtol=0.03)
     text = (tmp_path / module.REPORT).read_text()
-    assert text.startswith("Made by `python studies/spruce_badiane.py --quick`")
+    assert text.startswith("Made by `python -m studies.spruce_badiane --quick`")

@@ -1,0 +1,1 @@
+"""The validation studies; run each as ``python -m studies.<name>``."""
