@@ -142,7 +142,7 @@ def diagnose(
         case=case,
         model=model,
         coarse=coarse_model(model),  # the same in every pass
-        physics=physics or all_candidates(),
+        physics=physics or all_candidates(model),
         prior=(mu_b, V_b),
         options=options,
         say=say,

@@ -452,6 +452,7 @@ def diagnosis_to_dict(d):
         "probabilities": dict(getattr(d, "probabilities", {})),
         "rival": _rival(d),
         "also_tied": [c.name for c in getattr(d, "also_tied", [])],
+        "unnamed_change": _unnamed(getattr(d, "unnamed", None)),
         "unidentified": d.unidentified,
         "notes": d.notes,
         # the computed mode (1-based) of every measured peak, null where left out as
@@ -460,4 +461,21 @@ def diagnosis_to_dict(d):
         "peak_modes": None
         if getattr(d, "peak_modes", None) is None
         else [None if j < 0 else int(j) + 1 for j in d.peak_modes],
+    }
+
+
+def _unnamed(change):
+    """The unnamed local change every name must beat (search/unnamed.py), or None."""
+    if change is None:
+        return None
+    x0, x1, y0, y1 = (float(v) for v in change.window_mm)
+    return {
+        "log_evidence_gain": float(change.log_evidence_gain),
+        "window_mm": {"x": [x0, x1], "y": [y0, y1]},
+        "weight": float(change.weight),
+        "relative_change": {
+            "stiffness": float(change.change[0]),
+            "shear_stiffness": float(change.change[1]),
+            "mass": float(change.change[2]),
+        },
     }

@@ -14,6 +14,7 @@ import numpy as np
 from .probabilities import model_probabilities
 from .result import Diagnosis
 from .separation import separate
+from .unnamed import unnamed
 from .verdict import basins_note, tie_text, ties, unsettled_notes, verdict
 
 __all__ = ["conclude"]
@@ -42,6 +43,15 @@ def conclude(run, data, nominal_stage, located, searched):
     outcome, chosen = verdict(
         check.p_value, s.warranted, s.refit_p_value, o.alpha, s.best, tied=bool(tied)
     )
+    change = None
+    if outcome != "consistent" and o.unnamed_margin is not None:
+        change = unnamed(run.model, check.fit, data.problem, data.modes)
+        if chosen is not None and beaten(chosen, change, o.unnamed_margin):
+            run.say(
+                f"an unnamed local change gains {change.log_evidence_gain:+.1f} nats, "
+                f"{chosen.name} {chosen.log_evidence_gain:+.1f}"
+            )
+            outcome, chosen, tied = "unexplained", None, []
     rival = tied[0][0] if outcome == "ambiguous" else None
     separation, notes = None, [*data.notes, *nominal_stage.notes]
     if outcome == "ambiguous":
@@ -52,6 +62,7 @@ def conclude(run, data, nominal_stage, located, searched):
     if outcome == "consistent":
         region, mirrors = None, []
     notes += _notes(outcome, chosen, check.fit, o.basin_margin, region is not None and mirrors)
+    notes += _unnamed_notes(outcome, s.best if s.warranted else None, change, o.unnamed_margin)
     notes += unsettled_notes(check.fit, chosen, tied if rival else [], s.ranked)
     run.say(
         f"verdict: {outcome}"
@@ -83,7 +94,35 @@ def conclude(run, data, nominal_stage, located, searched):
         rival=rival,
         separation=separation,
         also_tied=[c for c, _ in tied[1:]] if rival else [],
+        unnamed=change,
     )
+
+
+def beaten(best, change, margin):
+    """Whether the unnamed local change gains more than ``best`` by over ``margin`` nats."""
+    return change.log_evidence_gain > best.log_evidence_gain + margin
+
+
+def _unnamed_notes(outcome, best, change, margin):
+    """What the unnamed local change says: where the mismatch sits, and against what."""
+    if change is None or outcome == "consistent":
+        return []
+    gain = change.log_evidence_gain
+    if outcome == "unexplained" and best is not None and gain > best.log_evidence_gain:
+        return [
+            f"an unnamed local change fits better than every named candidate (evidence gain "
+            f"{gain:.1f} nats against {best.log_evidence_gain:.1f} of {best.name}): the plate "
+            f"differs from the model in a way none of the candidates describes; {change.text()}"
+        ]
+    if outcome == "unexplained":
+        return [change.text()[0].upper() + change.text()[1:]]
+    if gain > best.log_evidence_gain - margin:
+        return [
+            f"an unnamed local change fits about as well as {best.name} (evidence gain "
+            f"{gain:.1f} nats against {best.log_evidence_gain:.1f}): the name is the nearest "
+            f"of the candidates, not a certainty; {change.text()}"
+        ]
+    return []
 
 
 def _notes(outcome, chosen, nominal, basin_margin, mirrored):

@@ -53,6 +53,11 @@ class DiagnoseOptions:
         order checked: where it pairs a peak with another mode), diagnose again
         (:mod:`.reassign`). Order or index asked by name, and pairing by shapes, are kept as
         they are.
+    unnamed_margin : float or None
+        Nats by which the unnamed local change (:mod:`.unnamed`) must gain more than the
+        best named candidate for the verdict to be ``unexplained`` rather than a name (2,
+        the ambiguity margin: within it the two tie, and the name stands with a note that
+        an unnamed change fits about as well); None leaves the rival out.
     prior_odds : dict, optional
         ``{candidate name: prior odds against the nominal model}`` (default 1 for every
         candidate; a case-file key for them is not defined yet).
@@ -71,6 +76,7 @@ class DiagnoseOptions:
     prior_margin: float = 4.0  # nats (odds about 55:1): one that fits as well this close ties too
     pairs: bool = True  # fit two effects at once when the best single one is rejected
     reassign: bool = True  # the assignment made again at the verdict's fit (not by order/index)
+    unnamed_margin: float | None = 2.0  # nats: the unnamed local change beats every name
     prior_odds: dict | None = None
 
     def __post_init__(self):

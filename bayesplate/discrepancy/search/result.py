@@ -9,6 +9,7 @@ import numpy as np
 from .laplace import JointFit
 from .rank import CandidateResult
 from .separation import Separation
+from .unnamed import UnnamedChange
 
 __all__ = ["Diagnosis"]
 
@@ -62,6 +63,9 @@ class Diagnosis:
         (:mod:`.reassign`).
     passes : int
         Passes diagnose ran, each with another assignment of the peaks (:mod:`.reassign`).
+    unnamed : UnnamedChange or None
+        The rival every named candidate must beat, an unnamed local change fitted at the
+        nominal fit (:mod:`.unnamed`); None when the nominal fit is consistent.
     """
 
     verdict: str
@@ -90,3 +94,4 @@ class Diagnosis:
     peak_modes: np.ndarray | None = None
     also_tied: list = field(default_factory=list, repr=False)
     passes: int = 1
+    unnamed: UnnamedChange | None = field(default=None, repr=False)
