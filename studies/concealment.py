@@ -35,30 +35,6 @@ from studies.recordings import NOISE, recordings  # noqa: F401  (recordings: tes
 
 SEED = 20261121
 NAMES = ("E1", "E2", "nu12", "G12", "G13", "G23")
-#: Rows made by these code versions are run again (diagnose has changed since in ways that
-#: change its answers); rows without a code label were made before rows carried one.
-RETIRED = {
-    None: "made before 2026-11-26 by code that did not label its rows: every fit since "
-    "settled on reduced models, the new candidates (cutout, point support) competing, and "
-    "the foundation's and point support's priors on the Rayleigh bound of the lowest "
-    "eigenvalue",
-    "65fcabd": "made on 2026-11-26 by the code of 65fcabd: since then a candidate's evidence "
-    "gain counts the posterior modes its mirror images make (up to ln 4 for a located one)",
-    "7d8ca6b": "made on 2026-11-26 by the code of 7d8ca6b: since then the rivals of a "
-    "candidate that may be named are refined when their coarse gain is within 10 nats",
-}
-#: Single rows run again, by (code, scenario index): a change since could alter that row's
-#: verdict and no other's (the others' gains leave no rival the change concerns).
-RETIRED_ROWS = {
-    ("3b28b25", "5"): "made on 2026-11-26 by the code of 3b28b25: since then a rival that fits "
-    "the recordings as well and lies within 4 nats makes the verdict ambiguous; this row's "
-    "runner-up was 2.8 nats below (every other explained row's is 7 nats or more below)",
-}
-
-
-def _retired(key, row):
-    """Why a cached row is run again, or None."""
-    return RETIRED.get(row.get("code")) or RETIRED_ROWS.get((row.get("code"), key))
 
 
 def scenarios(quick=False):
@@ -148,12 +124,13 @@ def main(out_dir="reports", quick=False, workers=1, scheduler=None, first=()):
     process with one worker, else on a local Dask cluster of `workers` processes or on the
     Dask scheduler at `scheduler`; each row is the same wherever it ran.
 
-    Finished rows are kept in ``out_dir/.cache/`` and reused when the study is run again.
-    ``first``: indices of scenarios to run before the others (the table keeps its order).
+    Finished rows are kept in ``out_dir/.cache/concealment/<code version>[-quick].json``
+    and reused when the study is run again by the same code; rows of other code are never
+    read. ``first``: indices of scenarios to run before the others (the table keeps its
+    order).
     """
-    cache = Path(out_dir) / ".cache" / f"concealment{'-quick' if quick else ''}.json"
+    cache = cache_path(out_dir, quick)
     done = json.loads(cache.read_text()) if cache.exists() else {}
-    done = {k: row for k, row in done.items() if _retired(k, row) is None}
     todo = [i for i in range(len(scenarios(quick))) if str(i) not in done]
     todo = [i for i in first if i in todo] + [i for i in todo if i not in first]
     print(f"{len(todo)} scenarios to run ({len(done)} cached)", flush=True)
@@ -184,14 +161,18 @@ def _ship_by_value():
         cloudpickle.register_pickle_by_value(module)
 
 
+def cache_path(out_dir, quick=False, version=None):
+    """The rows of the code ``version`` (default: this code's), keyed by scenario index."""
+    name = f"{version or code_version()}{'-quick' if quick else ''}.json"
+    return Path(out_dir) / ".cache" / "concealment" / name
+
+
 def write_report(out_dir="reports", quick=False):
-    """Write ``concealment.md`` from the finished rows in the cache; returns them."""
-    cache = Path(out_dir) / ".cache" / f"concealment{'-quick' if quick else ''}.json"
+    """Write ``concealment.md`` from this code's finished rows; returns them."""
+    cache = cache_path(out_dir, quick)
     done = json.loads(cache.read_text()) if cache.exists() else {}
     n = len(scenarios(quick))
-    rows = [
-        done[str(i)] for i in range(n) if str(i) in done and _retired(str(i), done[str(i)]) is None
-    ]
+    rows = [done[str(i)] for i in range(n) if str(i) in done]
     case = load_case(bundled_case_path("frederiksen_t300"))
     mesh = (12, 6) if quick else case.mesh
     _with_mirror_images(rows, scenarios(quick), PlateModel.from_case(case, mesh=mesh))
@@ -199,7 +180,7 @@ def write_report(out_dir="reports", quick=False):
     if len(rows) < n:
         text += (
             f"\n**Partial: {len(rows)} of {n} scenarios finished**; run the command again "
-            "to finish the rest (finished rows are kept in reports/.cache/).\n"
+            "to finish the rest (finished rows are kept in reports/.cache/concealment/).\n"
         )
     atomic_write_text(Path(out_dir) / "concealment.md", text)
     return rows
@@ -354,8 +335,6 @@ def _provenance(rows):
             if loads
             else f"Rows made by `{code}`: {len(mine)}."
         )
-    for (code, key), why in RETIRED_ROWS.items():
-        out.append(f"Scenario {key}'s row of `{code}` was run again ({why}).")
     return out
 
 

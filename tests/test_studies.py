@@ -230,13 +230,16 @@ def test_concealment_quick(tmp_path):
     assert (tmp_path / "concealment.md").read_text().count("| control |") == 1
 
 
-def test_concealment_runs_again_a_single_retired_row_and_no_other():
+def test_concealment_reads_the_rows_of_its_own_code_alone(tmp_path, monkeypatch):
+    # rows cached by another code version are never read: the report is this code's table
     study = importlib.import_module("studies.concealment")
-    (((code, key), why),) = study.RETIRED_ROWS.items()
-    assert study._retired(key, {"code": code}) == why
-    assert study._retired(str(int(key) + 1), {"code": code}) is None  # its neighbour is kept
-    old = next(c for c in study.RETIRED if c is not None)
-    assert study._retired(key, {"code": old}) == study.RETIRED[old]  # a whole code's rows
+    monkeypatch.setattr(study, "code_version", lambda: "newcode")
+    old = study.cache_path(tmp_path, quick=True, version="oldcode")
+    old.parent.mkdir(parents=True)
+    old.write_text('{"0": {"effect": "control"}}')
+    assert study.cache_path(tmp_path, quick=True) == old.with_name("newcode-quick.json")
+    assert study.write_report(tmp_path, quick=True) == []
+    assert "Partial: 0 of 2 scenarios" in (tmp_path / "concealment.md").read_text()
 
 
 @pytest.mark.slow
