@@ -6,7 +6,7 @@ import numpy as np
 
 from ...fem.mesh import DOF_NAMES, DOFS_PER_NODE
 from .base import Parameter, Physics
-from .cutout import RESIDUAL
+from .cutout import RESIDUAL, material_removed
 from .reduced_model import RegionProjection, project
 
 __all__ = ["CORNERS", "CutCorner", "half_plane_area", "triangle_fractions"]
@@ -167,20 +167,7 @@ class CutCorner(Physics):
 
     def apply(self, model, theta):
         """The plate with the corner cut off; ``theta = (dx_mm, dy_mm)``."""
-        frac = self._fractions(model, theta)
-        inside = np.flatnonzero(frac > 0)
-        if inside.size == 0:
-            return model
-        f = frac[inside, None, None]
-        removed = [
-            model.assembler.element_data(inside, f * Ke[None])
-            for Ke in model.element_stiffness_terms()
-        ]
-        mass = model.assembler.element_data(inside, f * model.element_mass()[None])
-        return model.modified(
-            stiffness_terms=model.stiffness_terms - np.array(removed),
-            mass_data=model.mass_data - mass,
-        )
+        return material_removed(model, self._fractions(model, theta))
 
     def ritz(self, model, b, basis, near=None):
         """``V^T K_j V - sum_e f_e V_e^T K_j^e V_e`` (and the same for M), cut elements only.

@@ -10,7 +10,14 @@ from .location import effect_map
 from .reduced_model import RegionProjection, project
 from .ritz_scan import Scan, misfit
 
-__all__ = ["Cutout", "cutout_map", "cutout_scan", "disc_fractions", "discs_fractions"]
+__all__ = [
+    "Cutout",
+    "cutout_map",
+    "cutout_scan",
+    "disc_fractions",
+    "discs_fractions",
+    "material_removed",
+]
 
 #: Share of the material kept inside the hole (an "ersatz" material, as in topology
 #: optimisation): a node whose every element lies in the hole keeps a regular, if light, row
@@ -111,6 +118,26 @@ def discs_fractions(mesh, centres, diameter):
     return out
 
 
+def material_removed(model, frac):
+    """``model`` with each element's stiffness and mass less the share ``frac`` of it.
+
+    ``K_j -> K_j - sum_e f_e K_j^e``, ``M -> M - sum_e f_e M^e`` over the elements with
+    ``f_e > 0``; ``model`` itself when there are none.
+    """
+    inside = np.flatnonzero(frac > 0)
+    if inside.size == 0:
+        return model
+    f = frac[inside, None, None]
+    removed = [
+        model.assembler.element_data(inside, f * Ke[None]) for Ke in model.element_stiffness_terms()
+    ]
+    mass = model.assembler.element_data(inside, f * model.element_mass()[None])
+    return model.modified(
+        stiffness_terms=model.stiffness_terms - np.array(removed),
+        mass_data=model.mass_data - mass,
+    )
+
+
 def _largest_mm(model):
     """The largest admissible diameter: a third of the plate's shorter side, mm."""
     return 1e3 * min(model.mesh.a, model.mesh.b) / 3.0
@@ -168,20 +195,7 @@ class Cutout(Physics):
 
     def apply(self, model, theta):
         """The plate with the hole; ``theta = (x_mm, y_mm, diameter_mm)``."""
-        frac = self._fractions(model, theta)
-        inside = np.flatnonzero(frac > 0)
-        if inside.size == 0:
-            return model
-        f = frac[inside, None, None]
-        removed = [
-            model.assembler.element_data(inside, f * Ke[None])
-            for Ke in model.element_stiffness_terms()
-        ]
-        mass = model.assembler.element_data(inside, f * model.element_mass()[None])
-        return model.modified(
-            stiffness_terms=model.stiffness_terms - np.array(removed),
-            mass_data=model.mass_data - mass,
-        )
+        return material_removed(model, self._fractions(model, theta))
 
     def ritz(self, model, b, basis, near=None):
         """``V^T K_j V - sum_e f_e V_e^T K_j^e V_e`` (and the same for M), cut elements only.

@@ -38,6 +38,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import logsumexp
 
+from .locate import paired
+
 __all__ = [
     "GROUPS",
     "SCALES",
@@ -149,13 +151,13 @@ def windows(nx, ny, span=WINDOW):
     return np.array(members), np.array(corners)
 
 
-def field_columns(model, paired, b, label, n_regions):
+def field_columns(model, at_fit, b, label, n_regions):
     """``d lambda_i / d w``: each region's relative change of each group, rad^2/s^2.
 
     Parameters
     ----------
     model : PlateModel
-    paired : ModalResult
+    at_fit : ModalResult
         The nominal fit's modes paired with the measured ones: ``eigenvalues`` (m,),
         ``vectors`` (n_dofs, m), mass-normalised.
     b : numpy.ndarray, shape (6,)
@@ -168,7 +170,7 @@ def field_columns(model, paired, b, label, n_regions):
     numpy.ndarray, shape (m, n_regions, 3)
         Stiffness scaled by ``1 + w``: ``+ a_i^T K_r a_i``; mass: ``- lambda_i a_i^T M_r a_i``.
     """
-    q = paired.vectors[model.mesh.element_dofs]  # (n_el, 32, m)
+    q = at_fit.vectors[model.mesh.element_dofs]  # (n_el, 32, m)
     terms = model.element_stiffness_terms()
     onehot = np.zeros((label.size, n_regions))
     onehot[np.arange(label.size), label] = 1.0
@@ -177,7 +179,7 @@ def field_columns(model, paired, b, label, n_regions):
         Ke = np.einsum("j,jab->ab", np.asarray(b) * np.array(_WEIGHTS[group]), terms)
         columns.append(np.einsum("eai,ab,ebi->ie", q, Ke, q) @ onehot)
     kinetic = np.einsum("eai,ab,ebi->ie", q, model.element_mass(), q) @ onehot
-    columns.append(-paired.eigenvalues[:, None] * kinetic)
+    columns.append(-at_fit.eigenvalues[:, None] * kinetic)
     return np.stack(columns, axis=-1)
 
 
@@ -250,20 +252,13 @@ def unnamed(model, fit_, problem, modes):
     modes : numpy.ndarray of int, shape (m,)
         0-based modes paired with the measured ones.
     """
-    modal = fit_.modal
-    paired = type(modal)(
-        modal.b,
-        modal.eigenvalues[modes],
-        modal.vectors[:, modes],
-        modal.sensitivities[modes],
-        modal.rigid_eigenvalues,
-    )
+    at_fit = paired(fit_, modes)
     sigma = problem.sigma
-    J = paired.sensitivities @ problem.L / sigma[:, None]
+    J = at_fit.sensitivities @ problem.L / sigma[:, None]
     r0 = fit_.residual_sigma + J @ problem.pack(fit_.b)[:6]
     label, (edges_x, edges_y) = regions(model.mesh)
     nx, ny = edges_x.size - 1, edges_y.size - 1
-    columns = field_columns(model, paired, fit_.b, label, nx * ny) / sigma[:, None, None]
+    columns = field_columns(model, at_fit, fit_.b, label, nx * ny) / sigma[:, None, None]
     members, corners = windows(nx, ny)
     gains, means = window_gains(r0, J, columns, members)
     total = logsumexp(gains)
