@@ -1,6 +1,7 @@
 """The machine and the code a study ran on, for its report (a helper here, not a study)."""
 
 import datetime
+import json
 import pathlib
 import platform
 import subprocess
@@ -42,3 +43,18 @@ def code_version():
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
     return head + ("+modified" if dirty else "")
+
+
+def jsonl_rows(path):
+    """The rows of a JSON-lines cache, in order; none when it does not exist.
+
+    A line cut short (a run killed while writing it) is skipped: its replicate runs again.
+    """
+    rows = []
+    if path.exists():
+        for line in path.read_text().splitlines():
+            try:
+                rows.append(json.loads(line))
+            except json.JSONDecodeError:
+                continue
+    return rows

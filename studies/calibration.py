@@ -61,7 +61,7 @@ from bayesplate.discrepancy.physics.location import absorbable_projector
 from bayesplate.io import atomic_write_text
 from bayesplate.likelihood.posterior import prior_in_stiffness
 from studies import recordings as rec
-from studies._study_host import code_version, cpu
+from studies._study_host import code_version, cpu, jsonl_rows
 from studies.recordings import NOISE  # relative deviation of each recorded frequency
 
 SEED = 20261125
@@ -663,13 +663,8 @@ def load(out_dir, quick, version=None):
         if head.get("settings") != stored["settings"]:
             return stored
         stored.update(head)
-    if rows_path.exists():
-        for line in rows_path.read_text().splitlines():
-            try:
-                row = json.loads(line)
-            except json.JSONDecodeError:
-                continue
-            stored["rows"][row["key"]] = row
+    for row in jsonl_rows(rows_path):
+        stored["rows"][row["key"]] = row
     return stored
 
 

@@ -37,7 +37,7 @@ from bayesplate.discrepancy.physics.cutout import disc_fractions
 from bayesplate.discrepancy.physics.local_stiffness_loss import area_fractions
 from bayesplate.io import atomic_write_text
 from studies import recordings as rec
-from studies._study_host import code_version, cpu, utc_now
+from studies._study_host import code_version, cpu, jsonl_rows, utc_now
 
 SEED = 20261128
 MESH = (30, 30)  # diagnose's working mesh; the recordings' is twice as fine
@@ -153,7 +153,7 @@ def main(out_dir="reports", replicates=REPLICATES):
     version = code_version()
     cache = pathlib.Path(out_dir) / ".cache" / "outside_effects" / f"{version}.jsonl"
     cache.parent.mkdir(parents=True, exist_ok=True)
-    rows = [json.loads(line) for line in cache.read_text().splitlines()] if cache.exists() else []
+    rows = jsonl_rows(cache)
     done = {(r["effect"], r["replicate"]) for r in rows}
     for label in EFFECTS:
         for k in range(replicates):

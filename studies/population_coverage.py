@@ -200,17 +200,9 @@ def cache_path(n_plates, version=None):
 
 def cached_rows(path):
     """Rows of `path` by seed (a line cut short by a kill is skipped)."""
-    import json
+    from studies._study_host import jsonl_rows
 
-    rows = {}
-    if path.exists():
-        for line in path.read_text().splitlines():
-            try:
-                row = json.loads(line)
-            except json.JSONDecodeError:
-                continue
-            rows[row["seed"]] = row
-    return rows
+    return {row["seed"]: row for row in jsonl_rows(path)}
 
 
 def run(seeds, n_plates, workers, path):
