@@ -27,10 +27,12 @@ class DiagnoseOptions:
         Posterior sd / prior sd above which a constant is reported as unidentified.
     mesh_error_ratio : float
         Mesh error / measurement deviation above which the deviation is inflated.
-    mesh_error_part : {"whole", "unabsorbed"}
+    mesh_error_part : {"whole", "unabsorbed", "corrected"}
         What of the mesh's estimated error inflates the deviations: all of it, or the part
         the six constants cannot absorb (:mod:`.mesh_error`; measured by
-        ``studies/mesh_error_rule.py``).
+        ``studies/mesh_error_rule.py``); or ``"corrected"``: the error (estimated with the
+        mesh twice as fine) taken out of the model, the deviations widened only by what the
+        correction leaves uncertain.
     refine_margin : float
         Candidates gaining less than this on their reduced coarse model are not refined on
         the working mesh, nats.

@@ -25,6 +25,9 @@ def one_pass(run, pairing, rng):
     """Steps 1-5 with one assignment of the peaks to the computed modes: a Diagnosis."""
     data = deviations(run, pairing)
     nominal = fit_nominal_stage(run, data, rng)
+    if run.options.mesh_error_part == "corrected":  # the error where the constants are
+        data = deviations(run, pairing, at=nominal.check.fit.b)
+        nominal = fit_nominal_stage(run, data, rng)
     located = locate(run, data, nominal)
     ranked = rank(located.fitting, run.physics)
     searched = refit(run, data, nominal, located, ranked)

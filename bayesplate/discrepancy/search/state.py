@@ -42,8 +42,9 @@ class Run:
     fast : bayesplate.reduced.CertifiedModel or None
     at_mean : dict
         ``n -> (the working mesh's modal result, the coarse mesh's eigenvalues)`` at the
-        prior mean, filled by the first pass that needs them (a cache: a second pass solves
-        nothing again).
+        prior mean, and ``("finer", n) ->`` the mesh twice as fine's frequencies there (Hz;
+        the corrected rule), filled by the first pass that needs them (a cache: a second
+        pass solves nothing again).
     """
 
     case: object
