@@ -10,31 +10,49 @@ by order.
   the unidirectional Frederiksen T300/epoxy plate (100.1 x 53.0 x 3.36 mm, diagnosed on
   40 x 20) and the 33-ply cross-ply laminate of the paper (100 x 50 x 3.3 mm, 32 x 16). Every
   verdict other than ``consistent`` is a false alarm.
-- **Power**: each candidate concealed in the Frederiksen plate at three sizes, ``N_POWER``
-  replicates each: how often diagnose names it (``explained`` with it, or ``ambiguous`` with it
+- **Power**: each candidate concealed in the Frederiksen plate, ``N_POWER`` replicates at
+  each size run: how often diagnose names it (``explained`` with it, or ``ambiguous`` with it
   among those named), against the ideal test: the chi-square of the recordings against the
   nominal plate on the recordings' own mesh at the *true* constants, ``m = 14`` degrees of
-  freedom, rejecting at the diagnosis's 1 %. The sizes (``SIZES``) are those at which the
-  ideal test rejects with probability 0.5 and 0.9, and three times the latter: its
-  noncentrality ``lambda(size) = sum(((f_effect - f_nominal) / (0.002 f_nominal))**2)`` is
-  computed on a grid of sizes and inverted (log-log interpolation), ``P(reject) =
-  ncx2.sf(chi2.ppf(0.99, m), m, lambda)``.
+  freedom, rejecting at the diagnosis's 1 %, and the fitted test (the same once the six
+  constants have absorbed what they can, ``m - 6``). The sizes (``SIZES``) are those at which
+  the fitted test rejects with probability 0.9, the ideal test with 0.9 and 0.5, and three
+  times the ideal 0.9 one: the noncentrality ``lambda(size) = sum(((f_effect - f_nominal) /
+  (0.002 f_nominal))**2)`` is computed on a grid of sizes and inverted (log-log
+  interpolation), ``P(reject) = ncx2.sf(chi2.ppf(0.99, m), m, lambda)``.
 - **Coverage of the refit**: in each replicate where the concealed candidate is named, is each
   true parameter (or its value at a mirror image of the place) inside the reported 94 %
   interval (estimate +- 1.881 sd)?
 
+The plan (``--sizes``): ``target`` (the default) runs the clean replicates and each candidate
+at the fitted 0.9 size alone, the size the achievable target is judged at (40 + 10 per
+candidate: about 1 h on two cores); ``all`` adds the other three sizes (about 7 h). Ten
+replicates a size tell a candidate named 8 of 10 only to a Wilson 95 % interval of about
+0.49-0.94, and 40 clean ones bound the false-alarm rate at about 0.09 (the report computes
+its own band).
+
+The mesh-error rule (``--mesh-error``, one of
+:data:`bayesplate.discrepancy.search.mesh_error.MESH_ERROR_PARTS`; default diagnose's
+``DEFAULTS["mesh_error_part"]``) is passed to diagnose for every replicate; the widening
+figures (:func:`widening`) follow it.
+
 Every replicate is an independent task on :func:`bayesplate.batch.map_tasks` (two workers by
 default), seeded by its own ``SeedSequence(SEED, spawn_key=...)``. The rows are cached by
-code version: each is appended as it arrives to
-``out_dir/.cache/calibration/<code version>[-quick].jsonl`` (one JSON row a line; the size
-table and the runs' times beside it in ``<code version>[-quick].json``), so a stopped run
-resumes from the rows of its own code, rows of other code are never read, and the report is
-rewritten from this version's finished rows after each one. The tasks run clean
-replicates first, then the first two power sizes together replicate by replicate, then the
-third, so that a partial run has even counts.
+code version and rule: each is appended as it arrives to
+``out_dir/.cache/calibration/<code version>[-<rule>][-quick].jsonl`` (the rule named when it
+is not diagnose's default; one JSON row a line; the size table and the runs' times beside it
+in the ``.json`` of the same name), so a stopped run resumes from the rows of its own code
+and rule, rows of other code are never read, and the report is rewritten from these rows
+after each one. The two plans share the rows (``target``'s are the first of ``all``'s). The
+tasks run the fitted 0.9 size replicate by replicate across the candidates with clean
+replicates between its rounds, then (``all``) the other sizes replicate by replicate, so that
+a partial run has even counts.
 
-Writes ``calibration.md`` and ``calibration.png`` to ``out_dir``. Run:
-``python -m studies.calibration [--quick] [--workers W] [--out DIR] [--report-only]``
+Writes ``calibration.md`` and ``calibration.png`` to ``out_dir`` (``calibration_<rule>.md``
+and ``.png`` for a rule other than the default; ``-quick`` before the suffix in quick mode).
+Run:
+``python -m studies.calibration [--quick] [--sizes {target,all}] [--mesh-error RULE]
+[--workers W] [--out DIR] [--report-only] [--effect NAME]``
 (quick: 6 x 3 and 8 x 4 meshes, 2 clean replicates, the point mass at one size, in this
 process: the regression run of the tests).
 """
@@ -58,6 +76,7 @@ from bayesplate import bundled_case_path, load_case, stiffness_from_engineering
 from bayesplate.batch import map_tasks
 from bayesplate.discrepancy.diagnose import DEFAULTS, diagnose, mesh_error
 from bayesplate.discrepancy.physics.location import absorbable_projector
+from bayesplate.discrepancy.search import mesh_error as mesh_error_module
 from bayesplate.io import atomic_write_text
 from bayesplate.likelihood.posterior import prior_in_stiffness
 from studies import recordings as rec
@@ -69,6 +88,12 @@ ALPHA = DEFAULTS["alpha"]
 Z94 = 1.881  # half-width of a 94 % normal interval, in sd
 N_CLEAN = 20  # per family
 N_POWER = 10  # per candidate and size
+NEED = 8  # of N_POWER: the target's count of a candidate named right
+#: The plans (``--sizes``): the clean replicates and the fitted 0.9 size alone, or every size.
+PLANS = ("target", "all")
+#: diagnose's mesh-error rules (``--mesh-error``) and its default.
+RULES = mesh_error_module.MESH_ERROR_PARTS
+DEFAULT_RULE = DEFAULTS["mesh_error_part"]
 #: The power sizes, in running order: (label, reference test, its rejection probability,
 #: factor): the size at which the reference test rejects with that probability, times the
 #: factor. The ideal test is the chi-square at the true constants (m dof); the fitted test
@@ -303,22 +328,46 @@ def sizes(quick=False):
     return out
 
 
-def widening(quick=False, frequency_Hz=None):
+def widening(quick=False, frequency_Hz=None, rule=DEFAULT_RULE, b=None):
     """How much diagnose widens each recorded frequency's deviation (Frederiksen plate).
 
-    As diagnose does: its mesh's own error, estimated as a third of the difference to the
-    mesh half as fine at the prior mean, is added in quadrature when it exceeds
-    ``mesh_error_ratio`` deviations somewhere. Returns ``hypot(1, error / (NOISE f))`` per
-    mode (ones when it does not widen), ``f`` the recorded frequencies (default: the clean
-    plate's on the recordings' mesh, without noise).
+    As diagnose does under its mesh-error ``rule`` (:data:`RULES`):
+
+    - ``"whole"``: its mesh's own error at the prior mean, estimated as a third of the
+      difference to the mesh half as fine, is added in quadrature when it exceeds
+      ``mesh_error_ratio`` deviations somewhere;
+    - ``"unabsorbed"``: the same with the part of that error the six constants cannot absorb
+      (:func:`.mesh_error.unabsorbed`), under the same threshold;
+    - ``"corrected"``: the computed frequencies are corrected by the error estimated with the
+      mesh twice as fine, and the uncertainty the correction leaves, ``u``
+      (:func:`.mesh_error.corrected_error`), is always added in quadrature, relative to the
+      working mesh's frequency as diagnose scales it onto the peaks:
+      ``hypot(1, (u / f_mesh) / NOISE)`` (``frequency_Hz`` unused). diagnose estimates it
+      again at its nominal fit, which for these recordings lies near the true constants:
+      here it is taken at ``b`` (default the true constants; on the quick study's 6 x 3
+      mesh the fit strays far enough from them to move ``u`` by up to 40 %).
+
+    Returns ``hypot(1, added / (NOISE f))`` per mode (ones when it does not widen), ``f`` the
+    recorded frequencies (default: the clean plate's on the recordings' mesh, without noise).
     """
+    if rule not in RULES:
+        raise ValueError(f"rule {rule!r}: must be one of {', '.join(RULES)}")
     case, model, fine = _models(POWER_FAMILY, quick)
-    if frequency_Hz is None:
-        frequency_Hz = np.sort(_frequencies(case, fine))
     mu_b, _ = prior_in_stiffness(case.prior.mean, case.prior.sd, "full")
     m = case.measured.size
-    err = mesh_error(model, mu_b, m)
-    ratio = np.abs(err) / (NOISE * np.asarray(frequency_Hz, dtype=float))
+    if rule == "corrected":
+        b = stiffness_from_engineering(case.reference) if b is None else b  # (diagnose: its fit)
+        _, u = mesh_error_module.corrected_error(model, b, m)
+        working = model.solve(b, m).frequency_Hz
+        return np.hypot(1.0, u / working / NOISE)
+    if frequency_Hz is None:
+        frequency_Hz = np.sort(_frequencies(case, fine))
+    sigma = NOISE * np.asarray(frequency_Hz, dtype=float)
+    added = mesh_error(model, mu_b, m)
+    if rule == "unabsorbed":
+        at = model.solve(mu_b, m)
+        added = mesh_error_module.unabsorbed(added, sigma, at.eigenvalues, at.sensitivities)
+    ratio = np.abs(added) / sigma
     return np.hypot(1.0, ratio) if ratio.max() > DEFAULTS["mesh_error_ratio"] else np.ones(m)
 
 
@@ -395,14 +444,21 @@ def absorbed(size_table, quick=False, widen=None, power=False):
     return out
 
 
-def tasks(size_table, quick=False):
+def tasks(size_table, quick=False, plan="all"):
     """Every replicate, in running order: ``(kind, family, effect, size label, size, rep)``.
 
     First the size that decides the target (the fitted test's 0.9) replicate by replicate
-    across the candidates, each round followed by two clean replicates of each family; then
-    the other sizes together replicate by replicate, in the order of ``SIZES``: a partial run
-    has even counts. A size two labels share runs once (one key).
+    across the candidates, each round followed by two clean replicates of each family; then,
+    with ``plan="all"``, the other sizes together replicate by replicate, in the order of
+    ``SIZES``: a partial run has even counts. ``plan="target"`` stops after the first part
+    (the clean replicates and the fitted 0.9 size); quick mode runs that part alone either
+    way. A size two labels share runs once (one key).
+
+    The default is ``"all"`` for the studies that select their replicates from these
+    (``checked_order``); the study's own default (:func:`main`) is ``"target"``.
     """
+    if plan not in PLANS:
+        raise ValueError(f"plan {plan!r}: must be one of {', '.join(PLANS)}")
     n_clean, n_power = (2, 1) if quick else (N_CLEAN, N_POWER)
     first = [j for j, entry in enumerate(SIZES) if entry[0] == "fitted 0.9"]
     rest = [j for j in range(len(SIZES)) if j not in first]
@@ -421,7 +477,7 @@ def tasks(size_table, quick=False):
     for rep in range(n_power):
         power(first, rep)
         out.extend(clean[rep * per_round : (rep + 1) * per_round])
-    if not quick:
+    if not quick and plan == "all":
         for rep in range(n_power):
             power(rest, rep)
     seen, unique = set(), []
@@ -619,17 +675,23 @@ def wilson(k, n):
 # ---------------------------------------------------------------- the study
 
 
-def cache_paths(out_dir, quick, version=None):
-    """The rows (JSON lines) and the head (JSON) of one code version's run.
+def _rule_suffix(rule, sep="-"):
+    """The rule in a file's name: none for diagnose's default."""
+    return "" if rule in (None, DEFAULT_RULE) else f"{sep}{rule}"
 
-    ``out_dir/.cache/calibration/<version>[-quick].jsonl`` and ``.json``; ``version``: the
-    code's (:func:`studies._study_host.code_version`) when not given. The head holds what
-    the rows are read with: the settings, the size table, the runs' times and the
-    fitted-constants figures computed from the table.
+
+def cache_paths(out_dir, quick, version=None, rule=None):
+    """The rows (JSON lines) and the head (JSON) of one code version's run under one rule.
+
+    ``out_dir/.cache/calibration/<version>[-<rule>][-quick].jsonl`` and ``.json``, the rule
+    named when it is not diagnose's default; ``version``: the code's
+    (:func:`studies._study_host.code_version`) when not given. The head holds what the rows
+    are read with: the settings, the size table, the runs' times and the fitted-constants
+    figures computed from the table.
     """
     version = version or code_version()
     folder = pathlib.Path(out_dir) / ".cache" / "calibration"
-    name = f"{version}{'-quick' if quick else ''}"
+    name = f"{version}{_rule_suffix(rule)}{'-quick' if quick else ''}"
     return folder / f"{name}.jsonl", folder / f"{name}.json"
 
 
@@ -638,9 +700,10 @@ def _settings(quick):
     return json.loads(json.dumps(settings))  # as read back from the cache (lists, not tuples)
 
 
-def _empty(quick, version):
+def _empty(quick, version, rule=None):
     return {
         "version": version,
+        "rule": rule or DEFAULT_RULE,
         "settings": _settings(quick),
         "sizes": None,
         "rows": {},
@@ -649,15 +712,17 @@ def _empty(quick, version):
     }
 
 
-def load(out_dir, quick, version=None):
-    """One code version's run (its head and its rows by key; empty when it has none).
+def load(out_dir, quick, version=None, rule=None):
+    """One code version's run under a mesh-error rule (its head and its rows by key; empty
+    when it has none).
 
-    Rows of other versions are never read: a run resumes from the rows of its own code. A
-    line cut short (the run killed while writing it) is skipped, its replicate run again.
+    Rows of other versions or rules are never read: a run resumes from the rows of its own
+    code and rule. A line cut short (the run killed while writing it) is skipped, its
+    replicate run again.
     """
     version = version or code_version()
-    rows_path, head_path = cache_paths(out_dir, quick, version)
-    stored = _empty(quick, version)
+    rows_path, head_path = cache_paths(out_dir, quick, version, rule)
+    stored = _empty(quick, version, rule)
     if head_path.exists():
         head = json.loads(head_path.read_text())
         if head.get("settings") != stored["settings"]:
@@ -669,13 +734,13 @@ def load(out_dir, quick, version=None):
 
 
 def _write_head(out_dir, quick, stored):
-    _, head_path = cache_paths(out_dir, quick, stored["version"])
+    _, head_path = cache_paths(out_dir, quick, stored["version"], stored.get("rule"))
     head = {k: v for k, v in stored.items() if k != "rows"}
     atomic_write_text(head_path, json.dumps(head))
 
 
 def _append(out_dir, quick, stored, row):
-    rows_path, _ = cache_paths(out_dir, quick, stored["version"])
+    rows_path, _ = cache_paths(out_dir, quick, stored["version"], stored.get("rule"))
     rows_path.parent.mkdir(parents=True, exist_ok=True)
     with rows_path.open("a") as out:
         out.write(json.dumps(row) + "\n")
@@ -683,9 +748,10 @@ def _append(out_dir, quick, stored, row):
 
 
 def save(out_dir, quick, stored):
-    """Write ``stored`` (:func:`load`'s form) as its version's head and rows, afresh."""
+    """Write ``stored`` (:func:`load`'s form) as its version's (and rule's) head and rows,
+    afresh."""
     stored = {**_empty(quick, stored.get("version") or code_version()), **stored}
-    rows_path, _ = cache_paths(out_dir, quick, stored["version"])
+    rows_path, _ = cache_paths(out_dir, quick, stored["version"], stored["rule"])
     rows_path.parent.mkdir(parents=True, exist_ok=True)
     rows = [{**row, "key": row.get("key", key)} for key, row in stored["rows"].items()]
     atomic_write_text(rows_path, "".join(json.dumps(row) + "\n" for row in rows))
@@ -701,18 +767,32 @@ def _now():
 FIGURES = ("absorbed", "widening", "widened_power", "widened_grid_power", "mesh_error_left")
 
 
-def main(out_dir="reports", quick=False, workers=None, report_only=False, effects=None):
+def main(
+    out_dir="reports",
+    quick=False,
+    workers=None,
+    report_only=False,
+    effects=None,
+    plan="target",
+    rule=None,
+):
     """Run what this code has not run yet, write the report and figure; return its path.
 
-    The rows are those of the code version running (:func:`load`): each replicate's row is
-    appended to its file as it finishes, so a stopped run resumes where it stopped, and the
-    report is built from this version's rows alone. ``effects``: run only the power
-    replicates of these candidates (default: every replicate).
+    The rows are those of the code version running under the mesh-error ``rule`` (default
+    diagnose's; :func:`load`): each replicate's row is appended to its file as it finishes,
+    so a stopped run resumes where it stopped, and the report is built from these rows
+    alone. ``plan``: ``"target"`` (the clean replicates and the fitted 0.9 size) or
+    ``"all"`` (every size; :func:`tasks`). ``effects``: run only the power replicates of
+    these candidates (default: every replicate).
     """
+    rule = rule or DEFAULT_RULE
+    if rule not in RULES or plan not in PLANS:
+        raise ValueError(f"rule {rule!r}, plan {plan!r}: must be in {RULES} and {PLANS}")
     logging.getLogger("bayesplate").setLevel(logging.ERROR)
     workers = workers or (1 if quick else 2)
     code = code_version()  # the rows' code: commits made while it runs do not count
-    stored = load(out_dir, quick, code)
+    stored = load(out_dir, quick, code, rule)
+    stored["plan"] = plan  # what the report counts against (the rows serve either plan)
     spec = [list(entry) for entry in SIZES]
     if (stored["sizes"] is None or stored.get("size_spec") != spec) and not report_only:
         stored["sizes"], stored["size_spec"] = sizes(quick), spec
@@ -724,7 +804,7 @@ def main(out_dir="reports", quick=False, workers=None, report_only=False, effect
         if report_only or stored["sizes"] is None
         else [
             t
-            for t in tasks(stored["sizes"], quick)
+            for t in tasks(stored["sizes"], quick, plan)
             if task_key(t) not in stored["rows"] and (effects is None or t[2] in effects)
         ]
     )
@@ -759,7 +839,9 @@ def main(out_dir="reports", quick=False, workers=None, report_only=False, effect
     _ship_by_value()
     if todo:
         map_tasks(
-            functools.partial(run_task_recorded, quick=quick, code=code),
+            functools.partial(
+                run_task_recorded, quick=quick, code=code, options={"mesh_error_part": rule}
+            ),
             todo,
             workers=workers,
             progress=False,
@@ -786,8 +868,8 @@ def _figures(stored, quick):
     """The size table's fitted-constants figures (:data:`FIGURES`), into ``stored``."""
     table = stored["sizes"]
     stored["absorbed"] = absorbed(table, quick)
-    # the fitted test at diagnose's widened deviations, with the noise as recorded (not widened)
-    widen = widening(quick)
+    # the fitted test at diagnose's widened deviations (its rule's), the noise as recorded
+    widen = widening(quick, rule=stored.get("rule") or DEFAULT_RULE)
     stored["widening"] = list(map(float, widen))
     stored["widened_power"] = absorbed(table, quick, widen, power=True)
     on_grid = {e: {"sizes": entry["grid"]} for e, entry in table.items()}
@@ -803,12 +885,18 @@ def write_report(out_dir, stored, quick, workers):
         if stored.get("version"):
             _write_head(out_dir, quick, stored)
     rows = list(stored["rows"].values())
-    name = "calibration-quick" if quick else "calibration"
+    name = report_name(stored.get("rule"), quick)
     text = report(rows, stored, quick, workers)
     atomic_write_text(out / f"{name}.md", text)
     if any(r["kind"] == "power" for r in rows):
         plot(rows, stored["sizes"], out / f"{name}.png", stored.get("widened_grid_power"))
     return out / f"{name}.md"
+
+
+def report_name(rule=None, quick=False):
+    """The report's (and figure's) name without suffix: ``calibration[_<rule>][-quick]``,
+    the rule named when it is not diagnose's default."""
+    return f"calibration{_rule_suffix(rule, '_')}{'-quick' if quick else ''}"
 
 
 def false_alarms(rows, family=None):
@@ -872,43 +960,108 @@ def _times(rows):
     )
 
 
-def _partial(done, n_tasks):
+def _partial(done, n_tasks, plan):
     if done >= n_tasks:
         return []
+    then = ", then the other sizes replicate by replicate" if plan == "all" else ""
     return [
         f"A partial run ({done} of {n_tasks} replicates): the counts below are of the "
         "replicates finished, in the running order (the fitted 0.9 size round by round "
-        "with the clean replicates between its rounds, then the other sizes replicate by "
-        "replicate); the rest resume from the cache on the next run of the same code.",
+        f"with the clean replicates between its rounds{then}); the rest resume from the "
+        "cache on the next run of the same code.",
         "",
     ]
+
+
+def _plan_band(plan, quick, n_tasks):
+    """The plan, and the binomial band its counts give (Wilson 95 %, :func:`wilson`)."""
+    n_clean = len(FAMILIES) * (2 if quick else N_CLEAN)
+    n_power = 1 if quick else N_POWER
+    need = -(-NEED * n_power // N_POWER)  # the target's share of the replicates run
+    lo, hi = wilson(need, n_power)
+    _, top = wilson(0, n_clean)
+    which = (
+        "each candidate at the fitted 0.9 size alone"
+        if plan == "target" or quick
+        else "each candidate at every size of `SIZES`"
+    )
+    return [
+        f"Plan `{plan}` (`--sizes {plan}`): the {n_clean} clean replicates and {which}, "
+        f"{n_power} replicate{'s' if n_power > 1 else ''} each: {n_tasks} replicates. The "
+        "counts give a band this wide: "
+        f"a candidate named {need} of {n_power} has a Wilson 95 % interval of "
+        f"{lo:.2f}-{hi:.2f}, and 0 false alarms of {n_clean} an upper bound of {top:.2f}; "
+        "rates within that band are not told apart by these counts.",
+        "",
+    ]
+
+
+def _code_line(rows, stored):
+    """The code the rows were made by: its version alone when every row is of it, else the
+    rows' versions listed (:func:`_provenance`)."""
+    version = stored.get("version")
+    if all(r.get("code") == version for r in rows):
+        return f" Code `{version}`.", []
+    return "", _provenance(rows, stored)
+
+
+def _shown(size_table, cells, plan, quick):
+    """``{effect: [index into SIZES]}``: the sizes of the power table, those the plan runs
+    (``target`` and quick mode: the fitted 0.9 size) and any other that has rows."""
+    every = plan == "all" and not quick
+    return {
+        effect: [
+            j
+            for j, (label, *_) in enumerate(SIZES)
+            if every
+            or label == "fitted 0.9"
+            or (entry["sizes"][j] is not None and (effect, size_key(entry["sizes"][j])) in cells)
+        ]
+        for effect, entry in size_table.items()
+    }
 
 
 def report(rows, stored, quick, workers):
     size_table = stored["sizes"] or {}
-    n_tasks = len(tasks(size_table, quick)) if size_table else 0
+    plan = stored.get("plan") or "all"
+    rule = stored.get("rule") or DEFAULT_RULE
+    planned = {task_key(t) for t in tasks(size_table, quick, plan)} if size_table else set()
+    n_tasks, done = len(planned), sum(r["key"] in planned for r in rows)
+    beyond = len(rows) - done
+    more = f" (and {beyond} of other sizes)" if beyond else ""
     meshes = QUICK_FAMILIES if quick else FAMILIES
     today = datetime.date.today().isoformat()
     uptime = ", ".join(f"{x:.2f}" for x in os.getloadavg())
+    command = "python -m studies.calibration" + "".join(
+        flag
+        for flag, on in (
+            (" --quick", quick),
+            (f" --sizes {plan}", plan != "target"),
+            (f" --mesh-error {rule}", rule != DEFAULT_RULE),
+        )
+        if on
+    )
+    code, provenance = _code_line(rows, stored)
+    default = "diagnose's default" if rule == DEFAULT_RULE else f"the default is `{DEFAULT_RULE}`"
     lines = [
         "# Calibration of `diagnose`: false alarms, power, coverage of the refit",
         "",
-        f"Made by `python -m studies.calibration{' --quick' if quick else ''}` (seed {SEED}) "
-        f"on {today}, on {_machine()}, {workers} worker(s); {len(rows)} of {n_tasks} replicates "
-        f"finished in {stored.get('seconds', 0.0) / 60:.0f} min of wall time (the runs' time "
-        f"to their last finished row); load averages (1, 5, 15 min) when this report was "
-        f"written: {uptime}.{_load_line(rows)}{_times(rows)}",
+        f"Made by `{command}` (seed {SEED}) on {today}, on {_machine()}, {workers} "
+        f"worker(s); {done} of {n_tasks} replicates{more} finished in "
+        f"{stored.get('seconds', 0.0) / 60:.0f} min of wall time (the runs' time to their "
+        f"last finished row); load averages (1, 5, 15 min) when this report was written: "
+        f"{uptime}.{_load_line(rows)}{_times(rows)}{code}",
         "",
-        *_partial(len(rows), n_tasks),
+        *_partial(done, n_tasks, plan),
+        *_plan_band(plan, quick, n_tasks),
         "Recordings: the plate (with the concealed effect) on a mesh twice as fine each way as "
         f"diagnose's, its lowest 14 frequencies with {100 * NOISE:.1f} % Gaussian noise, sorted; "
         "diagnose runs blind on the nominal case, pairing by order, at its defaults "
-        f"(alpha {ALPHA}). Meshes of diagnose: "
-        + ", ".join(f"{k} {v[0]} x {v[1]}" for k, v in meshes.items())
-        + ".",
+        f"(alpha {ALPHA}), the mesh-error rule `{rule}` (`--mesh-error`; {default}). "
+        f"Meshes of diagnose: {', '.join(f'{k} {v[0]} x {v[1]}' for k, v in meshes.items())}.",
         "",
     ]
-    lines += _provenance(rows, stored)
+    lines += provenance
     lines += [
         "## False alarms (nothing concealed)",
         "",
@@ -941,9 +1094,16 @@ def report(rows, stored, quick, workers):
         "",
         "## Power (Frederiksen plate)",
         "",
-        "Sizes where the ideal test (chi-square at the true constants on the recordings' "
-        "mesh, 14 dof, 1 %) rejects with probability 0.5 and 0.9, three times the "
-        "latter, and where the fitted test rejects with probability 0.9. The fitted "
+        (
+            "Sizes where the ideal test (chi-square at the true constants on the recordings' "
+            "mesh, 14 dof, 1 %) rejects with probability 0.5 and 0.9, three times the "
+            "latter, and where the fitted test rejects with probability 0.9. "
+            if plan == "all" and not quick
+            else "The size where the fitted test rejects with probability 0.9 (the other "
+            "sizes, where the ideal test rejects with 0.5 and 0.9 and three times the "
+            "latter, with `--sizes all`). "
+        )
+        + "The fitted "
         "test is the same once the six constants have absorbed what they can of the "
         "effect (linearised, 8 dof, no prior; `fitted_noncentrality`): the power left "
         "to any method that, like diagnose, does not know the constants. Its size is "
@@ -966,10 +1126,11 @@ def report(rows, stored, quick, workers):
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     cells = power_cells(rows)
+    shown = _shown(size_table, cells, plan, quick)
     for effect, entry in size_table.items():
         unit = EFFECTS[effect][2]
         order = sorted(
-            range(len(SIZES)), key=lambda i: (entry["sizes"][i] is None, entry["sizes"][i] or 0.0)
+            shown[effect], key=lambda i: (entry["sizes"][i] is None, entry["sizes"][i] or 0.0)
         )
         for j in order:
             s = entry["sizes"][j]
@@ -1037,7 +1198,7 @@ def report(rows, stored, quick, workers):
     else:
         lines.append("No replicate raised.")
     lines += ["", "## Targets (issue 13)", ""]
-    lines += _targets(rows, cells, size_table, left, inside, quick)
+    lines += _targets(rows, cells, size_table, left, inside, quick, plan)
     return "\n".join(lines) + "\n"
 
 
@@ -1110,8 +1271,23 @@ def _absorption(size_table, left, rows):
     ]
 
 
+#: How diagnose widens its deviations under each mesh-error rule (:func:`widening`).
+_RULE_WIDENS = {
+    "whole": "estimates the mesh's error (a third of the difference to the mesh half as fine) "
+    "and, as it exceeds {ratio} deviations, adds it to the deviations in quadrature",
+    "unabsorbed": "estimates the mesh's error (a third of the difference to the mesh half as "
+    "fine) and, as the part of it the six constants cannot absorb exceeds {ratio} deviations, "
+    "adds that part to the deviations in quadrature",
+    "corrected": "corrects each computed frequency by the mesh's error estimated with the mesh "
+    "twice as fine (4/3 of the difference) and adds what the correction leaves uncertain "
+    "(1.25 / 3 of the difference) to the deviations in quadrature",
+}
+
+
 def _widened(stored, cells):
-    """What diagnose's own test gives away: it widens the deviations by its mesh's error."""
+    """What diagnose's own test gives away: it widens the deviations by its mesh's error
+    (under its rule, :func:`widening`)."""
+    rule = stored.get("rule") or DEFAULT_RULE
     widen = np.asarray(stored.get("widening") or [])
     if widen.size == 0:
         return []
@@ -1127,23 +1303,24 @@ def _widened(stored, cells):
             "Diagnose tests against the recordings' declared deviations (its mesh's error "
             "stays below its threshold)."
         ]
+    how = _RULE_WIDENS.get(rule, f"widens its deviations under the rule `{rule}`")
     return [
         "**Diagnose's own test is weaker than the fitted test.** On its working mesh it "
-        "estimates the mesh's error (a third of the difference to the mesh half as fine) and, "
-        f"as it exceeds {DEFAULTS['mesh_error_ratio']} deviations, adds it to the deviations "
-        f"in quadrature: they are widened by {widen.min():.2f}-{widen.max():.2f} x (median "
-        f"{np.median(widen):.2f}) on this plate, so its chi-square carries less of an effect "
-        "than the fitted test's at the declared 0.2 % (and the clean plates' nominal p-values "
-        "sit high, above). With the widened deviations, and the noise as recorded (0.2 %: "
+        + how.format(ratio=DEFAULTS["mesh_error_ratio"])
+        + f" (mesh-error rule `{rule}`): they are widened by {widen.min():.2f}-"
+        f"{widen.max():.2f} x (median {np.median(widen):.2f}) on this plate, so its "
+        "chi-square carries less of an effect than the fitted test's at the declared 0.2 %"
+        + (" (and the clean plates' nominal p-values sit high, above)" if rule == "whole" else "")
+        + ". With the widened deviations, and the noise as recorded (0.2 %: "
         "the widening shrinks the noise's share of the statistic and not its critical value; "
         "a generalised chi-square, `recorded_noise_power`), the fitted test at the fitted 0.9 "
         "sizes rejects with probability "
         + ", ".join(f"{e} {p:.2f}" for e, p in sorted(at, key=lambda x: x[1]))
         + f"; diagnose's nominal test rejected in {k} of the {n} replicates run there. "
         "The fitted reference is thus the power of a method that tests at the declared "
-        "deviations; diagnose, at its defaults on this mesh, gives part of it away to its "
+        "deviations; diagnose, with this rule on this mesh, gives part of it away to its "
         "mesh's error."
-    ] + _left(stored.get("mesh_error_left"))
+    ] + (_left(stored.get("mesh_error_left")) if rule == "whole" else [])
 
 
 def _left(left):
@@ -1188,7 +1365,7 @@ def entry_p(left, size_table, effect, j, power=None):
     return ideal_power(lam, 14 - N_CONSTANTS) if power is None else power(lam)
 
 
-def _targets(rows, cells, size_table, left, inside, quick):
+def _targets(rows, cells, size_table, left, inside, quick, plan="all"):
     n_clean = 2 * (2 if quick else N_CLEAN)
     k, n = false_alarms(rows)
     out = [
@@ -1196,10 +1373,16 @@ def _targets(rows, cells, size_table, left, inside, quick):
         f"{n_clean}){'' if n >= n_clean else f' - partial, {n} of {n_clean} run so far'}"
     ]
     names = [entry[0] for entry in SIZES]
-    for label in ("fitted 0.9", "ideal 0.9"):
+    j90 = names.index("ideal 0.9")
+    run90 = any(
+        (e, size_key(entry["sizes"][j90])) in cells
+        for e, entry in size_table.items()
+        if entry["sizes"][j90] is not None
+    )
+    for label in ("fitted 0.9", "ideal 0.9") if plan == "all" or run90 else ("fitted 0.9",):
         j = names.index(label)
         ref = "the achievable reference" if label == "fitted 0.9" else "the issue's reference"
-        out.append(f"- at the {label} size ({ref}), target named right in 8 of 10:")
+        out.append(f"- at the {label} size ({ref}), target named right in {NEED} of {N_POWER}:")
         for effect, entry in size_table.items():
             s = entry["sizes"][j]
             if s is None:
@@ -1214,7 +1397,7 @@ def _targets(rows, cells, size_table, left, inside, quick):
                 else f"; ideal test rejected {c['ideal']} of {c['n']}, "
                 f"diagnose's nominal test {c['rejected']} of {c['n']}"
             )
-            out.append(f"  - {effect} at {s:.2g}{expect}: {_judge(c)}{ideal}")
+            out.append(f"  - {effect} at {s:.2g}{expect}: {_judge(c, NEED)}{ideal}")
         if label == "ideal 0.9":
             short = [e for e in size_table if entry_p(left, size_table, e, j, bound_power) < 0.8]
             if short:
@@ -1320,5 +1503,28 @@ if __name__ == "__main__":
         default=None,
         help="run only this candidate's power replicates (repeatable)",
     )
+    parser.add_argument(
+        "--sizes",
+        choices=PLANS,
+        default="target",
+        help="target: the clean replicates and the fitted 0.9 size alone (default); "
+        "all: every size of SIZES",
+    )
+    parser.add_argument(
+        "--mesh-error",
+        choices=RULES,
+        default=DEFAULT_RULE,
+        help=f"diagnose's mesh-error rule (default {DEFAULT_RULE!r}, diagnose's)",
+    )
     args = parser.parse_args()
-    print(main(args.out, args.quick, args.workers, args.report_only, args.effect))
+    print(
+        main(
+            args.out,
+            args.quick,
+            args.workers,
+            args.report_only,
+            args.effect,
+            plan=args.sizes,
+            rule=args.mesh_error,
+        )
+    )
