@@ -30,6 +30,7 @@ STUDIES = [
     "spruce_input_budget",
     "input_coverage",
     "error_scale",
+    "mesh_correction",
 ]
 
 
