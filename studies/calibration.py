@@ -1,4 +1,4 @@
-"""Calibration of ``diagnose`` (issue 13): false alarms, power against size, refit coverage.
+"""Calibration of ``diagnose`` (issues 13 and 40): false alarms, power against size, refit coverage.
 
 Recordings are made by a model the diagnosis does not use (:mod:`studies.recordings`): the
 plate (with the effect, if any) on a mesh twice as fine each way as diagnose's, its lowest 14
@@ -1197,7 +1197,7 @@ def report(rows, stored, quick, workers):
         lines += [f"- `{r['key']}`: {r['error']}" for r in errors]
     else:
         lines.append("No replicate raised.")
-    lines += ["", "## Targets (issue 13)", ""]
+    lines += ["", "## Targets (issue 40)", ""]
     lines += _targets(rows, cells, size_table, left, inside, quick, plan)
     return "\n".join(lines) + "\n"
 
@@ -1411,7 +1411,7 @@ def _targets(rows, cells, size_table, left, inside, quick, plan="all"):
     pair = sum(wrong_pair(r) for r in power)
     out.append(
         f"- wrong names: {wrong} `explained` with another candidate and {pair} `ambiguous` "
-        f"among others only, of {len(power)} power replicates run (target: none)"
+        f"among others only, of {len(power)} power replicates run (target: at most 1 in 100)"
     )
     if inside:
         out.append(
