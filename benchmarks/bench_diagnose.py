@@ -46,12 +46,13 @@ PAIRS_REPORT = "benchmark_diagnose_pairs.md"
 PAIRS_RUN, PAIRS_MESH = 14, (24, 24)
 
 
-def one(index, workers, quick=False, mesh=None, frequencies=None):
+def one(index, workers, quick=False, mesh=None, frequencies=None, mesh_error=None):
     """Diagnose scenario ``index`` of the concealment study; a JSON line on stdout.
 
     ``quick``: on the concealment study's quick mesh (12 x 6; recordings on 24 x 12), a
     regression run of this script, not a measurement. ``mesh`` and ``frequencies``: another
     working mesh, or only the lowest ``frequencies`` recorded (the scaling rows).
+    ``mesh_error``: diagnose's mesh-error rule (default its own).
     """
 
     from bayesplate.discrepancy.diagnose import diagnose
@@ -66,7 +67,8 @@ def one(index, workers, quick=False, mesh=None, frequencies=None):
         blind = blind.with_measured(frequency_Hz=f, sigma_Hz=NOISE * f)
     load = os.getloadavg()[0]
     start, cpu = time.perf_counter(), _cpu()
-    d = diagnose(blind, model=model, rng=SEED, pairing="order", workers=workers)
+    rule = {} if mesh_error is None else {"mesh_error_part": mesh_error}
+    d = diagnose(blind, model=model, rng=SEED, pairing="order", workers=workers, **rule)
     seconds, cpu = time.perf_counter() - start, _cpu() - cpu
     chosen = None
     if d.chosen is not None:
@@ -301,6 +303,7 @@ if __name__ == "__main__":
     parser.add_argument("--one", type=int, help=argparse.SUPPRESS)
     parser.add_argument("--mesh", help=argparse.SUPPRESS)
     parser.add_argument("--frequencies", type=int, help=argparse.SUPPRESS)
+    parser.add_argument("--mesh-error", help=argparse.SUPPRESS)
     parser.add_argument("--runs", type=int, nargs="*", default=None)
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--base", help="another checkout to compare with")
@@ -318,7 +321,7 @@ if __name__ == "__main__":
     args = parser.parse_args()
     if args.one is not None:
         mesh = tuple(int(v) for v in args.mesh.split("x")) if args.mesh else None
-        one(args.one, args.workers, args.quick, mesh, args.frequencies)
+        one(args.one, args.workers, args.quick, mesh, args.frequencies, args.mesh_error)
     else:
         from studies.concealment import scenarios
 
