@@ -122,12 +122,14 @@ def _both_meshes(run, n_solve, at=None):
 
     `at` defaults to the prior mean, where both are solved once per run.
     """
+    if "finer" not in run.at_mean:  # the mesh twice as fine, built once per run
+        run.at_mean["finer"] = finer_model(run.model)
+    finer = run.at_mean["finer"]
     if at is not None:
-        finer = finer_model(run.model)
         return run.model.solve(at, n_solve).frequency_Hz, finer.solve(at, n_solve).frequency_Hz
     key = ("finer", n_solve)
     if key not in run.at_mean:
-        run.at_mean[key] = finer_model(run.model).solve(run.prior[0], n_solve).frequency_Hz
+        run.at_mean[key] = finer.solve(run.prior[0], n_solve).frequency_Hz
     return _at_mean(run, n_solve)[0].frequency_Hz, run.at_mean[key]
 
 

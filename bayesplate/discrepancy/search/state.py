@@ -43,8 +43,8 @@ class Run:
     at_mean : dict
         ``n -> (the working mesh's modal result, the coarse mesh's eigenvalues)`` at the
         prior mean, and ``("finer", n) ->`` the mesh twice as fine's frequencies there (Hz;
-        the corrected rule), filled by the first pass that needs them (a cache: a second
-        pass solves nothing again).
+        the corrected rule, its model under ``"finer"``), filled by the first pass that
+        needs them (a cache: a second pass solves nothing again).
     """
 
     case: object
