@@ -13,7 +13,7 @@ import copy
 from .conclude import conclude
 from .deviations import deviations
 from .locate import locate
-from .nominal_check import fit_nominal_stage
+from .nominal_check import fit_nominal_stage, nominal_again
 from .rank import rank
 from .reassign import made_again
 from .refit import refit
@@ -27,7 +27,7 @@ def one_pass(run, pairing, rng):
     nominal = fit_nominal_stage(run, data, rng)
     if run.options.mesh_error_part == "corrected":  # the error where the constants are
         data = deviations(run, pairing, at=nominal.check.fit.b)
-        nominal = fit_nominal_stage(run, data, rng)
+        nominal = nominal_again(run, data, nominal)
     located = locate(run, data, nominal)
     ranked = rank(located.fitting, run.physics)
     searched = refit(run, data, nominal, located, ranked)
