@@ -57,8 +57,8 @@ def _singles():
     return physics, ranked
 
 
-def _run(monkeypatch, pairs_gain_chi2):
-    """two_effects with stand-in fits; returns (chosen, pairs, names fitted per turn)."""
+def _run(monkeypatch, pairs_gain_chi2, enough=None):
+    """two_effects with stand-in fits; returns (chosen, pairs, names fitted per turn, said)."""
     turns = []
 
     def pairs_with(leader, physics, ranked, model, scans):
@@ -78,7 +78,10 @@ def _run(monkeypatch, pairs_gain_chi2):
     physics, ranked = _singles()
     said = []
     fitting = SimpleNamespace(model=None, scans={}, say=said.append)
-    chosen, pairs = stage.two_effects(ranked[0], ranked, physics, fitting, 3.0, 0.01, M)
+    chosen, pairs, stopped = stage.two_effects(
+        ranked[0], ranked, physics, fitting, 3.0, 0.01, M, enough=enough
+    )
+    assert (stopped is not None) == any("not paired" in line for line in said)
     return chosen, pairs, turns, said
 
 
@@ -114,3 +117,30 @@ def test_no_more_than_the_leaders_and_none_chosen_when_none_gains(monkeypatch, l
     monkeypatch.setattr(stage, "LEADERS", leaders)
     chosen, pairs, turns, _ = _run(monkeypatch, table)
     assert chosen is None and len(turns) == stage.LEADERS
+
+
+def _unnamed_at(gain, margin=2.0):
+    """``enough`` as :mod:`.refit` makes it: an unnamed change gaining `gain` nats."""
+    from bayesplate.discrepancy.search.refit import _beaten_by
+
+    return _beaten_by(SimpleNamespace(log_evidence_gain=gain), margin)
+
+
+def test_a_later_leaders_turn_is_skipped_when_the_unnamed_change_beats_every_fit(monkeypatch):
+    # no pair of the best one explains (all rejected at 600); the unnamed change gains 603
+    table = _table(("point_mass", "misalignment"))
+    chosen, pairs, turns, said = _run(monkeypatch, table, enough=_unnamed_at(603.0))
+    assert len(turns) == 1 and len(pairs) == 3
+    assert chosen.fit.chi2 == 80.0  # a pair of the best one: its gain, its refit rejected
+    assert said == [
+        "point_mass not paired: an unnamed local change gains +603.0 nats, more than every "
+        "candidate and pair fitted (+600.0) by over 2: the pairs of the next candidates were "
+        "not fitted"
+    ]
+
+
+@pytest.mark.parametrize("gain", [601.0, 602.0])
+def test_the_later_turn_runs_when_the_unnamed_change_is_not_ahead_by_its_margin(monkeypatch, gain):
+    table = _table(("point_mass", "misalignment"))
+    chosen, pairs, turns, _ = _run(monkeypatch, table, enough=_unnamed_at(gain))
+    assert len(turns) == 2 and chosen.name == "point_mass+misalignment"

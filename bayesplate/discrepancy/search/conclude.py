@@ -45,7 +45,7 @@ def conclude(run, data, nominal_stage, located, searched):
     )
     change = None
     if outcome != "consistent" and o.unnamed_margin is not None:
-        change = unnamed(run.model, check.fit, data.problem, data.modes)
+        change = s.unnamed or unnamed(run.model, check.fit, data.problem, data.modes)
         if chosen is not None and beaten(chosen, change, o.unnamed_margin):
             run.say(
                 f"an unnamed local change gains {change.log_evidence_gain:+.1f} nats, "
@@ -53,7 +53,7 @@ def conclude(run, data, nominal_stage, located, searched):
             )
             outcome, chosen, tied = "unexplained", None, []
     rival = tied[0][0] if outcome == "ambiguous" else None
-    separation, notes = None, [*data.notes, *nominal_stage.notes]
+    separation, notes = None, [*data.notes, *nominal_stage.notes, *s.notes]
     if outcome == "ambiguous":
         relative_sd = float(np.median(data.sigma_Hz / data.measured.frequency_Hz))
         separation = separate(run.model, s.best, rival, data.modes, relative_sd)

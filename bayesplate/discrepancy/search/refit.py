@@ -25,6 +25,7 @@ from .rank import candidate_polisher, candidate_problem, candidate_result
 from .state import Searched
 from .store import fit_digest
 from .two_effects import two_effects
+from .unnamed import unnamed
 from .verdict import refit_test, unidentified
 
 __all__ = ["IMPROVEMENT", "improved_nominal", "refit", "searched_anew"]
@@ -57,8 +58,13 @@ def refit(run, data, nominal_stage, located, ranked):
     if warranted and refit_p < o.alpha:  # rejected: its constants searched again, globally
         fitting, ranked, best = _searched_again(fitting, ranked, best, refit_p)
         refit_dof, refit_p = refit_test(best.fit, m)
+    change, stopped = None, None
     if warranted and refit_p < o.alpha and o.pairs:  # two effects at once
-        top, two = two_effects(best, ranked, run.physics, fitting, o.evidence_threshold, o.alpha, m)
+        change = _unnamed(run, data, check)
+        enough = None if change is None else _beaten_by(change, o.unnamed_margin)
+        top, two, stopped = two_effects(
+            best, ranked, run.physics, fitting, o.evidence_threshold, o.alpha, m, enough=enough
+        )
         if top is not None:
             best = top
             refit_dof, refit_p = refit_test(best.fit, m)
@@ -68,7 +74,30 @@ def refit(run, data, nominal_stage, located, ranked):
         if warranted
         else check.unidentified
     )
-    return Searched(check, ranked, best, warranted, refit_dof, refit_p, loose)
+    searched = Searched(check, ranked, best, warranted, refit_dof, refit_p, loose)
+    return replace(searched, unnamed=change, notes=(stopped,) if stopped else ())
+
+
+def _unnamed(run, data, check):
+    """The unnamed local change at the nominal fit (:mod:`.unnamed`), or None if left out."""
+    if run.options.unnamed_margin is None:
+        return None
+    return unnamed(run.model, check.fit, data.problem, data.modes)
+
+
+def _beaten_by(change, margin):
+    """``enough(gain)`` of :func:`.two_effects.two_effects`: the unnamed change ahead."""
+
+    def enough(gain):
+        if change.log_evidence_gain <= gain + margin:
+            return None
+        return (
+            f"an unnamed local change gains {change.log_evidence_gain:+.1f} nats, more than "
+            f"every candidate and pair fitted ({gain:+.1f}) by over {margin:g}: the pairs of "
+            "the next candidates were not fitted"
+        )
+
+    return enough
 
 
 def _improved(run, data, check, fitting, ranked):

@@ -184,7 +184,9 @@ class Searched:
     """Steps 3-4's result: the candidates ranked, the best one, its refit test.
 
     ``check`` is the nominal fit the verdict weighs (improved from a candidate's constants
-    when that beat it); ``unidentified`` the constants the verdict's fit leaves loose.
+    when that beat it); ``unidentified`` the constants the verdict's fit leaves loose;
+    ``unnamed`` the unnamed local change at ``check``'s fit when the pairs' stage weighed
+    it (else None: the verdict computes it); ``notes`` what the stage left out and why.
     """
 
     check: NominalCheck
@@ -194,3 +196,5 @@ class Searched:
     refit_dof: float
     refit_p_value: float
     unidentified: list
+    unnamed: object = None
+    notes: tuple = ()
