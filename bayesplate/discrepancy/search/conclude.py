@@ -14,7 +14,7 @@ import numpy as np
 from .probabilities import model_probabilities
 from .result import Diagnosis
 from .separation import separate
-from .unnamed import unnamed
+from .unnamed import beaten, unnamed
 from .verdict import basins_note, tie_text, ties, unsettled_notes, verdict
 
 __all__ = ["conclude"]
@@ -46,7 +46,7 @@ def conclude(run, data, nominal_stage, located, searched):
     change = None
     if outcome != "consistent" and o.unnamed_margin is not None:
         change = s.unnamed or unnamed(run.model, check.fit, data.problem, data.modes)
-        if chosen is not None and beaten(chosen, change, o.unnamed_margin):
+        if chosen is not None and beaten(chosen.log_evidence_gain, change, o.unnamed_margin):
             run.say(
                 f"an unnamed local change gains {change.log_evidence_gain:+.1f} nats, "
                 f"{chosen.name} {chosen.log_evidence_gain:+.1f}"
@@ -96,11 +96,6 @@ def conclude(run, data, nominal_stage, located, searched):
         also_tied=[c for c, _ in tied[1:]] if rival else [],
         unnamed=change,
     )
-
-
-def beaten(best, change, margin):
-    """Whether the unnamed local change gains more than ``best`` by over ``margin`` nats."""
-    return change.log_evidence_gain > best.log_evidence_gain + margin
 
 
 def _unnamed_notes(outcome, best, change, margin):

@@ -25,7 +25,7 @@ from .rank import candidate_polisher, candidate_problem, candidate_result
 from .state import Searched
 from .store import fit_digest
 from .two_effects import two_effects
-from .unnamed import unnamed
+from .unnamed import beaten, unnamed
 from .verdict import refit_test, unidentified
 
 __all__ = ["IMPROVEMENT", "improved_nominal", "refit", "searched_anew"]
@@ -74,8 +74,10 @@ def refit(run, data, nominal_stage, located, ranked):
         if warranted
         else check.unidentified
     )
-    searched = Searched(check, ranked, best, warranted, refit_dof, refit_p, loose)
-    return replace(searched, unnamed=change, notes=(stopped,) if stopped else ())
+    notes = (stopped,) if stopped else ()
+    return Searched(
+        check, ranked, best, warranted, refit_dof, refit_p, loose, unnamed=change, notes=notes
+    )
 
 
 def _unnamed(run, data, check):
@@ -89,7 +91,7 @@ def _beaten_by(change, margin):
     """``enough(gain)`` of :func:`.two_effects.two_effects`: the unnamed change ahead."""
 
     def enough(gain):
-        if change.log_evidence_gain <= gain + margin:
+        if not beaten(gain, change, margin):
             return None
         return (
             f"an unnamed local change gains {change.log_evidence_gain:+.1f} nats, more than "

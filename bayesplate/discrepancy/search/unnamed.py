@@ -44,6 +44,7 @@ __all__ = [
     "GROUPS",
     "SCALES",
     "UnnamedChange",
+    "beaten",
     "field_columns",
     "field_gain",
     "regions",
@@ -97,6 +98,11 @@ class UnnamedChange:
             f"the mismatch sits most probably at x {x0:.0f}-{x1:.0f} mm, y {y0:.0f}-{y1:.0f} mm "
             f"(weight {self.weight:.2f} among the places tried; there {changes})"
         )
+
+
+def beaten(gain, change, margin):
+    """Whether the unnamed local `change` gains more than `gain` by over `margin` nats."""
+    return change.log_evidence_gain > gain + margin
 
 
 def regions(mesh, short=REGIONS_SHORT):
