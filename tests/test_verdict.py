@@ -178,6 +178,30 @@ def test_a_rival_that_fits_as_well_ties_within_the_prior_margin():
     assert (rival, tie) == (lower[2], "fit")
 
 
+def test_a_rival_that_fits_worse_does_not_tie_by_its_prior_volume():
+    """A concealed slot (``studies/outside_effects.py``, replicate 0): the thickness taper
+    came within 1.7 nats of the local stiffness loss in odds, by its one parameter against
+    five, while fitting the recordings 3.8 nats worse. The recordings prefer the loss."""
+    ranked = [
+        _Result("local_stiffness_loss", 10.05, chi2=3.32),
+        _Result("thickness_taper", 9.00, chi2=10.98),
+        _Result("point_mass", 6.18, chi2=8.17),
+        _Result("delamination", 4.18, chi2=9.52),
+    ]
+    p = model_probabilities([(c.name, c.log_evidence_gain) for c in ranked])
+    gap = np.log(p["local_stiffness_loss"] / p["thickness_taper"])
+    assert gap < 2.0  # within the odds margin ...
+    assert 0.5 * (10.98 - 3.32) > 2.0  # ... but fitting worse by more than the margin
+    assert ties(ranked[0], ranked, p, 2.0, 4.0) == []
+    assert runner_up(ranked[0], ranked, p, 2.0, 4.0)[0] is ranked[1]  # the rival, untied
+    assert verdict(1e-6, True, 0.5, 0.01, ranked[0], False) == ("explained", ranked[0])
+    # the same odds with a fit within the margin (chi2 + 4) is a tie of odds
+    close = [ranked[0], _Result("thickness_taper", 9.00, chi2=7.32), *ranked[2:]]
+    assert [(c.name, k) for c, k in ties(close[0], close, p, 2.0, 4.0)] == [
+        ("thickness_taper", "odds")
+    ]
+
+
 class _Twin(PointMass):
     """The point mass under another name: a constructed exact tie."""
 

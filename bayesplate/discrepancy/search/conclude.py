@@ -1,10 +1,10 @@
 """Step 5 of a pass, the verdict: what the evidence says, its ties and notes, the Diagnosis.
 
 ``consistent``, ``explained``, ``ambiguous`` (the refit is consistent but a different
-candidate's posterior odds are within ``ambiguity_margin``, or within ``prior_margin``
-while it fits the recordings as well: all that tie are named, with the measurement that
-would tell the first two apart, :mod:`.separation`) or ``unexplained`` (:mod:`.verdict`),
-with the posterior probability of every model (:mod:`.probabilities`).
+candidate fits the recordings as well, within ``ambiguity_margin`` of log-likelihood, and
+its posterior odds are within ``prior_margin``: all that tie are named, with the
+measurement that would tell the first two apart, :mod:`.separation`) or ``unexplained``
+(:mod:`.verdict`), with the posterior probability of every model (:mod:`.probabilities`).
 """
 
 from __future__ import annotations
