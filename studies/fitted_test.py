@@ -4,18 +4,26 @@ The calibration study sets each candidate's power size where the *fitted* test r
 10: the nominal model, its six constants fitted to the recordings, chi-square on ``m - 6``
 degrees of freedom at 1 %. Its size comes from a linearised absorption (and
 ``nonlinear_absorption`` fits from the true constants only). This study fits the constants
-to a replicate's own recordings from many starts (the true constants, the prior mean and
-draws from the prior; no prior in the objective), on the recordings' own mesh (no mesh
-error), and reports the best optimum found, beside what diagnose said on the same replicate
-(from the calibration's cache, when it holds that replicate).
+to a replicate's own recordings from many starts, with no prior in the objective, on the
+recordings' own mesh (no mesh error), and takes the best optimum found:
 
-A local fit from the true constants can stop in one optimum while another, far along the
-constants the frequencies hardly fix (G13, G23 of a thin plate), absorbs more of the effect:
-the best of all the starts is the test's statistic.
+- the true constants and the prior mean;
+- starts aimed along the constants the frequencies of a thin plate hardly fix, where deeper
+  optima lie: the transverse shear coefficients C44 (G23) times 0.4, 1 or 2.5 and C55 (G13)
+  times 0.3, 1 or 3.5 (the eight pairs besides 1, 1), the others true;
+- ``draws`` draws from the prior.
 
-Writes ``fitted_test.md`` to ``out_dir``. Run:
-``python -m studies.fitted_test EFFECT SIZE [--replicates 0 1 ...] [--starts N] [--out DIR]``
-(about 4-5 min a replicate on one core on the Frederiksen plate's 80 x 40 mesh).
+Each local fit is :func:`studies.nonlinear_absorption.exact_fit` from its start (log-stiffness
+steps), capped at ``MAX_NFEV`` evaluations. The best optimum found bounds the global
+minimum from above, so the rejections counted are an upper bound too.
+
+With ``--diagnose`` each replicate is also diagnosed blind with the package's defaults
+(:func:`studies.calibration.run_task`), so the fitted test's rejections and diagnose's names
+stand side by side at one size. Rows are cached by code version in
+``out_dir/.cache/fitted_test/<version>.jsonl`` (a run resumes); the report
+``fitted_test.md`` holds every size of the current version. Run:
+``python -m studies.fitted_test EFFECT SIZE [--replicates 0 1 ...] [--draws N] [--diagnose]
+[--workers 2] [--out DIR]`` (about 5-6 min a replicate on one core, 80 x 40 mesh).
 """
 
 import argparse
@@ -25,20 +33,44 @@ import pathlib
 import time
 
 import numpy as np
-from scipy.optimize import least_squares
 from scipy.stats import chi2 as chi2_dist
 
 from bayesplate import stiffness_from_engineering
 from bayesplate.io import atomic_write_text
 from bayesplate.likelihood.posterior import prior_in_stiffness
+from bayesplate.parallel import fork_map
 from studies import calibration as cal
-from studies._study_host import code_version, utc_now
+from studies._study_host import code_version, cpu, jsonl_rows, utc_now
+from studies.nonlinear_absorption import exact_fit
 
 FAMILY = "frederiksen_t300"
 ALPHA = 0.01
+MAX_NFEV = 40  # evaluations of each local fit
+#: Factors of (C44, C55) the aimed starts take, the other constants true.
+SHEAR_GRID = tuple((a, b) for a in (0.4, 1.0, 2.5) for b in (0.3, 1.0, 3.5) if (a, b) != (1, 1))
 
 
-def fitted_test(recorded_Hz, sigma_Hz, model, b_true, prior, starts=8, rng=0, max_nfev=40):
+def starts(b_true, prior, draws, rng):
+    """Every start as a step ``ln(b / b_true)``, and its kind.
+
+    Returns
+    -------
+    list of (numpy.ndarray of shape (6,), str)
+        The truth, the prior mean, :data:`SHEAR_GRID`, then ``draws`` draws from the prior
+        (clipped at a twentieth of the truth).
+    """
+    mu_b, V_b = prior
+    out = [(np.zeros(6), "truth"), (np.log(mu_b / b_true), "prior mean")]
+    for a, b in SHEAR_GRID:
+        out.append((np.log([1, 1, 1, 1, a, b]), "shear"))
+    L, rng = np.linalg.cholesky(V_b), np.random.default_rng(rng)
+    for _ in range(draws):
+        d = mu_b + L @ rng.standard_normal(6)
+        out.append((np.log(np.maximum(d / b_true, 0.05)), "draw"))
+    return out
+
+
+def fitted_test(recorded_Hz, sigma_Hz, model, b_true, prior, draws=4, rng=0):
     """The nominal model's six constants fitted to recorded frequencies from many starts.
 
     Parameters
@@ -50,142 +82,159 @@ def fitted_test(recorded_Hz, sigma_Hz, model, b_true, prior, starts=8, rng=0, ma
     b_true : numpy.ndarray, shape (6,)
         The true stiffness coefficients (Pa): a start, and the unit of the fitted ratios.
     prior : tuple of numpy.ndarray
-        ``(mu_b, V_b)`` (Pa, Pa^2): its mean is a start and ``starts`` draws from it are more.
-    starts : int
+        ``(mu_b, V_b)`` (Pa, Pa^2): its mean is a start and ``draws`` draws from it are more.
+    draws : int
     rng : int or numpy.random.Generator
-    max_nfev : int
-        Evaluation cap of each local fit.
 
     Returns
     -------
     dict
         ``chi2`` (the best optimum's), ``dof`` (``m - 6``), ``p``, ``ratios`` (its constants
         over the true ones, shape (6,)), ``by_start`` (every start's optimum's chi-square, in
-        the order above: the true constants, the prior mean, the draws) and ``at_truth`` (the
-        chi-square at the true constants).
+        the order of :func:`starts`), ``kinds`` (each start's kind), ``best_kind`` and
+        ``at_truth`` (the chi-square at the true constants).
     """
     f, s = np.asarray(recorded_Hz, float), np.asarray(sigma_Hz, float)
     m, Y = f.size, (2 * np.pi * f) ** 2
     sigma = 2 * Y * s / f
-    cache = {}
-
-    def solved(x):
-        key = x.tobytes()
-        if key not in cache:
-            cache.clear()
-            cache[key] = model.solve(x * b_true, m)
-        return cache[key]
-
-    def residuals(x):
-        return (solved(x).eigenvalues - Y) / sigma
-
-    def jacobian(x):
-        return solved(x).sensitivities * b_true[None, :] / sigma[:, None]
-
-    mu_b, V_b = prior
-    L, rng = np.linalg.cholesky(V_b), np.random.default_rng(rng)
-    draws = [mu_b + L @ rng.standard_normal(6) for _ in range(starts)]
-    x0s = [np.ones(6), mu_b / b_true] + [np.maximum(d / b_true, 0.05) for d in draws]
-    optima = []
-    for x0 in x0s:
-        fit = least_squares(
-            residuals, x0, jac=jacobian, x_scale="jac", bounds=(1e-3, np.inf), max_nfev=max_nfev
-        )
-        optima.append((float(fit.fun @ fit.fun), fit.x))
-    best, x = min(optima, key=lambda pair: pair[0])
+    points = starts(b_true, prior, draws, rng)
+    optima = [exact_fit(model, b_true, Y, sigma, start=z, max_nfev=MAX_NFEV) for z, _ in points]
+    k = int(np.argmin([o.chi2 for o in optima]))
+    r = (model.solve(b_true, m).eigenvalues - Y) / sigma
     dof = m - 6
-    at_truth = residuals(np.ones(6))
     return {
-        "chi2": best,
+        "chi2": optima[k].chi2,
         "dof": dof,
-        "p": float(chi2_dist.sf(best, dof)),
-        "ratios": x.tolist(),
-        "by_start": [c for c, _ in optima],
-        "at_truth": float(at_truth @ at_truth),
+        "p": float(chi2_dist.sf(optima[k].chi2, dof)),
+        "ratios": (optima[k].b / b_true).tolist(),
+        "by_start": [o.chi2 for o in optima],
+        "kinds": [kind for _, kind in points],
+        "best_kind": points[k][1],
+        "at_truth": float(r @ r),
     }
 
 
-def replicate(effect, size, rep, starts=8, quick=False):
-    """The fitted test on one power replicate of the calibration study; its row."""
+def replicate(effect, size, rep, draws=4, quick=False, diagnose=False):
+    """The fitted test on one power replicate of the calibration study (and, asked, diagnose's
+    verdict on it); its row."""
     task = ("power", FAMILY, effect, "fitted 0.9", size, rep)
     blind, _, _, _, _, _, _ = cal.recordings(task, quick)
     case, _, fine = cal._models(FAMILY, quick)
     prior = prior_in_stiffness(case.prior.mean, case.prior.sd, "full")
     b_true = stiffness_from_engineering(case.reference)
     m = blind.measured
-    row = fitted_test(m.frequency_Hz, m.sigma_Hz, fine, b_true, prior, starts, rng=rep)
-    return {"effect": effect, "size": size, "rep": rep, "key": cal.task_key(task), **row}
+    start = time.perf_counter()
+    row = fitted_test(m.frequency_Hz, m.sigma_Hz, fine, b_true, prior, draws, rng=rep)
+    row = {"effect": effect, "size": size, "rep": rep, "draws": draws, **row}
+    row["seconds"] = time.perf_counter() - start
+    row["diagnose"] = None
+    if diagnose:
+        d = cal.run_task(task, quick)
+        row["diagnose"] = {
+            k: d[k] for k in ("verdict", "chosen", "rival", "also", "p_value", "seconds")
+        }
+        row["diagnose"]["named"] = cal.named(d)
+    return row
 
 
-def diagnosed(out_dir, key):
-    """What the calibration's caches say of replicate ``key``: ``{rule: row}``."""
-    found = {}
-    for path in sorted((pathlib.Path(out_dir) / ".cache" / "calibration").glob("*.jsonl")):
-        rule = "corrected" if "-corrected" in path.name else "whole"
-        for line in path.read_text().splitlines():
-            row = json.loads(line)
-            if row.get("key") == key and "-quick" not in path.name:
-                found[f"{rule} ({row.get('code')})"] = row
-    return found
+def _key(row):
+    return (row["effect"], row["size"], row["rep"], row["draws"])
 
 
-def write_report(out_dir, rows, starts, seconds):
-    """``fitted_test.md``: one line a replicate, with diagnose's verdicts beside."""
-    effect, size = rows[0]["effect"], rows[0]["size"]
-    rejected = sum(r["p"] < ALPHA for r in rows)
+def main(effect, size, replicates, draws=4, out_dir="reports", quick=False, **kw):
+    """Run what the cache lacks (``workers``, ``diagnose`` in ``kw``); write the report;
+    return this size's rows."""
+    version = code_version() + ("-quick" if quick else "")
+    cache = pathlib.Path(out_dir) / ".cache" / "fitted_test" / f"{version}.jsonl"
+    cache.parent.mkdir(parents=True, exist_ok=True)
+    done = {_key(r) for r in jsonl_rows(cache)}
+    todo = [k for k in replicates if (effect, size, k, draws) not in done]
+
+    def one(rep):
+        row = replicate(effect, size, rep, draws, quick, kw.get("diagnose", False))
+        with cache.open("a") as out:  # one line a replicate: a stopped run keeps its rows
+            out.write(json.dumps(row) + "\n")
+        print(f"{effect} {size:g} #{rep}: chi2 {row['chi2']:.1f}, p {row['p']:.2g}", flush=True)
+        return row
+
+    fork_map(one, todo, kw.get("workers", 1))
+    rows = jsonl_rows(cache)
+    write_report(out_dir, rows, version)
+    return [r for r in rows if (r["effect"], r["size"], r["draws"]) == (effect, size, draws)]
+
+
+def write_report(out_dir, rows, version):
+    """``fitted_test.md``: every size of the current version, one line a replicate."""
     lines = [
-        f"# The fitted test fitted globally: {effect} at {size:g}",
+        "# The fitted test fitted globally",
         "",
-        f"Made by `python -m studies.fitted_test {effect} {size:g} --starts {starts}` on "
-        f"{utc_now()}, on the 2-core development machine (AMD EPYC), code {code_version()}; "
-        f"{len(rows)} replicates in {seconds / 60:.0f} min on one process.",
+        f"Date: {utc_now()}. Machine: {cpu()}, 2 cores. Code: {version}. Made by "
+        "`python -m studies.fitted_test EFFECT SIZE --diagnose` (its docstring says how).",
         "",
-        "The calibration study's power replicates of this size (Frederiksen plate, recordings on "
-        "80 x 40, 14 frequencies, 0.2 % noise): the six constants fitted with no prior, on the "
-        f"recordings' own mesh, from the true constants, the prior mean and {starts} draws from "
-        f"the prior. The statistic is the best optimum's chi-square on {rows[0]['dof']} dof; "
-        f"rejected at {ALPHA:g}. `first two starts`: the best of the true constants and the "
-        "prior mean alone. `ratios`: the best optimum's coefficients over the true ones (C11, "
-        "C22, C12, C66, C44 = G23, C55 = G13). `diagnose`: its verdict "
-        "and nominal p on the same replicate, from the calibration's cache.",
-        "",
-        "| replicate | chi2 at the truth | first two starts | best of all | p | rejected | ratios "
-        "| diagnose |",
-        "|---|---|---|---|---|---|---|---|",
+        "The calibration study's power replicates (Frederiksen plate, recordings on 80 x 40, "
+        "14 frequencies, 0.2 % noise): the six constants fitted with no prior, on the "
+        "recordings' own mesh, from the true constants, the prior mean, eight starts aimed "
+        "along the transverse shear coefficients and draws from the prior. The statistic is "
+        f"the best optimum's chi-square; rejected at {ALPHA:g}. `first two`: the best of the "
+        "true constants and the prior mean alone; `found by`: the kind of start of the best. "
+        "`ratios`: the best optimum's coefficients over the true ones (C11, C22, C12, C66, "
+        "C44 = G23, C55 = G13). `diagnose`: its verdict on the same replicate with the "
+        "package's defaults; *named* when it names the concealed candidate (explained, or "
+        "ambiguous with it).",
     ]
-    for r in rows:
-        first_two = min(r["by_start"][:2])
-        said = "; ".join(
-            f"{rule}: {d['verdict']}{' ' + d['chosen'] if d.get('chosen') else ''} "
-            f"(p {d['p_value']:.2g})"
-            for rule, d in r["diagnose"].items()
+    groups = sorted({(r["effect"], r["size"], r["draws"]) for r in rows})
+    for effect, size, draws in groups:
+        mine = sorted(
+            (r for r in rows if (r["effect"], r["size"], r["draws"]) == (effect, size, draws)),
+            key=lambda r: r["rep"],
         )
-        lines.append(
-            f"| {r['rep']} | {r['at_truth']:.1f} | {first_two:.1f} | {r['chi2']:.1f} | "
-            f"{r['p']:.2g} | {'yes' if r['p'] < ALPHA else 'no'} | "
-            f"{', '.join(f'{v:.2f}' for v in r['ratios'])} | {said or '-'} |"
-        )
-    lines += [
-        "",
-        f"Rejected: {rejected} of {len(rows)} (the linearised fitted test promised 0.9 at this "
-        "size).",
-        "",
-    ]
+        lines += _group(effect, size, draws, mine)
     path = pathlib.Path(out_dir) / "fitted_test.md"
-    atomic_write_text(path, "\n".join(lines))
+    atomic_write_text(path, "\n".join(lines) + "\n")
     return path
 
 
-def main(effect, size, replicates, starts=8, out_dir="reports", quick=False):
-    """Run the replicates, write the report; return the rows."""
-    start, rows = time.perf_counter(), []
-    for rep in replicates:
-        row = replicate(effect, size, rep, starts, quick)
-        row["diagnose"] = {} if quick else diagnosed(out_dir, row["key"])
-        print(f"{effect} {size:g} #{rep}: chi2 {row['chi2']:.1f}, p {row['p']:.2g}", flush=True)
-        rows.append(row)
-    write_report(out_dir, rows, starts, time.perf_counter() - start)
-    return rows
+def _group(effect, size, draws, rows):
+    """One size's table and its counts."""
+    out = [
+        "",
+        f"## {effect} at {size:g} ({draws} draws)",
+        "",
+        "| replicate | chi2 at the truth | first two | best of all | found by | p | rejected "
+        "| ratios | diagnose | s (test, diagnose) |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        d = r["diagnose"]
+        said = "-"
+        if d:
+            names = [n for n in (d["chosen"], d["rival"], *d["also"]) if n]
+            said = f"{d['verdict']} {', '.join(names)} (p {d['p_value']:.2g})" + (
+                ", named" if d["named"] else ""
+            )
+        out.append(
+            f"| {r['rep']} | {r['at_truth']:.1f} | {min(r['by_start'][:2]):.1f} | "
+            f"{r['chi2']:.1f} | {r['best_kind']} | {r['p']:.2g} | "
+            f"{'yes' if r['p'] < ALPHA else 'no'} | "
+            f"{', '.join(f'{v:.2f}' for v in r['ratios'])} | {said} | "
+            f"{r['seconds']:.0f}, {_seconds(d)} |"
+        )
+    seen = [r for r in rows if r["diagnose"]]
+    out += [
+        "",
+        f"Rejected by the fitted test: **{sum(r['p'] < ALPHA for r in rows)} of {len(rows)}**"
+        + (
+            f"; named by diagnose: **{sum(r['diagnose']['named'] for r in seen)} of {len(seen)}**"
+            if seen
+            else ""
+        )
+        + ".",
+    ]
+    return out
+
+
+def _seconds(d):
+    return "-" if not d else f"{d['seconds']:.0f}"
 
 
 if __name__ == "__main__":
@@ -193,8 +242,19 @@ if __name__ == "__main__":
     parser.add_argument("effect")
     parser.add_argument("size", type=float)
     parser.add_argument("--replicates", type=int, nargs="+", default=[0, 1, 2, 3, 4])
-    parser.add_argument("--starts", type=int, default=8)
+    parser.add_argument("--draws", type=int, default=4)
+    parser.add_argument("--diagnose", action="store_true")
+    parser.add_argument("--workers", type=int, default=1)
     parser.add_argument("--out", default=os.environ.get("STUDY_OUT", "reports"))
     parser.add_argument("--quick", action="store_true")
-    args = parser.parse_args()
-    main(args.effect, args.size, args.replicates, args.starts, args.out, args.quick)
+    a = parser.parse_args()
+    main(
+        a.effect,
+        a.size,
+        a.replicates,
+        a.draws,
+        a.out,
+        a.quick,
+        workers=a.workers,
+        diagnose=a.diagnose,
+    )

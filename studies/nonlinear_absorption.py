@@ -60,8 +60,8 @@ class Exact(NamedTuple):
     jacobian: np.ndarray  #: their derivatives in the log-stiffness steps, shape (len, 6)
 
 
-def exact_fit(plate, b_true, lam_effect, sigma, prior=None):
-    """The six constants fitted to ``lam_effect`` from the true ones (log-stiffness steps).
+def exact_fit(plate, b_true, lam_effect, sigma, prior=None, start=None, max_nfev=None):
+    """The six constants fitted to ``lam_effect`` (log-stiffness steps from ``b_true``).
 
     Parameters
     ----------
@@ -75,6 +75,10 @@ def exact_fit(plate, b_true, lam_effect, sigma, prior=None):
         Their deviations, (rad/s)^2.
     prior : (mean, sd), optional
         Gaussian prior on the engineering constants, SI units, shapes (6,).
+    start : numpy.ndarray, shape (6,), optional
+        The first step ``ln(b / b_true)`` (default zeros: the true constants).
+    max_nfev : int, optional
+        Evaluation cap of the local fit (default: scipy's).
 
     Returns
     -------
@@ -109,7 +113,8 @@ def exact_fit(plate, b_true, lam_effect, sigma, prior=None):
         de_dz = np.linalg.solve(stiffness_jacobian(engineering_from_stiffness(b)), np.diag(b))
         return np.vstack([-sens / sigma[:, None], de_dz / prior[1][:, None]])
 
-    out = least_squares(residuals, np.zeros(6), jac=jacobian, xtol=1e-10, ftol=1e-12)
+    z0 = np.zeros(6) if start is None else np.asarray(start, dtype=float)
+    out = least_squares(residuals, z0, jac=jacobian, xtol=1e-10, ftol=1e-12, max_nfev=max_nfev)
     r = out.fun
     return Exact(
         float(np.sum(r[:m] ** 2)), float(np.sum(r[m:] ** 2)), b_true * np.exp(out.x), r, out.jac

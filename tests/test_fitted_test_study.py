@@ -1,5 +1,7 @@
 """The global fitted test (``studies/fitted_test.py``): its fit, and a regression run."""
 
+import json
+
 import numpy as np
 
 from bayesplate import stiffness_from_engineering
@@ -14,15 +16,37 @@ def test_recordings_of_the_model_itself_are_fitted_exactly():
     b = stiffness_from_engineering(case.reference)
     prior = prior_in_stiffness(case.prior.mean, case.prior.sd, "full")
     f = fine.solve(b, 14).frequency_Hz
-    row = ft.fitted_test(f, 0.002 * f, fine, b, prior, starts=1, rng=0)
+    row = ft.fitted_test(f, 0.002 * f, fine, b, prior, draws=1, rng=0)
     assert row["at_truth"] < 1e-12 and row["chi2"] < 1e-8
     np.testing.assert_allclose(row["ratios"][:4], 1.0, atol=1e-4)  # the well-felt ones
-    assert row["dof"] == 8 and len(row["by_start"]) == 3
+    assert row["dof"] == 8 and len(row["by_start"]) == 2 + len(ft.SHEAR_GRID) + 1
+    assert row["kinds"][:3] == ["truth", "prior mean", "shear"] and row["kinds"][-1] == "draw"
 
 
-def test_the_best_optimum_is_no_worse_than_the_start_at_the_truth_and_is_reported(tmp_path):
-    rows = ft.main("ply_misalignment", 0.64, [0], starts=2, out_dir=tmp_path, quick=True)
+def test_the_aimed_starts_scale_the_shear_coefficients_alone():
+    b = np.arange(1.0, 7.0)
+    prior = (b * 1.1, np.diag((0.1 * b) ** 2))
+    points = ft.starts(b, prior, draws=2, rng=0)
+    shear = [np.exp(z) for z, kind in points if kind == "shear"]
+    assert len(shear) == 8 and {(round(x[4], 6), round(x[5], 6)) for x in shear} == set(
+        ft.SHEAR_GRID
+    )
+    assert all(np.allclose(x[:4], 1.0) for x in shear)
+    np.testing.assert_allclose(np.exp(points[1][0]), 1.1)  # the prior mean
+    # the same seed, the same draws
+    again = ft.starts(b, prior, draws=2, rng=0)
+    assert all(np.array_equal(z, w) for (z, _), (w, _) in zip(points, again, strict=True))
+
+
+def test_the_best_optimum_is_no_worse_than_the_start_at_the_truth_and_rows_resume(tmp_path):
+    rows = ft.main("ply_misalignment", 0.64, [0], draws=0, out_dir=tmp_path, quick=True)
     row = rows[0]
     assert row["chi2"] == min(row["by_start"]) <= row["by_start"][0] <= row["at_truth"]
     text = (tmp_path / "fitted_test.md").read_text()
     assert "ply_misalignment at 0.64" in text and f"| 0 | {row['at_truth']:.1f} |" in text
+    assert "Rejected by the fitted test: **" in text
+    # a second run reads the cached row, it does not fit again
+    cache = next((tmp_path / ".cache" / "fitted_test").glob("*.jsonl"))
+    assert len(cache.read_text().splitlines()) == 1
+    again = ft.main("ply_misalignment", 0.64, [0], draws=0, out_dir=tmp_path, quick=True)
+    assert again == [json.loads(cache.read_text())]
