@@ -23,12 +23,14 @@ def cpu():
     return platform.machine()
 
 
-def code_version():
-    """The commit the study runs (``+modified`` when the package or studies differ from it)."""
-    root = pathlib.Path(__file__).resolve().parents[1]
+def code_version(root=None):
+    """The last commit that changed the package or the studies (``+modified`` when they differ
+    from it): a commit of documents or reports alone leaves a study's cached rows current.
+    ``root``: the repository (default this one)."""
+    root = pathlib.Path(__file__).resolve().parents[1] if root is None else root
     try:
         head = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"],
+            ["git", "log", "-1", "--format=%h", "--", "bayesplate", "studies"],
             cwd=root,
             text=True,
             capture_output=True,
