@@ -30,7 +30,8 @@ from dataclasses import dataclass
 
 from bayesplate.discrepancy.search.options import DiagnoseOptions
 from bayesplate.discrepancy.search.verdict import ties
-from studies._study_host import code_version, cpu, utc_now
+from bayesplate.io import atomic_write_text
+from studies._study_host import code_version, cpu, jsonl_rows, utc_now
 
 #: The calibrations replayed: label, cache file (relative to the reports directory).
 CACHES = (
@@ -59,7 +60,7 @@ def rows(path):
     """The cached rows of one calibration (a JSON object's ``rows``, or JSON lines)."""
     path = pathlib.Path(path)
     if path.suffix == ".jsonl":
-        return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+        return jsonl_rows(path)
     stored = json.loads(path.read_text())["rows"]
     return list(stored.values()) if isinstance(stored, dict) else list(stored)
 
@@ -157,7 +158,7 @@ def main(out_dir="reports"):
         "its test, the unnamed change) depends on them, so a rerun of a calibration gives "
         "these names.",
     ]
-    (out / "tie_rule.md").write_text("\n".join(lines) + "\n")
+    atomic_write_text(out / "tie_rule.md", "\n".join(lines) + "\n")
     return results
 
 
