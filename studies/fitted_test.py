@@ -141,9 +141,11 @@ def _key(row):
     return (row["effect"], row["size"], row["rep"], row["draws"])
 
 
-def main(effect, size, replicates, draws=4, out_dir="reports", quick=False, **kw):
-    """Run what the cache lacks (``workers``, ``diagnose`` in ``kw``); write the report;
-    return this size's rows."""
+def main(
+    effect, size, replicates, draws=4, out_dir="reports", quick=False, workers=1, diagnose=False
+):
+    """Run what the cache lacks (``workers`` replicates at a time; ``diagnose``: diagnose each
+    one too); write the report; return this size's rows."""
     version = code_version() + ("-quick" if quick else "")
     cache = pathlib.Path(out_dir) / ".cache" / "fitted_test" / f"{version}.jsonl"
     cache.parent.mkdir(parents=True, exist_ok=True)
@@ -151,13 +153,13 @@ def main(effect, size, replicates, draws=4, out_dir="reports", quick=False, **kw
     todo = [k for k in replicates if (effect, size, k, draws) not in done]
 
     def one(rep):
-        row = replicate(effect, size, rep, draws, quick, kw.get("diagnose", False))
+        row = replicate(effect, size, rep, draws, quick, diagnose)
         with cache.open("a") as out:  # one line a replicate: a stopped run keeps its rows
             out.write(json.dumps(row) + "\n")
         print(f"{effect} {size:g} #{rep}: chi2 {row['chi2']:.1f}, p {row['p']:.2g}", flush=True)
         return row
 
-    fork_map(one, todo, kw.get("workers", 1))
+    fork_map(one, todo, workers)
     rows = jsonl_rows(cache)
     write_report(out_dir, rows, version)
     return [r for r in rows if (r["effect"], r["size"], r["draws"]) == (effect, size, draws)]
