@@ -9,19 +9,22 @@ the tasks run in this process, in order, with the same results.
 
 No process outlives the command that started it (issue 39). A forked process leaves Ctrl-C,
 SIGHUP and SIGTERM's handling to its parent (it ignores the first two and dies of the
-third, as :meth:`multiprocessing.Pool.terminate` and :meth:`Forked.stop` send it), closes
-the pipe ends it does not use (the parent's ends of :class:`Forked` results: otherwise a
-child writing a large result into a pipe it holds open itself blocks for good), and ends
+third, as :func:`fork_map` and :meth:`Forked.stop` send it to end it), closes the pipe
+ends it does not use (the parent's ends of other children's pipes: otherwise a child
+writing a large result into a pipe it holds open itself blocks for good), and ends
 when its parent ends, also when the parent is killed with SIGKILL (:func:`die_with_parent`:
 the parent-death signal on Linux, a thread watching the parent elsewhere). The parent ends
-its children on every way out: the ``with`` blocks of :func:`fork_map` and :class:`Forked`,
-and :func:`end_children` for the command line's last word.
+its children on every way out: the ``finally`` of :func:`fork_map`, the ``with`` block of
+:class:`Forked`, and :func:`end_children` for the command line's last word. Only the
+parent's main thread reads the children's pipes, so ending them at any moment leaves no
+reader waiting on half a result.
 """
 
 from __future__ import annotations
 
 import ctypes
 import multiprocessing
+import multiprocessing.connection
 import os
 import signal
 import sys
@@ -218,18 +221,108 @@ def fork_map(function, items, workers=1):
         with threadpool_limits(limits=1, user_api="blas"):
             return [function(item) for item in items]
     _TASK = (function, items)
-    pool = None
     try:
-        context = multiprocessing.get_context("fork")
-        # a Pool, not a ProcessPoolExecutor: on Ctrl-C (or a failed task) terminate() ends
-        # the workers at once, where the executor waits for their tasks
-        with _signals_held():  # the workers (and the pool's threads) start with them held
-            pool = context.Pool(n, initializer=_start_worker, initargs=(os.getpid(),))
-        return pool.map(_call, range(len(items)), chunksize=1)
+        return _map_on_workers(n, len(items))
     finally:
         _TASK = None
-        if pool is not None:
-            pool.terminate()  # as leaving ``with pool`` does: the workers ended and reaped
+
+
+def _serve(conn, parent):
+    """A worker: compute the items whose indices come through `conn`, send each result back.
+
+    It ends at a ``None`` or when the parent's end is closed (or by SIGTERM, the parent's
+    way to stop it at once). A result that cannot be pickled goes back as an error.
+    """
+    _start_worker(parent)
+    while True:
+        try:
+            index = conn.recv()
+        except EOFError:
+            return
+        if index is None:
+            return
+        try:
+            outcome = (index, True, _call(index))
+        except Exception as err:  # noqa: BLE001 - every failure goes back to the parent
+            outcome = (index, False, err)
+        try:
+            conn.send(outcome)
+        except Exception as err:  # noqa: BLE001 - an unpicklable result or exception
+            conn.send((index, False, RuntimeError(f"{type(err).__name__}: {err}")))
+
+
+def _map_on_workers(n, count):
+    """Items ``0 .. count - 1`` of :data:`_TASK` on `n` forked workers; results in order.
+
+    Each worker has its own pipe, and only this thread reads them: nothing reads on after
+    the map is left, so stopping the workers at any moment (Ctrl-C, SIGTERM, a failed task)
+    cannot leave a reader blocked on a result cut in two. :class:`multiprocessing.Pool`
+    does leave one (its result thread, joined by ``terminate``), once in a few dozen stops.
+    """
+    context = multiprocessing.get_context("fork")
+    workers = {}  # the parent's end of each worker's pipe: its process
+    try:
+        for _ in range(n):
+            mine, theirs = context.Pipe()
+            _PARENT_ENDS.add(mine)  # closed in every worker forked after it
+            process = context.Process(target=_serve, args=(theirs, os.getpid()), daemon=True)
+            workers[mine] = process
+            try:
+                with _signals_held():  # the worker starts with them held
+                    process.start()
+            finally:
+                theirs.close()
+        return _dispatch(workers, count)
+    finally:
+        _stop_workers(workers)
+
+
+def _dispatch(workers, count):
+    """Send each free worker the next index until every result is back; the results."""
+    results = [None] * count
+    pending = iter(range(count))
+    busy = {}
+    for mine in workers:
+        index = next(pending, None)
+        if index is None:
+            break
+        mine.send(index)
+        busy[mine] = workers[mine]
+    while busy:
+        for mine in multiprocessing.connection.wait(list(busy)):
+            try:
+                index, ok, value = mine.recv()
+            except EOFError:
+                process = busy[mine]
+                process.join(1.0)  # a stop signal to this process too acts here first
+                raise RuntimeError(
+                    f"a forked worker ended without a result (exit code {process.exitcode})"
+                ) from None
+            if not ok:
+                raise value
+            results[index] = value
+            following = next(pending, None)
+            if following is None:
+                del busy[mine]
+            else:
+                mine.send(following)
+    return results
+
+
+def _stop_workers(workers, timeout=5.0):
+    """End the workers (SIGTERM; SIGKILL after `timeout` s), reap them, close the pipes."""
+    for process in workers.values():
+        if process.pid is not None and process.exitcode is None:
+            process.terminate()
+    deadline = time.monotonic() + timeout
+    for mine, process in workers.items():
+        if process.pid is not None:
+            process.join(max(0.0, deadline - time.monotonic()))
+            if process.exitcode is None:
+                process.kill()
+                process.join()
+        _PARENT_ENDS.discard(mine)
+        mine.close()
 
 
 def _run_and_send(function, send, parent):

@@ -21,7 +21,9 @@ With ``--diagnose`` each replicate is also diagnosed blind with the package's de
 (:func:`studies.calibration.run_task`), so the fitted test's rejections and diagnose's names
 stand side by side at one size. Rows are cached by code version in
 ``out_dir/.cache/fitted_test/<version>.jsonl`` (a run resumes); the report
-``fitted_test.md`` holds every size of the current version. Run:
+``fitted_test.md`` holds every size of the current version; each row names the code that
+computed it (``code``), also a row carried over from an earlier version whose computation
+is the same. Run:
 ``python -m studies.fitted_test EFFECT SIZE [--replicates 0 1 ...] [--draws N] [--diagnose]
 [--workers 2] [--out DIR]`` (about 5-6 min a replicate on one core, 80 x 40 mesh).
 """
@@ -153,7 +155,7 @@ def main(
     todo = [k for k in replicates if (effect, size, k, draws) not in done]
 
     def one(rep):
-        row = replicate(effect, size, rep, draws, quick, diagnose)
+        row = {**replicate(effect, size, rep, draws, quick, diagnose), "code": version}
         with cache.open("a") as out:  # one line a replicate: a stopped run keeps its rows
             out.write(json.dumps(row) + "\n")
         print(f"{effect} {size:g} #{rep}: chi2 {row['chi2']:.1f}, p {row['p']:.2g}", flush=True)
@@ -198,9 +200,10 @@ def write_report(out_dir, rows, version):
 
 def _group(effect, size, draws, rows):
     """One size's table and its counts."""
+    codes = ", ".join(sorted({r.get("code", "-") for r in rows}))
     out = [
         "",
-        f"## {effect} at {size:g} ({draws} draws)",
+        f"## {effect} at {size:g} ({draws} draws; computed by code {codes})",
         "",
         "| replicate | chi2 at the truth | first two | best of all | found by | p | rejected "
         "| ratios | diagnose | s (test, diagnose) |",

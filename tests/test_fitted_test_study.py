@@ -50,3 +50,5 @@ def test_the_best_optimum_is_no_worse_than_the_start_at_the_truth_and_rows_resum
     assert len(cache.read_text().splitlines()) == 1
     again = ft.main("ply_misalignment", 0.64, [0], draws=0, out_dir=tmp_path, quick=True)
     assert again == [json.loads(cache.read_text())]
+    # the row names the code that computed it, and its size's heading says it
+    assert row["code"] == cache.stem and f"computed by code {cache.stem})" in text
