@@ -576,14 +576,16 @@ def recordings(task, quick=False):
     return blind, model, f_true, f0, physics, theta, int(rng.integers(2**31))
 
 
-def run_task(task, quick=False, options=None):
+def run_task(task, quick=False, options=None, made=None):
     """Make the recordings of one replicate, diagnose them blind; the row (plain data).
 
     ``options``: keyword options of diagnose besides its defaults (another study's rule).
+    ``made``: what :func:`recordings` returned for this task, when the caller has it.
     """
     kind, family, effect, label, size, rep = task
     logging.getLogger("bayesplate").setLevel(logging.ERROR)
-    blind, model, f_true, f0, physics, theta, seed = recordings(task, quick)
+    made = recordings(task, quick) if made is None else made
+    blind, model, f_true, f0, physics, theta, seed = made
     case, f, sigma = blind, blind.measured.frequency_Hz, blind.measured.sigma_Hz
     ideal_chi2 = float(np.sum(((f - np.sort(f0)) / sigma) ** 2))
     start = time.perf_counter()

@@ -120,7 +120,8 @@ def replicate(effect, size, rep, draws=4, quick=False, diagnose=False):
     """The fitted test on one power replicate of the calibration study (and, asked, diagnose's
     verdict on it); its row."""
     task = ("power", FAMILY, effect, "fitted 0.9", size, rep)
-    blind, _, _, _, _, _, _ = cal.recordings(task, quick)
+    made = cal.recordings(task, quick)
+    blind = made[0]
     case, _, fine = cal._models(FAMILY, quick)
     prior = prior_in_stiffness(case.prior.mean, case.prior.sd, "full")
     b_true = stiffness_from_engineering(case.reference)
@@ -131,7 +132,7 @@ def replicate(effect, size, rep, draws=4, quick=False, diagnose=False):
     row["seconds"] = time.perf_counter() - start
     row["diagnose"] = None
     if diagnose:
-        d = cal.run_task(task, quick)
+        d = cal.run_task(task, quick, made=made)  # the same recordings, not made again
         row["diagnose"] = {
             k: d[k] for k in ("verdict", "chosen", "rival", "also", "p_value", "seconds")
         }

@@ -52,3 +52,16 @@ def test_the_best_optimum_is_no_worse_than_the_start_at_the_truth_and_rows_resum
     assert again == [json.loads(cache.read_text())]
     # the row names the code that computed it, and its size's heading says it
     assert row["code"] == cache.stem and f"computed by code {cache.stem})" in text
+
+
+def test_diagnose_beside_the_test_sees_the_recordings_the_test_fitted():
+    # replicate() hands its recordings to run_task; run_task on its own makes them again
+    row = ft.replicate("ply_misalignment", 0.64, 0, 0, quick=True, diagnose=True)
+    task = ("power", ft.FAMILY, "ply_misalignment", "fitted 0.9", 0.64, 0)
+    alone = cal.run_task(task, quick=True)
+    said = row["diagnose"]
+    assert (said["verdict"], said["chosen"], said["p_value"]) == (
+        alone["verdict"],
+        alone["chosen"],
+        alone["p_value"],
+    )
