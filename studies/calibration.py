@@ -357,8 +357,9 @@ def widening(quick=False, frequency_Hz=None, rule=DEFAULT_RULE, b=None):
     m = case.measured.size
     if rule == "corrected":
         b = stiffness_from_engineering(case.reference) if b is None else b  # (diagnose: its fit)
-        _, u = mesh_error_module.corrected_error(model, b, m)
         working = model.solve(b, m).frequency_Hz
+        finer = mesh_error_module.finer_model(model).solve(b, m).frequency_Hz
+        _, u = mesh_error_module.richardson(working, finer)  # corrected_error, solved once
         return np.hypot(1.0, u / working / NOISE)
     if frequency_Hz is None:
         frequency_Hz = np.sort(_frequencies(case, fine))
