@@ -355,7 +355,7 @@ sys.exit(main())
 def test_a_map_reads_its_workers_in_its_own_thread_only():
     # multiprocessing.Pool's result thread, reading a result whose sender terminate() had
     # killed half-way, waited for the rest for good, and terminate() waited for that thread:
-    # the command never ended (CI, diagnose stopped by SIGTERM; about once in 50 stops of a
+    # the command never ended (CI, diagnose stopped by SIGTERM; 4 of 150 stops of a
     # map of short tasks). fork_map starts no thread: nothing reads on once it is left
     seen = []
     mapping = threading.Event()
