@@ -166,15 +166,22 @@ def end_children(keep=(), timeout=5.0):
         How many children were still running and were ended.
     """
     children = [p for p in multiprocessing.active_children() if p not in keep]
-    for child in children:
-        child.terminate()
-    deadline = time.monotonic() + timeout
-    for child in children:
-        child.join(max(0.0, deadline - time.monotonic()))
-        if child.exitcode is None:
-            child.kill()
-            child.join()
+    _end(children, timeout)
     return len(children)
+
+
+def _end(processes, timeout=5.0):
+    """Terminate started `processes` still running; SIGKILL any alive after `timeout` s; reap."""
+    started = [p for p in processes if p.pid is not None]
+    for process in started:
+        if process.exitcode is None:
+            process.terminate()
+    deadline = time.monotonic() + timeout
+    for process in started:
+        process.join(max(0.0, deadline - time.monotonic()))
+        if process.exitcode is None:
+            process.kill()
+            process.join()
 
 
 def _call(index):
@@ -230,8 +237,7 @@ def fork_map(function, items, workers=1):
 def _serve(conn, parent):
     """A worker: compute the items whose indices come through `conn`, send each result back.
 
-    It ends at a ``None`` or when the parent's end is closed (or by SIGTERM, the parent's
-    way to stop it at once). A result that cannot be pickled goes back as an error.
+    It ends when the parent's end is closed, or by SIGTERM (the parent's way to stop it).
     """
     _start_worker(parent)
     while True:
@@ -239,16 +245,19 @@ def _serve(conn, parent):
             index = conn.recv()
         except EOFError:
             return
-        if index is None:
-            return
         try:
-            outcome = (index, True, _call(index))
+            ok, value = True, _call(index)
         except Exception as err:  # noqa: BLE001 - every failure goes back to the parent
-            outcome = (index, False, err)
-        try:
-            conn.send(outcome)
-        except Exception as err:  # noqa: BLE001 - an unpicklable result or exception
-            conn.send((index, False, RuntimeError(f"{type(err).__name__}: {err}")))
+            ok, value = False, err
+        _send(conn, (index,), ok, value)
+
+
+def _send(conn, head, ok, value):
+    """Send ``(*head, ok, value)``; a value that cannot be pickled goes as an error."""
+    try:
+        conn.send((*head, ok, value))
+    except Exception as err:  # noqa: BLE001 - an unpicklable result or exception
+        conn.send((*head, False, RuntimeError(f"{type(err).__name__}: {err}")))
 
 
 def _map_on_workers(n, count):
@@ -281,19 +290,19 @@ def _dispatch(workers, count):
     """Send each free worker the next index until every result is back; the results."""
     results = [None] * count
     pending = iter(range(count))
-    busy = {}
+    busy = set()
     for mine in workers:
         index = next(pending, None)
         if index is None:
             break
         mine.send(index)
-        busy[mine] = workers[mine]
+        busy.add(mine)
     while busy:
         for mine in multiprocessing.connection.wait(list(busy)):
             try:
                 index, ok, value = mine.recv()
             except EOFError:
-                process = busy[mine]
+                process = workers[mine]
                 process.join(1.0)  # a stop signal to this process too acts here first
                 raise RuntimeError(
                     f"a forked worker ended without a result (exit code {process.exitcode})"
@@ -303,7 +312,7 @@ def _dispatch(workers, count):
             results[index] = value
             following = next(pending, None)
             if following is None:
-                del busy[mine]
+                busy.discard(mine)
             else:
                 mine.send(following)
     return results
@@ -311,16 +320,8 @@ def _dispatch(workers, count):
 
 def _stop_workers(workers, timeout=5.0):
     """End the workers (SIGTERM; SIGKILL after `timeout` s), reap them, close the pipes."""
-    for process in workers.values():
-        if process.pid is not None and process.exitcode is None:
-            process.terminate()
-    deadline = time.monotonic() + timeout
-    for mine, process in workers.items():
-        if process.pid is not None:
-            process.join(max(0.0, deadline - time.monotonic()))
-            if process.exitcode is None:
-                process.kill()
-                process.join()
+    _end(workers.values(), timeout)
+    for mine in workers:
         _PARENT_ENDS.discard(mine)
         mine.close()
 
@@ -328,13 +329,11 @@ def _stop_workers(workers, timeout=5.0):
 def _run_and_send(function, send, parent):
     _child_setup(parent)  # the parent stops this process; its read end closed here
     try:
-        outcome = (True, function())
+        ok, value = True, function()
     except BaseException as err:  # noqa: BLE001 - every failure goes back to the parent
-        outcome = (False, err)
+        ok, value = False, err
     try:
-        send.send(outcome)
-    except Exception as err:  # noqa: BLE001 - an unpicklable result or exception
-        send.send((False, RuntimeError(f"{type(err).__name__}: {err}")))
+        _send(send, (), ok, value)
     finally:
         send.close()
 
@@ -402,12 +401,7 @@ class Forked:
         if self._process is None or self._process.pid is None:  # not started
             self._close()
             return
-        if self._process.is_alive():
-            self._process.terminate()
-            self._process.join(timeout)
-            if self._process.exitcode is None:
-                self._process.kill()
-        self._process.join()
+        _end([self._process], timeout)
         self._close()
 
     def __enter__(self):
