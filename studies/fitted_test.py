@@ -23,9 +23,12 @@ stand side by side at one size. Rows are cached by code version in
 ``out_dir/.cache/fitted_test/<version>.jsonl`` (a run resumes); the report
 ``fitted_test.md`` holds every size of the current version; each row names the code that
 computed it (``code``), also a row carried over from an earlier version whose computation
-is the same. Run:
+is the same. ``--mesh-error RULE`` (a rule other than diagnose's default) diagnoses the
+same replicates under that mesh-error rule alone, without the test, into
+``<version>.rules.jsonl``; the report shows its verdicts in a column of their own. Run:
 ``python -m studies.fitted_test EFFECT SIZE [--replicates 0 1 ...] [--draws N] [--diagnose]
-[--workers 2] [--out DIR]`` (about 5-6 min a replicate on one core, 80 x 40 mesh).
+[--mesh-error RULE] [--workers 2] [--out DIR]`` (about 5-6 min a replicate on one core,
+80 x 40 mesh; diagnose alone 0.5-2 min).
 """
 
 import argparse
@@ -130,14 +133,22 @@ def replicate(effect, size, rep, draws=4, quick=False, diagnose=False):
     row = fitted_test(m.frequency_Hz, m.sigma_Hz, fine, b_true, prior, draws, rng=rep)
     row = {"effect": effect, "size": size, "rep": rep, "draws": draws, **row}
     row["seconds"] = time.perf_counter() - start
-    row["diagnose"] = None
-    if diagnose:
-        d = cal.run_task(task, quick, made=made)  # the same recordings, not made again
-        row["diagnose"] = {
-            k: d[k] for k in ("verdict", "chosen", "rival", "also", "p_value", "seconds")
-        }
-        row["diagnose"]["named"] = cal.named(d)
+    row["diagnose"] = _verdict(cal.run_task(task, quick, made=made)) if diagnose else None
     return row
+
+
+def diagnosed(effect, size, rep, rule, quick=False):
+    """Diagnose's verdict on one power replicate under mesh-error ``rule``; its row."""
+    task = ("power", FAMILY, effect, "fitted 0.9", size, rep)
+    d = cal.run_task(task, quick, options={"mesh_error_part": rule})
+    return {"effect": effect, "size": size, "rep": rep, "rule": rule, "diagnose": _verdict(d)}
+
+
+def _verdict(d):
+    """What the report keeps of a calibration row: verdict, names, p-value, time, named."""
+    out = {k: d[k] for k in ("verdict", "chosen", "rival", "also", "p_value", "seconds")}
+    out["named"] = cal.named(d)
+    return out
 
 
 def _key(row):
@@ -145,31 +156,55 @@ def _key(row):
 
 
 def main(
-    effect, size, replicates, draws=4, out_dir="reports", quick=False, workers=1, diagnose=False
+    effect,
+    size,
+    replicates,
+    draws=4,
+    out_dir="reports",
+    quick=False,
+    workers=1,
+    diagnose=False,
+    rule=cal.DEFAULT_RULE,
 ):
     """Run what the cache lacks (``workers`` replicates at a time; ``diagnose``: diagnose each
-    one too); write the report; return this size's rows."""
+    one too; ``rule`` other than the default: diagnose alone under it); write the report;
+    return this size's rows (the test's, or the rule's)."""
     version = code_version() + ("-quick" if quick else "")
     cache = pathlib.Path(out_dir) / ".cache" / "fitted_test" / f"{version}.jsonl"
+    ruled = cache.with_suffix(".rules.jsonl")
     cache.parent.mkdir(parents=True, exist_ok=True)
-    done = {_key(r) for r in jsonl_rows(cache)}
-    todo = [k for k in replicates if (effect, size, k, draws) not in done]
+    if rule == cal.DEFAULT_RULE:
+        done = {_key(r) for r in jsonl_rows(cache)}
+        todo = [k for k in replicates if (effect, size, k, draws) not in done]
+        path, work = cache, lambda rep: replicate(effect, size, rep, draws, quick, diagnose)
+    else:
+        done = {(r["effect"], r["size"], r["rep"], r["rule"]) for r in jsonl_rows(ruled)}
+        todo = [k for k in replicates if (effect, size, k, rule) not in done]
+        path, work = ruled, lambda rep: diagnosed(effect, size, rep, rule, quick)
 
     def one(rep):
-        row = {**replicate(effect, size, rep, draws, quick, diagnose), "code": version}
-        with cache.open("a") as out:  # one line a replicate: a stopped run keeps its rows
+        row = {**work(rep), "code": version}
+        with path.open("a") as out:  # one line a replicate: a stopped run keeps its rows
             out.write(json.dumps(row) + "\n")
-        print(f"{effect} {size:g} #{rep}: chi2 {row['chi2']:.1f}, p {row['p']:.2g}", flush=True)
+        print(f"{effect} {size:g} #{rep}: {_said(row)}", flush=True)
         return row
 
     fork_map(one, todo, workers)
-    rows = jsonl_rows(cache)
-    write_report(out_dir, rows, version)
-    return [r for r in rows if (r["effect"], r["size"], r["draws"]) == (effect, size, draws)]
+    write_report(out_dir, jsonl_rows(cache), version, jsonl_rows(ruled))
+    mine = jsonl_rows(path)
+    return [r for r in mine if (r["effect"], r["size"]) == (effect, size)]
 
 
-def write_report(out_dir, rows, version):
-    """``fitted_test.md``: every size of the current version, one line a replicate."""
+def _said(row):
+    """One replicate's outcome in a line of progress."""
+    if "chi2" in row:
+        return f"chi2 {row['chi2']:.1f}, p {row['p']:.2g}"
+    return f"{row['rule']}: {row['diagnose']['verdict']}, named {row['diagnose']['named']}"
+
+
+def write_report(out_dir, rows, version, ruled=()):
+    """``fitted_test.md``: every size of the current version, one line a replicate; ``ruled``:
+    diagnose's rows under other mesh-error rules, a column each."""
     lines = [
         "# The fitted test fitted globally",
         "",
@@ -193,50 +228,67 @@ def write_report(out_dir, rows, version):
             (r for r in rows if (r["effect"], r["size"], r["draws"]) == (effect, size, draws)),
             key=lambda r: r["rep"],
         )
-        lines += _group(effect, size, draws, mine)
+        lines += _group(effect, size, draws, mine, [r for r in ruled if r["effect"] == effect])
     path = pathlib.Path(out_dir) / "fitted_test.md"
     atomic_write_text(path, "\n".join(lines) + "\n")
     return path
 
 
-def _group(effect, size, draws, rows):
-    """One size's table and its counts."""
-    codes = ", ".join(sorted({r.get("code", "-") for r in rows}))
+def _group(effect, size, draws, rows, ruled=()):
+    """One size's table and its counts; ``ruled``: diagnose's rows under other rules."""
+    ruled = [r for r in ruled if r["size"] == size]
+    rules = sorted({r["rule"] for r in ruled})
+    by = {(r["rule"], r["rep"]): r["diagnose"] for r in ruled}
+    codes = ", ".join(sorted({r.get("code", "-") for r in [*rows, *ruled]}))
     out = [
         "",
         f"## {effect} at {size:g} ({draws} draws; computed by code {codes})",
         "",
         "| replicate | chi2 at the truth | first two | best of all | found by | p | rejected "
-        "| ratios | diagnose | s (test, diagnose) |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| ratios | diagnose | "
+        + "".join(f"diagnose, `{rule}` rule | " for rule in rules)
+        + "s (test, diagnose) |",
+        "|---|---|---|---|---|---|---|---|---|---|" + "---|" * len(rules),
     ]
     for r in rows:
         d = r["diagnose"]
-        said = "-"
-        if d:
-            names = [n for n in (d["chosen"], d["rival"], *d["also"]) if n]
-            said = f"{d['verdict']} {', '.join(names)} (p {d['p_value']:.2g})" + (
-                ", named" if d["named"] else ""
-            )
         out.append(
             f"| {r['rep']} | {r['at_truth']:.1f} | {min(r['by_start'][:2]):.1f} | "
             f"{r['chi2']:.1f} | {r['best_kind']} | {r['p']:.2g} | "
             f"{'yes' if r['p'] < ALPHA else 'no'} | "
-            f"{', '.join(f'{v:.2f}' for v in r['ratios'])} | {said} | "
-            f"{r['seconds']:.0f}, {_seconds(d)} |"
+            f"{', '.join(f'{v:.2f}' for v in r['ratios'])} | {_verdict_text(d)} | "
+            + "".join(f"{_verdict_text(by.get((rule, r['rep'])))} | " for rule in rules)
+            + f"{r['seconds']:.0f}, {_seconds(d)} |"
         )
-    seen = [r for r in rows if r["diagnose"]]
+    seen = [r["diagnose"] for r in rows if r["diagnose"]]
+    counts = [("diagnose", seen)] + [
+        (
+            f"diagnose under the `{rule}` rule",
+            [by[rule, r["rep"]] for r in rows if (rule, r["rep"]) in by],
+        )
+        for rule in rules
+    ]
     out += [
         "",
         f"Rejected by the fitted test: **{sum(r['p'] < ALPHA for r in rows)} of {len(rows)}**"
-        + (
-            f"; named by diagnose: **{sum(r['diagnose']['named'] for r in seen)} of {len(seen)}**"
-            if seen
-            else ""
+        + "".join(
+            f"; named by {who}: **{sum(d['named'] for d in ds)} of {len(ds)}**"
+            for who, ds in counts
+            if ds
         )
         + ".",
     ]
     return out
+
+
+def _verdict_text(d):
+    """A verdict, the names it gives, its nominal p-value and whether it named the truth."""
+    if not d:
+        return "-"
+    names = [n for n in (d["chosen"], d["rival"], *d["also"]) if n]
+    return f"{d['verdict']} {', '.join(names)} (p {d['p_value']:.2g})" + (
+        ", named" if d["named"] else ""
+    )
 
 
 def _seconds(d):
@@ -250,6 +302,7 @@ if __name__ == "__main__":
     parser.add_argument("--replicates", type=int, nargs="+", default=[0, 1, 2, 3, 4])
     parser.add_argument("--draws", type=int, default=4)
     parser.add_argument("--diagnose", action="store_true")
+    parser.add_argument("--mesh-error", choices=cal.RULES, default=cal.DEFAULT_RULE)
     parser.add_argument("--workers", type=int, default=1)
     parser.add_argument("--out", default=os.environ.get("STUDY_OUT", "reports"))
     parser.add_argument("--quick", action="store_true")
@@ -263,4 +316,5 @@ if __name__ == "__main__":
         a.quick,
         workers=a.workers,
         diagnose=a.diagnose,
+        rule=a.mesh_error,
     )
