@@ -48,8 +48,9 @@ tasks run the fitted 0.9 size replicate by replicate across the candidates with 
 replicates between its rounds, then (``all``) the other sizes replicate by replicate, so that
 a partial run has even counts.
 
-Writes ``calibration.md`` and ``calibration.png`` to ``out_dir`` (``calibration_<rule>.md``
-and ``.png`` for a rule other than the default; ``-quick`` before the suffix in quick mode).
+Writes ``calibration_<rule>.md`` and ``.png`` to ``out_dir`` (``calibration.md`` and ``.png``
+for the ``whole`` rule, the default when the study began; ``-quick`` before the suffix in
+quick mode).
 Run:
 ``python -m studies.calibration [--quick] [--sizes {target,all}] [--mesh-error RULE]
 [--workers W] [--out DIR] [--report-only] [--effect NAME]``
@@ -678,9 +679,14 @@ def wilson(k, n):
 # ---------------------------------------------------------------- the study
 
 
+#: The rule whose files carry no suffix: the default when the study began (its reports and
+#: caches keep their names whatever the default is now).
+PLAIN_RULE = "whole"
+
+
 def _rule_suffix(rule, sep="-"):
-    """The rule in a file's name: none for diagnose's default."""
-    return "" if rule in (None, DEFAULT_RULE) else f"{sep}{rule}"
+    """The rule in a file's name: none for :data:`PLAIN_RULE`."""
+    return "" if (rule or DEFAULT_RULE) == PLAIN_RULE else f"{sep}{rule or DEFAULT_RULE}"
 
 
 def cache_paths(out_dir, quick, version=None, rule=None):

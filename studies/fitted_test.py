@@ -133,7 +133,12 @@ def replicate(effect, size, rep, draws=4, quick=False, diagnose=False):
     row = fitted_test(m.frequency_Hz, m.sigma_Hz, fine, b_true, prior, draws, rng=rep)
     row = {"effect": effect, "size": size, "rep": rep, "draws": draws, **row}
     row["seconds"] = time.perf_counter() - start
-    row["diagnose"] = _verdict(cal.run_task(task, quick, made=made)) if diagnose else None
+    row["diagnose"] = None
+    if diagnose:  # the same recordings, not made again
+        row["diagnose"] = {
+            **_verdict(cal.run_task(task, quick, made=made)),
+            "rule": cal.DEFAULT_RULE,
+        }
     return row
 
 
@@ -218,9 +223,11 @@ def write_report(out_dir, rows, version, ruled=()):
         f"the best optimum's chi-square; rejected at {ALPHA:g}. `first two`: the best of the "
         "true constants and the prior mean alone; `found by`: the kind of start of the best. "
         "`ratios`: the best optimum's coefficients over the true ones (C11, C22, C12, C66, "
-        "C44 = G23, C55 = G13). `diagnose`: its verdict on the same replicate with the "
-        "package's defaults; *named* when it names the concealed candidate (explained, or "
-        "ambiguous with it).",
+        "C44 = G23, C55 = G13). `diagnose, RULE rule`: its verdict on the same replicate with "
+        "the package's defaults but its mesh-error rule (`--mesh-error`; the default is "
+        f"`{cal.DEFAULT_RULE}`; rows made before the rule was kept: `whole`, the default "
+        "then), its nominal p-value and time; *named* when it names the concealed candidate "
+        "(explained, or ambiguous with it).",
     ]
     groups = sorted({(r["effect"], r["size"], r["draws"]) for r in rows})
     for effect, size, draws in groups:
@@ -237,31 +244,29 @@ def write_report(out_dir, rows, version, ruled=()):
 def _group(effect, size, draws, rows, ruled=()):
     """One size's table and its counts; ``ruled``: diagnose's rows under other rules."""
     ruled = [r for r in ruled if r["size"] == size]
-    rules = sorted({r["rule"] for r in ruled})
-    by = {(r["rule"], r["rep"]): r["diagnose"] for r in ruled}
+    beside = [r for r in rows if r["diagnose"]]  # diagnosed beside the test, under its rule
+    by = {(_rule(r["diagnose"]), r["rep"]): r["diagnose"] for r in beside}
+    by |= {(r["rule"], r["rep"]): r["diagnose"] for r in ruled}
+    rules = sorted({rule for rule, _ in by})
     codes = ", ".join(sorted({r.get("code", "-") for r in [*rows, *ruled]}))
     out = [
         "",
         f"## {effect} at {size:g} ({draws} draws; computed by code {codes})",
         "",
         "| replicate | chi2 at the truth | first two | best of all | found by | p | rejected "
-        "| ratios | diagnose | "
-        + "".join(f"diagnose, `{rule}` rule | " for rule in rules)
-        + "s (test, diagnose) |",
-        "|---|---|---|---|---|---|---|---|---|---|" + "---|" * len(rules),
+        "| ratios | " + "".join(f"diagnose, `{rule}` rule | " for rule in rules) + "s (test) |",
+        "|---|---|---|---|---|---|---|---|---|" + "---|" * len(rules),
     ]
     for r in rows:
-        d = r["diagnose"]
         out.append(
             f"| {r['rep']} | {r['at_truth']:.1f} | {min(r['by_start'][:2]):.1f} | "
             f"{r['chi2']:.1f} | {r['best_kind']} | {r['p']:.2g} | "
             f"{'yes' if r['p'] < ALPHA else 'no'} | "
-            f"{', '.join(f'{v:.2f}' for v in r['ratios'])} | {_verdict_text(d)} | "
+            f"{', '.join(f'{v:.2f}' for v in r['ratios'])} | "
             + "".join(f"{_verdict_text(by.get((rule, r['rep'])))} | " for rule in rules)
-            + f"{r['seconds']:.0f}, {_seconds(d)} |"
+            + f"{r['seconds']:.0f} |"
         )
-    seen = [r["diagnose"] for r in rows if r["diagnose"]]
-    counts = [("diagnose", seen)] + [
+    counts = [
         (
             f"diagnose under the `{rule}` rule",
             [by[rule, r["rep"]] for r in rows if (rule, r["rep"]) in by],
@@ -281,18 +286,20 @@ def _group(effect, size, draws, rows, ruled=()):
     return out
 
 
+def _rule(d):
+    """The mesh-error rule a verdict was made under (rows before it was kept: ``whole``, the
+    default then)."""
+    return d.get("rule", "whole")
+
+
 def _verdict_text(d):
     """A verdict, the names it gives, its nominal p-value and whether it named the truth."""
     if not d:
         return "-"
     names = [n for n in (d["chosen"], d["rival"], *d["also"]) if n]
-    return f"{d['verdict']} {', '.join(names)} (p {d['p_value']:.2g})" + (
-        ", named" if d["named"] else ""
-    )
-
-
-def _seconds(d):
-    return "-" if not d else f"{d['seconds']:.0f}"
+    said = " ".join([d["verdict"], *([", ".join(names)] if names else [])])
+    said += f" (p {d['p_value']:.2g}, {d['seconds']:.0f} s)"
+    return said + (", named" if d["named"] else "")
 
 
 if __name__ == "__main__":

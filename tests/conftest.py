@@ -115,6 +115,8 @@ _CI_TIER = {
     "fitted": "two diagnoses and a fit (30 s); the module's other tests",
     "test_fitted_test_study.py::test_another_mesh_error_rule_diagnoses_alone_in_a_column_of_"
     "its_own": "three diagnoses (32 s); the module's other tests",
+    "test_coarse_mesh_study.py::test_the_quick_run_diagnoses_on_the_coarser_mesh_and_"
+    "resumes": "two diagnoses (40-100 s); the module's other tests",
     "test_diagnose_reassign.py": "seven diagnoses (190 s in CI); test_sampling_assignment",
     "test_diagnose_store.py": "diagnoses stopped and resumed (157 s)",
     "test_error_scale.py::test_the_study_quick": "the study (41 s)",

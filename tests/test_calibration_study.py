@@ -100,7 +100,7 @@ def test_quick_study_runs_and_clean_plates_are_consistent(tmp_path, monkeypatch)
         "point_mass"
     ][0]
     assert widened < drawn  # the widened test is the weaker
-    assert (tmp_path / "calibration-quick.png").exists()
+    assert (tmp_path / f"{cal.report_name(None, quick=True)}.png").exists()
     monkeypatch.setattr(cal, "run_task", None)  # everything must come from the cache now
     again = cal.main(tmp_path, quick=True, workers=1)
     assert again.read_text().split("\n", 3)[3] == text.split("\n", 3)[3]
@@ -203,7 +203,9 @@ def test_a_run_reads_the_rows_of_its_own_code_version_alone(tmp_path):
     cal.save(tmp_path, True, {"version": "aaaaaaa", "sizes": _table(), "rows": {}})
     cal.save(tmp_path, True, {"version": "bbbbbbb", "sizes": None, "rows": {}})
     rows_a, head_a = cal.cache_paths(tmp_path, True, "aaaaaaa")
-    assert rows_a.name == "aaaaaaa-quick.jsonl" and head_a.name == "aaaaaaa-quick.json"
+    suffix = cal._rule_suffix(None)  # diagnose's default rule
+    assert rows_a.name == f"aaaaaaa{suffix}-quick.jsonl"
+    assert head_a.name == f"aaaaaaa{suffix}-quick.json"
     assert rows_a.parent == tmp_path / ".cache" / "calibration"
     with rows_a.open("a") as out:
         out.write(json.dumps(_row(one, "aaaaaaa")) + "\n" + json.dumps(_row(two, "aaaaaaa"))[:40])
@@ -292,7 +294,7 @@ def test_the_target_plan_runs_the_clean_replicates_and_the_fitted_size_alone():
         cal.tasks(_table(), plan="some")
 
 
-def test_the_rule_names_the_cache_and_the_report_unless_it_is_the_default(tmp_path):
+def test_the_rule_names_the_cache_and_the_report_unless_it_is_the_plain_one(tmp_path):
     rows, head = cal.cache_paths(tmp_path, True, "abc1234", "unabsorbed")
     assert (
         rows.name == "abc1234-unabsorbed-quick.jsonl"
@@ -301,10 +303,13 @@ def test_the_rule_names_the_cache_and_the_report_unless_it_is_the_default(tmp_pa
     assert cal.cache_paths(tmp_path, False, "abc1234", "unabsorbed")[0].name == (
         "abc1234-unabsorbed.jsonl"
     )
-    for default in (None, cal.DEFAULT_RULE):
-        assert cal.cache_paths(tmp_path, True, "abc1234", default)[0].name == "abc1234-quick.jsonl"
-        assert cal.report_name(default) == "calibration"
-        assert cal.report_name(default, quick=True) == "calibration-quick"
+    # the whole rule's files keep the plain names they had when it was the default
+    assert cal.cache_paths(tmp_path, True, "abc1234", "whole")[0].name == "abc1234-quick.jsonl"
+    assert cal.report_name("whole") == "calibration"
+    assert cal.report_name("whole", quick=True) == "calibration-quick"
+    # no rule is diagnose's default, named
+    assert cal.report_name(None) == cal.report_name(cal.DEFAULT_RULE)
+    assert cal.report_name("corrected") == "calibration_corrected"
     assert cal.report_name("unabsorbed") == "calibration_unabsorbed"
     assert cal.report_name("unabsorbed", quick=True) == "calibration_unabsorbed-quick"
     # each rule reads its own rows alone
@@ -407,7 +412,7 @@ def test_the_report_of_another_rule_goes_to_its_own_file(tmp_path):
     assert path == tmp_path / "calibration_unabsorbed-quick.md"
     assert "mesh-error rule `unabsorbed`" in path.read_text()
     path = cal.write_report(tmp_path, _stored(rows), True, 1)
-    assert path == tmp_path / "calibration-quick.md"
+    assert path == tmp_path / f"{cal.report_name(None, quick=True)}.md"
 
 
 def test_a_replicate_that_raises_is_recorded(monkeypatch):
