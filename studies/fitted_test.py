@@ -227,7 +227,8 @@ def write_report(out_dir, rows, version, ruled=()):
         "the package's defaults but its mesh-error rule (`--mesh-error`; the default is "
         f"`{cal.DEFAULT_RULE}`; rows made before the rule was kept: `whole`, the default "
         "then), its nominal p-value and time; *named* when it names the concealed candidate "
-        "(explained, or ambiguous with it).",
+        "(explained, or ambiguous with it); *a name without the truth*: explained with another "
+        "candidate, or ambiguous among others only.",
     ]
     groups = sorted({(r["effect"], r["size"], r["draws"]) for r in rows})
     for effect, size, draws in groups:
@@ -277,13 +278,19 @@ def _group(effect, size, draws, rows, ruled=()):
         "",
         f"Rejected by the fitted test: **{sum(r['p'] < ALPHA for r in rows)} of {len(rows)}**"
         + "".join(
-            f"; named by {who}: **{sum(d['named'] for d in ds)} of {len(ds)}**"
+            f"; named by {who}: **{sum(d['named'] for d in ds)} of {len(ds)}** (a name "
+            f"without the truth: {sum(_wrong(d) for d in ds)})"
             for who, ds in counts
             if ds
         )
         + ".",
     ]
     return out
+
+
+def _wrong(d):
+    """A verdict that names physics without the concealed candidate."""
+    return d["verdict"] in ("explained", "ambiguous") and not d["named"]
 
 
 def _rule(d):
