@@ -58,7 +58,9 @@ def test_the_unabsorbed_part_widens_the_deviations_less_and_is_said():
     f = f * (1 + 0.002 * np.random.default_rng(1).standard_normal(f.size))
     blind = case.with_measured(frequency_Hz=f, sigma_Hz=0.002 * f)
     model = PlateModel.from_case(case, mesh=(12, 6))
-    whole = diagnose(blind, model=model, rng=0, n_starts=1, pairing="order")
+    whole = diagnose(
+        blind, model=model, rng=0, n_starts=1, pairing="order", mesh_error_part="whole"
+    )
     left = diagnose(
         blind, model=model, rng=0, n_starts=1, pairing="order", mesh_error_part="unabsorbed"
     )
