@@ -138,11 +138,11 @@ def register(sub):
         "--mesh-error",
         choices=MESH_ERROR_CHOICES,
         default=MESH_ERROR_CHOICES[0],
-        help="what is done with the working mesh's estimated error: 'corrected' (default): each "
-        "computed frequency corrected by its error (Richardson with the mesh twice as fine), "
-        "the deviations widened only by what the correction leaves uncertain; or it widens the "
-        "deviations where it is not well under them: 'whole', or 'unabsorbed', the part the six "
-        "constants cannot absorb (reports/mesh_error_rule.md)",
+        help="what of the working mesh's estimated error widens the deviations where it is "
+        "not well under them: 'whole' (default) or 'unabsorbed', the part the six constants "
+        "cannot absorb (measured in reports/mesh_error_rule.md); or 'corrected': each computed "
+        "frequency corrected by its error (Richardson with the mesh twice as fine), the "
+        "deviations widened only by what the correction leaves uncertain",
     )
     add_pairing_option(p)
     add_json_option(p)

@@ -157,7 +157,7 @@ PAIRING_CHOICES = ("auto", "mac", "likelihood", "index", "order")
 #: (``tests/test_startup.py`` holds them equal).
 METHOD_CHOICES = ("B", "MVE", "MVE-mod")
 #: :data:`bayesplate.discrepancy.search.mesh_error.MESH_ERROR_PARTS`, the first the default.
-MESH_ERROR_CHOICES = ("corrected", "whole", "unabsorbed")
+MESH_ERROR_CHOICES = ("whole", "unabsorbed", "corrected")
 CONVENTION_CHOICES = ("paper", "full-prior", "printed")
 #: :data:`bayesplate.io.band.DEFAULT_BAND_MODES`, ``BAND_LOW_FACTOR`` and ``BAND_HIGH_FACTOR``,
 #: spelled here so that the parser does not import :mod:`bayesplate.io` at start-up.

@@ -10,12 +10,11 @@ stiffer), and the nominal fit's six constants absorb that part; what they cannot
 ``S_f`` the sensitivities of the frequencies to the stiffness coefficients (``d f / d b =
 f / (2 lambda) d lambda / d b``) at the same point, whitened like ``e`` (the projector of
 :func:`..physics.location.absorbable_projector`). ``"whole"`` adds ``e`` to the deviations
-in quadrature where it is not well under them; ``"unabsorbed"`` adds ``e_left``
+in quadrature where it is not well under them (diagnose's default); ``"unabsorbed"`` adds ``e_left``
 instead, so that what the constants take is not counted twice, once by the fit and once in
 the deviations.
 
-``"corrected"`` (diagnose's default) takes the error out of the model instead of into the
-deviations: it keeps the power the widening gives away (``reports/fitted_test.md``). The half
+``"corrected"`` takes the error out of the model instead of into the deviations. The half
 mesh is not yet where the ``h^2`` rate holds (the observed orders between 20 x 10, 40 x 20
 and 80 x 40 on the Frederiksen plate run from 1 to 3), so the estimate comes from the mesh
 *twice as fine* each way: ``e = 4/3 (f_mesh - f_finer)`` (Richardson, rate 2), and each
@@ -43,9 +42,8 @@ __all__ = [
     "unabsorbed",
 ]
 
-#: What of the mesh's estimated error :func:`..diagnose.diagnose` adds to the deviations; the
-#: first is the default.
-MESH_ERROR_PARTS = ("corrected", "whole", "unabsorbed")
+#: What of the mesh's estimated error :func:`..diagnose.diagnose` adds to the deviations.
+MESH_ERROR_PARTS = ("whole", "unabsorbed", "corrected")
 
 #: Roache's safety factor of the grid convergence index on a two-mesh estimate.
 GCI_SAFETY = 1.25

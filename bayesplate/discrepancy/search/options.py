@@ -27,12 +27,12 @@ class DiagnoseOptions:
         Posterior sd / prior sd above which a constant is reported as unidentified.
     mesh_error_ratio : float
         Mesh error / measurement deviation above which the deviation is inflated.
-    mesh_error_part : {"corrected", "whole", "unabsorbed"}
-        ``"corrected"`` (default): the mesh's error (estimated with the mesh twice as fine)
-        taken out of the model, the deviations widened only by what the correction leaves
-        uncertain; or what of the error inflates the deviations: all of it, or the part the
-        six constants cannot absorb (:mod:`.mesh_error`; measured by
-        ``studies/mesh_error_rule.py``).
+    mesh_error_part : {"whole", "unabsorbed", "corrected"}
+        What of the mesh's estimated error inflates the deviations: all of it, or the part
+        the six constants cannot absorb (:mod:`.mesh_error`; measured by
+        ``studies/mesh_error_rule.py``); or ``"corrected"``: the error (estimated with the
+        mesh twice as fine) taken out of the model, the deviations widened only by what the
+        correction leaves uncertain.
     refine_margin : float
         Candidates gaining less than this on their reduced coarse model are not refined on
         the working mesh, nats.
@@ -70,7 +70,7 @@ class DiagnoseOptions:
     n_starts: int = N_STARTS  # random starts of the nominal fit (reduced model), and the mean
     unidentified_ratio: float = 0.7  # posterior sd / prior sd: a constant is unidentified
     mesh_error_ratio: float = 0.3  # mesh error / sigma above which sigma is inflated
-    mesh_error_part: str = "corrected"  # the mesh error taken out (or added: all, or unabsorbed)
+    mesh_error_part: str = "whole"  # of the mesh error added: all, or what the constants leave
     refine_margin: float = 1.0  # nats: candidates below this on the coarse mesh are not refined
     basin_margin: float = 2.0  # chi2 + chi2_prior: another nominal optimum this close fits as well
     workers: int = 1  # processes for independent fits (fork); the CLI uses 2
