@@ -653,6 +653,12 @@ def wrong_pair(row):
     return row["verdict"] == "ambiguous" and not named(row)
 
 
+def misnamed(row):
+    """A name of physics without the concealed candidate (:func:`wrong_name` or
+    :func:`wrong_pair`; on a clean plate, any name)."""
+    return wrong_name(row) or wrong_pair(row)
+
+
 def covered(row):
     """``{parameter: inside the 94 % interval}`` at the mirror image nearest the truth."""
     if row["recovered"] is None or row["truth"] is None:
@@ -1189,7 +1195,7 @@ def report(rows, stored, quick, workers):
         )
     else:
         lines.append("No replicate named its concealed candidate yet.")
-    wrong = [r for r in rows if r["kind"] == "power" and (wrong_name(r) or wrong_pair(r))]
+    wrong = [r for r in rows if r["kind"] == "power" and misnamed(r)]
     lines += ["", "## Wrong names", ""]
     if wrong:
         lines += [

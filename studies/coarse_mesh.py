@@ -26,13 +26,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import logging
 import os
 import pathlib
 import statistics
-import time
 
-from bayesplate.discrepancy.diagnose import diagnose
 from bayesplate.io import atomic_write_text
 from bayesplate.parallel import fork_map
 from studies import calibration as cal
@@ -48,43 +45,24 @@ def tasks(what, replicates):
     effect, size = what.split(":")
     if effect not in cal.EFFECTS:
         raise ValueError(f"effect = {effect!r}: must be one of {', '.join(cal.EFFECTS)}")
-    family = "frederiksen_t300"
+    family = cal.POWER_FAMILY
     return [("power", family, effect, "fitted 0.9", float(size), r) for r in range(replicates)]
 
 
 def run(task, rule, factor, quick=False):
-    """Diagnose one replicate's recordings on the scaled working mesh; its row (plain data)."""
-    logging.getLogger("bayesplate").setLevel(logging.ERROR)
-    blind, model, *_, seed = cal.recordings(task, quick)
+    """Diagnose one replicate's recordings on the scaled working mesh; its row (plain data).
+
+    The calibration study's own diagnosis of the replicate (:func:`studies.calibration.
+    run_task`), its working model replaced by the coarser one.
+    """
+    blind, model, *rest = cal.recordings(task, quick)
     nx, ny = model.mesh.nx, model.mesh.ny
     coarse = model.on_mesh((max(2, round(nx * factor)), max(1, round(ny * factor))))
-    start = time.perf_counter()
-    d = diagnose(blind, model=coarse, rng=seed, pairing="order", mesh_error_part=rule)
-    row = {
-        "key": cal.task_key(task),
-        "effect": task[2],
-        "family": task[1],
-        "rep": task[5],
-        "rule": rule,
-        "factor": factor,
-        "mesh": [coarse.mesh.nx, coarse.mesh.ny],
-        "verdict": d.verdict,
-        "chosen": d.chosen.name if d.chosen else None,
-        "rival": d.rival.name if d.rival is not None else None,
-        "also": [c.name for c in d.also_tied],
-        "p_value": float(d.p_value),
-        "seconds": time.perf_counter() - start,
-    }
-    row["named"] = task[2] is not None and cal.named(row)
-    return row
-
-
-def wrong(row):
-    """A name of physics that is not there: any name on a clean plate, or a name without the
-    concealed candidate."""
-    if row["verdict"] not in ("explained", "ambiguous"):
-        return False
-    return not row["named"]
+    d = cal.run_task(task, quick, {"mesh_error_part": rule}, made=(blind, coarse, *rest))
+    keep = ("key", "effect", "family", "rep", "verdict", "chosen", "rival", "also", "p_value")
+    row = {k: d[k] for k in keep}
+    row |= {"rule": rule, "factor": factor, "mesh": [coarse.mesh.nx, coarse.mesh.ny]}
+    return row | {"seconds": d["seconds"], "named": cal.named(d)}
 
 
 def main(what, rule=None, factor=FACTOR, replicates=10, out_dir="reports", workers=2, quick=False):
@@ -146,8 +124,9 @@ def write_report(out_dir, rows, version):
         lines.append(
             f"| {what} | {family} | {mesh[0]} x {mesh[1]} | `{rule}` | {len(mine)} | "
             f"{sum(r['verdict'] != 'consistent' for r in mine)} | "
-            f"{sum(r['named'] for r in mine) if effect else '-'} | {sum(wrong(r) for r in mine)} "
-            f"| {counts} | {statistics.median(p):.2g} ({min(p):.2g}) | "
+            f"{sum(r['named'] for r in mine) if effect else '-'} | "
+            f"{sum(cal.misnamed(r) for r in mine)} | {counts} | "
+            f"{statistics.median(p):.2g} ({min(p):.2g}) | "
             f"{statistics.median(s):.0f} ({max(s):.0f}) |"
         )
     path = pathlib.Path(out_dir) / "coarse_mesh.md"

@@ -119,10 +119,15 @@ def fitted_test(recorded_Hz, sigma_Hz, model, b_true, prior, draws=4, rng=0):
     }
 
 
+def _task(effect, size, rep):
+    """The calibration study's power replicate at ``size`` (its fitted 0.9 label)."""
+    return ("power", FAMILY, effect, "fitted 0.9", size, rep)
+
+
 def replicate(effect, size, rep, draws=4, quick=False, diagnose=False):
     """The fitted test on one power replicate of the calibration study (and, asked, diagnose's
     verdict on it); its row."""
-    task = ("power", FAMILY, effect, "fitted 0.9", size, rep)
+    task = _task(effect, size, rep)
     made = cal.recordings(task, quick)
     blind = made[0]
     case, _, fine = cal._models(FAMILY, quick)
@@ -144,7 +149,7 @@ def replicate(effect, size, rep, draws=4, quick=False, diagnose=False):
 
 def diagnosed(effect, size, rep, rule, quick=False):
     """Diagnose's verdict on one power replicate under mesh-error ``rule``; its row."""
-    task = ("power", FAMILY, effect, "fitted 0.9", size, rep)
+    task = _task(effect, size, rep)
     d = cal.run_task(task, quick, options={"mesh_error_part": rule})
     return {"effect": effect, "size": size, "rep": rep, "rule": rule, "diagnose": _verdict(d)}
 
@@ -158,6 +163,10 @@ def _verdict(d):
 
 def _key(row):
     return (row["effect"], row["size"], row["rep"], row["draws"])
+
+
+def _rule_key(row):
+    return (row["effect"], row["size"], row["rep"], row["rule"])
 
 
 def main(
@@ -179,13 +188,13 @@ def main(
     ruled = cache.with_suffix(".rules.jsonl")
     cache.parent.mkdir(parents=True, exist_ok=True)
     if rule == cal.DEFAULT_RULE:
-        done = {_key(r) for r in jsonl_rows(cache)}
-        todo = [k for k in replicates if (effect, size, k, draws) not in done]
-        path, work = cache, lambda rep: replicate(effect, size, rep, draws, quick, diagnose)
+        path, key, tag = cache, _key, draws
+        work = lambda rep: replicate(effect, size, rep, draws, quick, diagnose)  # noqa: E731
     else:
-        done = {(r["effect"], r["size"], r["rep"], r["rule"]) for r in jsonl_rows(ruled)}
-        todo = [k for k in replicates if (effect, size, k, rule) not in done]
-        path, work = ruled, lambda rep: diagnosed(effect, size, rep, rule, quick)
+        path, key, tag = ruled, _rule_key, rule
+        work = lambda rep: diagnosed(effect, size, rep, rule, quick)  # noqa: E731
+    done = {key(r) for r in jsonl_rows(path)}
+    todo = [k for k in replicates if (effect, size, k, tag) not in done]
 
     def one(rep):
         row = {**work(rep), "code": version}
@@ -196,8 +205,8 @@ def main(
 
     fork_map(one, todo, workers)
     write_report(out_dir, jsonl_rows(cache), version, jsonl_rows(ruled))
-    mine = jsonl_rows(path)
-    return [r for r in mine if (r["effect"], r["size"]) == (effect, size)]
+    mine = [r for r in jsonl_rows(path) if (r["effect"], r["size"]) == (effect, size)]
+    return [r for r in mine if key(r)[3] == tag]  # of these draws (the test) or this rule
 
 
 def _said(row):
@@ -279,18 +288,13 @@ def _group(effect, size, draws, rows, ruled=()):
         f"Rejected by the fitted test: **{sum(r['p'] < ALPHA for r in rows)} of {len(rows)}**"
         + "".join(
             f"; named by {who}: **{sum(d['named'] for d in ds)} of {len(ds)}** (a name "
-            f"without the truth: {sum(_wrong(d) for d in ds)})"
+            f"without the truth: {sum(cal.misnamed({**d, 'effect': effect}) for d in ds)})"
             for who, ds in counts
             if ds
         )
         + ".",
     ]
     return out
-
-
-def _wrong(d):
-    """A verdict that names physics without the concealed candidate."""
-    return d["verdict"] in ("explained", "ambiguous") and not d["named"]
 
 
 def _rule(d):

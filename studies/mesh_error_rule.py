@@ -99,9 +99,7 @@ def summary(rule_rows, base_rows):
             entry[side] = {
                 "alarms": sum(r["verdict"] != "consistent" for r in rows),
                 "named": sum(cal.named(r) for r in rows if r["kind"] == "power"),
-                "wrong": sum(
-                    cal.wrong_name(r) or cal.wrong_pair(r) for r in rows if r["kind"] == "power"
-                ),
+                "wrong": sum(cal.misnamed(r) for r in rows if r["kind"] == "power"),
                 "verdicts": _verdicts(rows),
                 "p": _p_quantiles(rows),
                 "widening": _widening(rows),
@@ -179,7 +177,7 @@ def write_report(out_dir, stored, base_rows, quick, workers):
     wrong = [
         (k, r)
         for k, r in sorted(stored["rows"].items())
-        if r["kind"] == "power" and (cal.wrong_name(r) or cal.wrong_pair(r)) and k in base_rows
+        if r["kind"] == "power" and cal.misnamed(r) and k in base_rows
     ]
     alarms = [
         (k, r)

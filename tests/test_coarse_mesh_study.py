@@ -17,11 +17,12 @@ def test_clean_runs_both_families_and_an_effect_the_frederiksen_plate():
 
 def test_a_name_without_the_truth_is_wrong_and_a_clean_plate_named_is_too():
     row = {"effect": "cutout", "verdict": "ambiguous", "chosen": "cutout", "rival": "point_mass"}
-    assert not cm.wrong({**row, "named": cal.named(row)})
-    row = {**row, "chosen": "thickness_taper"}
-    assert cm.wrong({**row, "named": cal.named(row)})
-    assert cm.wrong({"effect": None, "verdict": "explained", "named": False})
-    assert not cm.wrong({"effect": None, "verdict": "unexplained", "named": False})
+    assert not cal.misnamed(row)
+    assert cal.misnamed({**row, "chosen": "thickness_taper"})
+    assert cal.misnamed({"effect": None, "verdict": "explained", "chosen": "point_mass"})
+    clean = {"effect": None, "verdict": "ambiguous", "chosen": "cutout", "rival": "point_mass"}
+    assert cal.misnamed(clean)
+    assert not cal.misnamed({"effect": None, "verdict": "unexplained", "chosen": None})
 
 
 def test_the_quick_run_diagnoses_on_the_coarser_mesh_and_resumes(tmp_path):
