@@ -170,3 +170,24 @@ def test_sample_command_on_dask_workers_gives_the_same_chain(client, tmp_path, c
     assert got["constants"]["E1_GPa"]["mean"] > 0
     assert client.status == "running"  # a cluster reached by address is not shut down
     capsys.readouterr()
+
+
+def _logs_errors():
+    """Whether this worker's Dask records of an error (a heartbeat's traceback) are written."""
+    import logging
+
+    return logging.getLogger("distributed.worker").isEnabledFor(logging.ERROR)
+
+
+def test_the_workers_of_a_cluster_started_here_keep_dask_records_off(client):
+    """A stopped batch's workers log a heartbeat traceback: none reaches the command line.
+
+    The control is the workers of a scheduler given (their owner's to configure): they
+    write their records of an error.
+    """
+    from bayesplate.batch.run import _client
+
+    assert all(client.run(_logs_errors).values())
+    with _client(None, 2) as started:
+        assert not any(started.run(_logs_errors).values())
+        assert len(started.run(_logs_errors)) == 2

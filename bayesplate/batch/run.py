@@ -229,6 +229,8 @@ class _client:
     def _open(self):
         from distributed import Client, LocalCluster
 
+        from .quiet import QuietWorker
+
         if self.scheduler is not None and not isinstance(self.scheduler, str):
             return self.scheduler  # a client given by the caller: theirs to close
         if self.scheduler is not None:
@@ -252,6 +254,7 @@ class _client:
         self.owned.append(cluster)
         client = Client(cluster)
         self.owned.insert(0, client)
+        client.register_plugin(QuietWorker(), name="bayesplate-quiet-worker")
         return client
 
     def __exit__(self, kind, *exc):
