@@ -18,7 +18,9 @@ import numpy as np
 
 from bayesplate import PlateModel, stiffness_from_engineering
 from bayesplate.discrepancy import (
+    CutCorner,
     Cutout,
+    Delamination,
     ElasticFoundation,
     LocalStiffnessLoss,
     PlyMisalignment,
@@ -34,7 +36,10 @@ NOISE = 0.002
 #: size's unit, a grid of sizes for the calibration's ideal test). Places on the Frederiksen
 #: plate (100.1 x 53.0 mm), away from its lines of symmetry; the sizes: a point mass's grams,
 #: a taper's thickness ratio, a misalignment's degrees, a foundation's modulus (N/m^3), the
-#: stiffness a local loss takes (0 to 1), a hole's diameter (mm), a support's N/m.
+#: stiffness a local loss takes (0 to 1), a hole's diameter (mm), a support's N/m, the
+#: transverse shear stiffness (G13, G23) a delamination takes (0 to 1; a rectangle 24 x 14 mm
+#: about (28, 18) mm), a cut corner's leg along x (mm; the leg along y 0.6 times it, at the
+#: corner x = a, y = 0).
 EFFECTS = {
     "point_mass": (PointMass, lambda s: [s, 23.0, 14.0], "g", np.geomspace(0.01, 3.0, 8)),
     "thickness_taper": (
@@ -57,6 +62,18 @@ EFFECTS = {
         lambda s: [np.log10(s), 80.0, 40.0],
         "N/m",
         np.geomspace(1.0, 1e7, 15),
+    ),
+    "delamination": (
+        Delamination,
+        lambda s: [28.0, 18.0, 24.0, 14.0, 1.0 - s],
+        "shear lost",
+        np.r_[np.geomspace(0.01, 0.5, 6), 0.6, 0.7, 0.8, 0.9, 0.99],
+    ),
+    "cut_corner": (
+        lambda: CutCorner("a0"),
+        lambda s: [s, 0.6 * s],
+        "mm",
+        np.geomspace(0.5, 40.0, 8),
     ),
 }
 

@@ -275,14 +275,14 @@ def test_tasks_run_the_fitted_size_first_with_clean_replicates_between_its_round
 
 
 def test_the_target_plan_runs_the_clean_replicates_and_the_fitted_size_alone():
-    """40 clean replicates and each candidate at its fitted 0.9 size (110 for the seven
+    """40 clean replicates and each candidate at its fitted 0.9 size (130 for the nine
     candidates); they are the first tasks of the plan with every size, in the same order."""
     table = {
         name: {**_table()["point_mass"], "sizes": [0.1 * (k + 1), 1.0, 2.0, 3.0]}
         for k, name in enumerate(cal.EFFECTS)
     }
     target, every = cal.tasks(table, plan="target"), cal.tasks(table, plan="all")
-    assert len(target) == 2 * cal.N_CLEAN + len(cal.EFFECTS) * cal.N_POWER == 110
+    assert len(target) == 2 * cal.N_CLEAN + len(cal.EFFECTS) * cal.N_POWER == 130
     assert every[: len(target)] == target
     assert {t[3] for t in target if t[0] == "power"} == {"fitted 0.9"}
     assert sum(t[0] == "clean" for t in target) == 2 * cal.N_CLEAN
