@@ -21,7 +21,10 @@ With ``--diagnose`` each replicate is also diagnosed blind with the package's de
 (:func:`studies.calibration.run_task`), so the fitted test's rejections and diagnose's names
 stand side by side at one size. Rows are cached by code version in
 ``out_dir/.cache/fitted_test/<version>.jsonl`` (a run resumes); the report
-``fitted_test.md`` holds every size of the current version; each row names the code that
+``fitted_test.md`` holds every size of the current version, led by the power table (each
+size's rejections by the test and names by diagnose under each rule run) and followed by a
+reading written by hand (``## What it shows``), which is kept when the tables are written
+again; each row names the code that
 computed it (``code``), also a row carried over from an earlier version whose computation
 is the same. ``--mesh-error RULE`` (a rule other than diagnose's default) diagnoses the
 same replicates under that mesh-error rule alone, without the test, into
@@ -240,23 +243,83 @@ def write_report(out_dir, rows, version, ruled=()):
         "candidate, or ambiguous among others only.",
     ]
     groups = sorted({(r["effect"], r["size"], r["draws"]) for r in rows})
+    tables, summary = [], []
     for effect, size, draws in groups:
         mine = sorted(
             (r for r in rows if (r["effect"], r["size"], r["draws"]) == (effect, size, draws)),
             key=lambda r: r["rep"],
         )
-        lines += _group(effect, size, draws, mine, [r for r in ruled if r["effect"] == effect])
+        theirs = [r for r in ruled if r["effect"] == effect]
+        tables += _group(effect, size, draws, mine, theirs)
+        summary.append((effect, size, mine, _by_rule(mine, theirs, size)))
+    lines += _summary(summary) + tables
     path = pathlib.Path(out_dir) / "fitted_test.md"
-    atomic_write_text(path, "\n".join(lines) + "\n")
+    atomic_write_text(path, "\n".join(lines) + "\n" + _kept_reading(path))
     return path
+
+
+#: The heading of the report's reading of its numbers, written by hand and kept when the
+#: tables are written again.
+READING = "## What it shows"
+
+
+def _kept_reading(path):
+    """The hand-written :data:`READING` section of the report at ``path`` (empty if none)."""
+    try:
+        text = pathlib.Path(path).read_text()
+    except FileNotFoundError:
+        return ""
+    at = text.find("\n" + READING + "\n")
+    return "" if at < 0 else text[at:]
+
+
+def _by_rule(rows, ruled, size):
+    """``{(rule, rep): verdict}``: diagnose's verdicts on one size's replicates, every rule."""
+    by = {(_rule(r["diagnose"]), r["rep"]): r["diagnose"] for r in rows if r["diagnose"]}
+    return by | {(r["rule"], r["rep"]): r["diagnose"] for r in ruled if r["size"] == size}
+
+
+def _summary(groups):
+    """The power table: each size's rejections by the test and names by diagnose, per rule.
+
+    ``groups``: ``(effect, size, rows, by_rule)`` a size, as :func:`write_report` gathers them.
+    """
+    rules = sorted({rule for *_, by in groups for rule, _ in by})
+    out = [
+        "",
+        "## The power table",
+        "",
+        "Each size run: how often the fitted test rejects (at 0.01), and diagnose names the "
+        "concealed candidate (named / diagnosed; after the + the names without the truth; "
+        "the median seconds a diagnosis) under each mesh-error rule run.",
+        "",
+        "| candidate | size | fitted test rejects |"
+        + "".join(f" named, `{rule}` rule |" for rule in rules),
+        "|---|---|---|" + "---|" * len(rules),
+    ]
+    for effect, size, rows, by in groups:
+        cells = []
+        for rule in rules:
+            ds = [by[rule, r["rep"]] for r in rows if (rule, r["rep"]) in by]
+            wrong = sum(cal.misnamed({**d, "effect": effect}) for d in ds)
+            seconds = np.median([d["seconds"] for d in ds]) if ds else 0.0
+            cells.append(
+                f"{sum(d['named'] for d in ds)} of {len(ds)} + {wrong} ({seconds:.0f} s)"
+                if ds
+                else "-"
+            )
+        unit = cal.EFFECTS[effect][2] if effect in cal.EFFECTS else ""
+        out.append(
+            f"| {effect} | {size:g} {unit} | {sum(r['p'] < ALPHA for r in rows)} of "
+            f"{len(rows)} |" + "".join(f" {c} |" for c in cells)
+        )
+    return out
 
 
 def _group(effect, size, draws, rows, ruled=()):
     """One size's table and its counts; ``ruled``: diagnose's rows under other rules."""
     ruled = [r for r in ruled if r["size"] == size]
-    beside = [r for r in rows if r["diagnose"]]  # diagnosed beside the test, under its rule
-    by = {(_rule(r["diagnose"]), r["rep"]): r["diagnose"] for r in beside}
-    by |= {(r["rule"], r["rep"]): r["diagnose"] for r in ruled}
+    by = _by_rule(rows, ruled, size)
     rules = sorted({rule for rule, _ in by})
     codes = ", ".join(sorted({r.get("code", "-") for r in [*rows, *ruled]}))
     out = [

@@ -89,3 +89,60 @@ def test_another_mesh_error_rule_diagnoses_alone_in_a_column_of_its_own(tmp_path
     # run again: read from the cache, not diagnosed again
     again = ft.main("ply_misalignment", 0.64, [0], out_dir=tmp_path, quick=True, rule=other)
     assert again == rows
+
+
+def _said(verdict, chosen, rule, seconds, rival=None):
+    """A diagnose verdict as a row holds it; *named* when it names the point mass."""
+    named = chosen == "point_mass" or rival == "point_mass"
+    return {
+        "verdict": verdict,
+        "chosen": chosen,
+        "rival": rival,
+        "also": [],
+        "p_value": 0.01,
+        "seconds": seconds,
+        "named": named,
+        "rule": rule,
+    }
+
+
+def test_the_power_table_counts_each_rule_and_the_reading_is_kept(tmp_path):
+    # three replicates by hand: the test rejects two; under `whole` one named, one explained
+    # by a delamination (a name without the truth), one consistent; under `corrected` alone
+    ps = (0.001, 0.5, 0.002)
+    whole = (
+        _said("explained", "point_mass", "whole", 10.0),
+        _said("explained", "delamination", "whole", 30.0),
+        _said("consistent", None, "whole", 20.0),
+    )
+    rows = [
+        {
+            "effect": "point_mass",
+            "size": 0.24,
+            "draws": 4,
+            "rep": k,
+            "p": p,
+            "at_truth": 100.0,
+            "by_start": [50.0, 60.0],
+            "chi2": 40.0,
+            "best_kind": "shear",
+            "ratios": [1.0] * 6,
+            "seconds": 300.0,
+            "code": "abc",
+            "diagnose": d,
+        }
+        for k, (p, d) in enumerate(zip(ps, whole, strict=True))
+    ]
+    ruled = [
+        {"effect": "point_mass", "size": 0.24, "rep": 1, "rule": "corrected", "code": "abc"}
+        | {"diagnose": _said("ambiguous", "delamination", "corrected", 50.0, "point_mass")}
+    ]
+    path = ft.write_report(tmp_path, rows, "abc", ruled)
+    text = path.read_text()
+    assert "| point_mass | 0.24 g | 2 of 3 | 1 of 1 + 0 (50 s) | 1 of 3 + 1 (20 s) |\n" in text
+    # a reading written below the tables is kept when they are written again, once
+    reading = "\n## What it shows\n\n- read by hand\n"
+    path.write_text(text + reading)
+    ft.write_report(tmp_path, rows, "abc", ruled)
+    again = path.read_text()
+    assert again.count("## What it shows") == 1 and again.endswith(reading)
