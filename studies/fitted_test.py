@@ -249,9 +249,10 @@ def write_report(out_dir, rows, version, ruled=()):
             (r for r in rows if (r["effect"], r["size"], r["draws"]) == (effect, size, draws)),
             key=lambda r: r["rep"],
         )
-        theirs = [r for r in ruled if r["effect"] == effect]
-        tables += _group(effect, size, draws, mine, theirs)
-        summary.append((effect, size, mine, _by_rule(mine, theirs, size)))
+        theirs = [r for r in ruled if (r["effect"], r["size"]) == (effect, size)]
+        by = _by_rule(mine, theirs)
+        tables += _group(effect, size, draws, mine, theirs, by)
+        summary.append((effect, size, mine, by))
     lines += _summary(summary) + tables
     path = pathlib.Path(out_dir) / "fitted_test.md"
     atomic_write_text(path, "\n".join(lines) + "\n" + _kept_reading(path))
@@ -273,10 +274,19 @@ def _kept_reading(path):
     return "" if at < 0 else text[at:]
 
 
-def _by_rule(rows, ruled, size):
-    """``{(rule, rep): verdict}``: diagnose's verdicts on one size's replicates, every rule."""
+def _by_rule(rows, ruled):
+    """``{(rule, rep): verdict}``: diagnose's verdicts on one size's replicates, every rule
+    (``rows``: the test's, diagnosed beside it; ``ruled``: under other rules alone)."""
     by = {(_rule(r["diagnose"]), r["rep"]): r["diagnose"] for r in rows if r["diagnose"]}
-    return by | {(r["rule"], r["rep"]): r["diagnose"] for r in ruled if r["size"] == size}
+    return by | {(r["rule"], r["rep"]): r["diagnose"] for r in ruled}
+
+
+def _tally(effect, rows, by, rule):
+    """One rule's verdicts on ``rows`` (those diagnosed), how many named the concealed
+    ``effect`` and how many gave a name without it: ``(verdicts, named, wrong)``."""
+    ds = [by[rule, r["rep"]] for r in rows if (rule, r["rep"]) in by]
+    named = sum(d["named"] for d in ds)
+    return ds, named, sum(cal.misnamed({**d, "effect": effect}) for d in ds)
 
 
 def _summary(groups):
@@ -300,14 +310,9 @@ def _summary(groups):
     for effect, size, rows, by in groups:
         cells = []
         for rule in rules:
-            ds = [by[rule, r["rep"]] for r in rows if (rule, r["rep"]) in by]
-            wrong = sum(cal.misnamed({**d, "effect": effect}) for d in ds)
-            seconds = np.median([d["seconds"] for d in ds]) if ds else 0.0
-            cells.append(
-                f"{sum(d['named'] for d in ds)} of {len(ds)} + {wrong} ({seconds:.0f} s)"
-                if ds
-                else "-"
-            )
+            ds, named, wrong = _tally(effect, rows, by, rule)
+            seconds = np.median([d["seconds"] for d in ds]) if ds else None
+            cells.append(f"{named} of {len(ds)} + {wrong} ({seconds:.0f} s)" if ds else "-")
         unit = cal.EFFECTS[effect][2] if effect in cal.EFFECTS else ""
         out.append(
             f"| {effect} | {size:g} {unit} | {sum(r['p'] < ALPHA for r in rows)} of "
@@ -316,10 +321,9 @@ def _summary(groups):
     return out
 
 
-def _group(effect, size, draws, rows, ruled=()):
-    """One size's table and its counts; ``ruled``: diagnose's rows under other rules."""
-    ruled = [r for r in ruled if r["size"] == size]
-    by = _by_rule(rows, ruled, size)
+def _group(effect, size, draws, rows, ruled, by):
+    """One size's table and its counts; ``ruled``: diagnose's rows under other rules at this
+    size, ``by``: every verdict (:func:`_by_rule`)."""
     rules = sorted({rule for rule, _ in by})
     codes = ", ".join(sorted({r.get("code", "-") for r in [*rows, *ruled]}))
     out = [
@@ -339,20 +343,14 @@ def _group(effect, size, draws, rows, ruled=()):
             + "".join(f"{_verdict_text(by.get((rule, r['rep'])))} | " for rule in rules)
             + f"{r['seconds']:.0f} |"
         )
-    counts = [
-        (
-            f"diagnose under the `{rule}` rule",
-            [by[rule, r["rep"]] for r in rows if (rule, r["rep"]) in by],
-        )
-        for rule in rules
-    ]
+    tallies = [(rule, *_tally(effect, rows, by, rule)) for rule in rules]
     out += [
         "",
         f"Rejected by the fitted test: **{sum(r['p'] < ALPHA for r in rows)} of {len(rows)}**"
         + "".join(
-            f"; named by {who}: **{sum(d['named'] for d in ds)} of {len(ds)}** (a name "
-            f"without the truth: {sum(cal.misnamed({**d, 'effect': effect}) for d in ds)})"
-            for who, ds in counts
+            f"; named by diagnose under the `{rule}` rule: **{named} of {len(ds)}** (a name "
+            f"without the truth: {wrong})"
+            for rule, ds, named, wrong in tallies
             if ds
         )
         + ".",
