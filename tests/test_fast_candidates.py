@@ -107,7 +107,7 @@ def test_region_projection_is_the_projected_assembled_region(plate):
     the assembled matrix of the same weighted elements projected on the same basis; weights
     on runs split across rows, a single element, none, and a run long enough for its own
     matrix-vector product beside short ones (``RUN_MIN``)."""
-    from bayesplate.discrepancy.physics.reduced_model import RUN_MIN, RegionProjection
+    from bayesplate.discrepancy.physics.region_projection import RUN_MIN, RegionProjection
 
     model, b = plate
     V = np.random.default_rng(3).standard_normal((model.mesh.n_dofs, 9))
@@ -137,7 +137,7 @@ def test_region_sum_by_whole_elements_kept_is_the_weighted_sum(plate):
     kept) against ``__call__`` (every element weighted): patches moved so that the set of
     whole elements stays and changes, one repeated, a result changed by its caller, and more
     sets than are kept."""
-    from bayesplate.discrepancy.physics import reduced_model as pencil
+    from bayesplate.discrepancy.physics import region_projection as pencil
     from bayesplate.discrepancy.physics.local_stiffness_loss import area_fractions
 
     model, b = plate

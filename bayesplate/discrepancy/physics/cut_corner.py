@@ -7,7 +7,8 @@ import numpy as np
 from ...fem.mesh import DOF_NAMES, DOFS_PER_NODE
 from .base import Parameter, Physics
 from .cutout import RESIDUAL, material_removed
-from .reduced_model import RegionProjection, project
+from .reduced_model import project
+from .region_projection import RegionProjection
 
 __all__ = ["CORNERS", "CutCorner", "half_plane_area", "triangle_fractions"]
 
@@ -71,7 +72,7 @@ def triangle_fractions(mesh, corner, leg_x, leg_y):
 
 
 def _region(model, basis):
-    """:class:`~.reduced_model.RegionProjection` of the element stiffness terms and mass.
+    """:class:`~.region_projection.RegionProjection` of the element stiffness terms and mass.
 
     With the unknowns ``w_x``, ``w_y``, ``w_xy`` times ``dx``, ``dy``, ``dx dy`` (lengths,
     as ``w``): ``V^T A V = (T^-1 V)^T (T A T) (T^-1 V)`` for any diagonal ``T``. Unscaled,

@@ -7,7 +7,8 @@ import numpy as np
 from .base import Parameter, Physics, mirror_position
 from .local_stiffness_loss import element_energies
 from .location import effect_map
-from .reduced_model import RegionProjection, project
+from .reduced_model import project
+from .region_projection import RegionProjection
 from .ritz_scan import Scan, misfit
 
 __all__ = [
@@ -202,7 +203,7 @@ class Cutout(Physics):
 
         A difference in the place or the diameter visits only the elements along the rim; the
         sum of those wholly inside is kept while they stay the same
-        (:meth:`~.reduced_model.RegionProjection.inside`).
+        (:meth:`~.region_projection.RegionProjection.inside`).
         """
         terms, constant, mass = project(model, basis)
         element = np.concatenate([model.element_stiffness_terms(), model.element_mass()[None]])

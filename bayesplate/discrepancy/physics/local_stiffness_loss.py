@@ -6,7 +6,8 @@ import numpy as np
 
 from .base import Parameter, Physics, mirror_position
 from .location import effect_map
-from .reduced_model import RegionProjection, project
+from .reduced_model import project
+from .region_projection import RegionProjection
 from .ritz_scan import Scan, misfit
 
 __all__ = [
@@ -109,7 +110,7 @@ class LocalStiffnessLoss(Physics):
 
         Every element of the plate has the same matrices ``K_j^e``; only the elements the
         rectangle touches are projected at each evaluation (the sum of those wholly inside
-        kept while they stay the same: :meth:`~.reduced_model.RegionProjection.inside`), and a
+        kept while they stay the same: :meth:`~.region_projection.RegionProjection.inside`), and a
         difference in a place or a side only the elements along the edges that moved.
         """
         terms, constant, mass = project(model, basis)

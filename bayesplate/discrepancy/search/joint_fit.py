@@ -26,6 +26,7 @@ import numpy as np
 from scipy.stats import norm
 
 from ... import laminate
+from ..physics.reduced_model import PencilModes
 from .laplace import summarise
 from .local_fits import distinct as _distinct
 from .local_fits import local_fits as _local_fits
@@ -35,6 +36,7 @@ from .tight_finish import finish
 __all__ = ["JointProblem", "fit", "rough_fit", "settle"]
 
 _UNPHYSICAL_RESIDUAL = 1e4  # residual returned outside the lamina's physical region
+_NOT_YET = object()  # not in the cache
 #: ``ftol`` and ``xtol`` of the local fits of :func:`rough_fit`: a rough optimum only says
 #: where to refine from (the refinement converges on the working mesh).
 ROUGH_TOL = 1e-8
@@ -132,11 +134,41 @@ class JointProblem:
         return self.model if self.physics is None else self.physics.apply(self.model, theta)
 
     def evaluate(self, z):
-        """Paired eigenvalues and their Jacobian in ``z``, cached by ``z``."""
+        """Paired eigenvalues and their Jacobian in ``z``, cached by ``z``.
+
+        ``(lam, J, modal)``, or None outside the lamina's physical region.
+        """
         key = np.asarray(z, dtype=float).tobytes()
-        if key not in self._cache:
-            self._cache = {key: self._evaluate(np.asarray(z, dtype=float))}
-        return self._cache[key]
+        out = self._cache.get(key, _NOT_YET)
+        if isinstance(out, PencilModes):  # the residuals' modes: their derivatives now
+            out = self._finish_reduced(out)
+        elif out is _NOT_YET:
+            out = self._evaluate(np.asarray(z, dtype=float))
+        self._cache = {key: out}
+        return out
+
+    def values(self, z):
+        """Paired eigenvalues in ``z`` (m,), or None outside the physical region.
+
+        On a pencil without their derivatives, which :meth:`evaluate` adds at the same ``z``
+        (the modes kept): a fit asks for the Jacobian at the steps it accepts only.
+        """
+        z = np.asarray(z, dtype=float)
+        key = z.tobytes()
+        out = self._cache.get(key, _NOT_YET)
+        if out is _NOT_YET and self.pencil is not None:
+            b, theta = self.unpack(z)
+            if laminate.is_physical(b):
+                out = self.pencil.modes(b, theta, int(self.modes.max()) + 1)
+                self._cache = {key: out}
+        if out is _NOT_YET:
+            out = self.evaluate(z)
+        if out is None:
+            return None
+        if isinstance(out, PencilModes):
+            lam = out.eigenvalues[self.modes]
+            return lam if self.scale is None else lam * self.scale
+        return out[0]
 
     def _evaluate(self, z):
         b, theta = self.unpack(z)
@@ -159,7 +191,10 @@ class JointProblem:
         return lam, J, modal
 
     def _evaluate_reduced(self, b, theta):
-        modal, d_theta = self.pencil.solve(b, theta, int(self.modes.max()) + 1)
+        return self._finish_reduced(self.pencil.modes(b, theta, int(self.modes.max()) + 1))
+
+    def _finish_reduced(self, modes):
+        modal, d_theta = self.pencil.derivatives(modes)
         lam = modal.eigenvalues[self.modes]
         J = np.hstack(
             [modal.sensitivities[self.modes] @ self.L, d_theta[self.modes] * self.theta_sd]
@@ -183,10 +218,10 @@ class JointProblem:
 
     def residuals(self, z):
         """``[W (Y - g); z]``: whitened data misfit, then the prior terms."""
-        out = self.evaluate(z)
-        if out is None:
+        lam = self.values(z)
+        if lam is None:
             return np.full(self.Y.size + z.size, _UNPHYSICAL_RESIDUAL)
-        return np.concatenate([(self.Y - out[0]) / self.sigma, z])
+        return np.concatenate([(self.Y - lam) / self.sigma, z])
 
     def jacobian(self, z):
         """Jacobian of :meth:`residuals`."""
