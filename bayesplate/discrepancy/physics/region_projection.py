@@ -69,10 +69,9 @@ class RegionProjection:
         # plate, r = 90, seven matrices, its sum 3.6-4.0 ms by whole matrices and 2.0-2.2 ms
         # by triangles (the unpacking included), a sum over its moved edges 2.0-2.2 and 1.3 ms
         self._upper = np.triu_indices(r)
-        self._unpacking = np.empty((r, r), dtype=np.intp)  # (i, j) -> its triangle's entry
-        self._unpacking[self._upper] = np.arange(self._upper[0].size)
-        self._unpacking.T[self._upper] = np.arange(self._upper[0].size)
-        self._unpacking = self._unpacking.ravel()
+        unpacking = np.empty((r, r), dtype=np.intp)  # (i, j) -> its triangle's entry
+        unpacking[self._upper] = unpacking.T[self._upper] = np.arange(self._upper[0].size)
+        self._unpacking = unpacking.ravel()  # row by row, for ``np.take``
         shape = (len(self.dofs), len(self._slices), self._upper[0].size)
         self._projected = np.empty(shape)  # filled element by element (pages on first touch)
         self._done = np.zeros(len(self.dofs), dtype=bool)

@@ -158,17 +158,14 @@ class JointProblem:
         out = self._cache.get(key, _NOT_YET)
         if out is _NOT_YET and self.pencil is not None:
             b, theta = self.unpack(z)
-            if laminate.is_physical(b):
-                out = self.pencil.modes(b, theta, int(self.modes.max()) + 1)
-                self._cache = {key: out}
+            out = self._pencil_modes(b, theta) if laminate.is_physical(b) else None
+            self._cache = {key: out}
         if out is _NOT_YET:
             out = self.evaluate(z)
-        if out is None:
-            return None
         if isinstance(out, PencilModes):
             lam = out.eigenvalues[self.modes]
             return lam if self.scale is None else lam * self.scale
-        return out[0]
+        return None if out is None else out[0]
 
     def _evaluate(self, z):
         b, theta = self.unpack(z)
@@ -191,7 +188,11 @@ class JointProblem:
         return lam, J, modal
 
     def _evaluate_reduced(self, b, theta):
-        return self._finish_reduced(self.pencil.modes(b, theta, int(self.modes.max()) + 1))
+        return self._finish_reduced(self._pencil_modes(b, theta))
+
+    def _pencil_modes(self, b, theta):
+        """The pencil's modes at ``(b, theta)``, as many as the pairing reaches."""
+        return self.pencil.modes(b, theta, int(self.modes.max()) + 1)
 
     def _finish_reduced(self, modes):
         modal, d_theta = self.pencil.derivatives(modes)
