@@ -426,29 +426,57 @@ def test_mirror_images_count_as_posterior_modes():
         assert weight == pytest.approx(exact, abs=0.03), mu
 
 
-def test_a_named_candidates_rivals_left_on_the_coarse_model_are_refined():
-    # rank's phase 2b: once a refined candidate may be named (gain over the threshold), the
-    # unrefined ones within RIVAL_REACH of it are refined too; none when nothing may be named
+def _ranked(gain, refined, failed=""):
+    """A ranked candidate as rank's phase choices see it."""
     from types import SimpleNamespace
 
+    fit = SimpleNamespace(refined=refined, rough_optima=() if refined else (np.zeros(7),))
+    return SimpleNamespace(name="c", parameters={}, log_evidence_gain=gain, fit=fit, failed=failed)
+
+
+def test_a_named_candidates_rivals_left_on_the_coarse_model_are_refined():
+    # rank's phase 2b: once a refined candidate may be named (gain over the threshold), the
+    # unrefined ones within RIVAL_REACH of it are refined too
     from bayesplate.discrepancy.search.rank import RIVAL_REACH, _rivals
 
-    def result(gain, refined, failed=""):
-        return SimpleNamespace(
-            log_evidence_gain=gain, fit=SimpleNamespace(refined=refined), failed=failed
-        )
+    results = [
+        _ranked(3.5, True),
+        _ranked(-0.7, False),
+        _ranked(3.5 - RIVAL_REACH - 0.1, False),
+        _ranked(2.0, True),
+    ]
+    assert _rivals(results, threshold=3.0, margin=1.0) == [1]
+    # one whose refinement failed already is not tried again
+    failed = _ranked(3.0, False, "its settled fit failed")
+    assert _rivals([*results, failed], 3.0, margin=1.0) == [1]
+    # when none may be named, every unrefined one over the margin, however far behind
+    behind = [*results, _ranked(1.5, False), _ranked(0.5, False)]
+    assert _rivals(behind, threshold=4.0, margin=1.0) == [4]
+    assert _rivals([_ranked(-0.7, False)], threshold=3.0, margin=1.0) == []
+
+
+def test_only_the_rough_fits_within_reach_of_the_best_are_refined_first():
+    # rank's phase 2: over the margin and within REACH of the best rough gain; a refined
+    # fit (a candidate without a reduced form, refined in its rough phase) is not chosen
+    from bayesplate.discrepancy.search.rank import REACH, REACH_SHARE, _rivals, _within_reach
 
     results = [
-        result(3.5, True),
-        result(-0.7, False),
-        result(3.5 - RIVAL_REACH - 0.1, False),
-        result(2.0, True),
+        _ranked(26.8, False),
+        _ranked(26.8 - REACH + 0.1, False),
+        _ranked(26.8 - REACH - 0.1, False),
+        _ranked(0.9, False),
+        _ranked(40.0, True),
     ]
-    assert _rivals(results, threshold=3.0) == [1]
-    # one whose refinement failed already is not tried again
-    assert _rivals([*results, result(3.0, False, "its settled fit failed")], 3.0) == [1]
-    assert _rivals(results, threshold=4.0) == []  # the best may not be named: no rivals
-    assert _rivals([result(-0.7, False)], threshold=3.0) == []
+    assert _within_reach(results, margin=1.0) == [0, 1]
+    # the one left behind is refined after, if it may rival the refined best: here the
+    # best's coarse gain had overstated its gain
+    results[:2] = [_ranked(25.0, True), _ranked(14.0, True)]
+    assert _rivals(results[:4], threshold=3.0, margin=1.0) == [2]
+    results[0] = _ranked(29.5, True)
+    assert _rivals(results[:4], threshold=3.0, margin=1.0) == []
+    # a strong effect: within a share of the best gain (a coarse model's error grows with it)
+    strong = [_ranked(4975.0, False), _ranked(4975.0 * (1 - REACH_SHARE) + 1, False)]
+    assert _within_reach([*strong, _ranked(3900.0, False)], margin=1.0) == [0, 1]
 
 
 def test_every_named_fit_not_settled_gets_its_note():

@@ -21,7 +21,7 @@ __all__ = ["run_phase"]
 log = logging.getLogger(__name__)
 
 
-def run_phase(stages, name, compute, items, results, hits, workers, say, then=None):
+def run_phase(stages, name, compute, items, results, hits, workers, say):
     """One phase of :func:`.rank.rank`: ``compute((physics, earlier fit))`` for each item, stored.
 
     ``items`` are ``(index, physics, earlier fit or None)``; each result goes to
@@ -31,60 +31,39 @@ def run_phase(stages, name, compute, items, results, hits, workers, say, then=No
     that cannot be solved (a far reduced model's mass no longer positive definite, say)
     keeps its earlier phase's result, marked ``failed`` (None for the first phase: the
     candidate is left out), and the failure is said; nothing is stored for it.
-
-    ``then``, optional ``(name, compute, wanted)``: the next phase, which an item goes on
-    to in the same task when ``wanted(its result of this one)``. Its results are those of
-    the two phases run one after the other, where that next phase depends on a candidate's
-    own result only: a worker then need not wait for the others' first phase.
     """
     if not items:
         return
-    steps = [(name, compute)] + ([tuple(then[:2])] if then is not None else [])
 
-    def key(name, physics, earlier):
+    def key(physics, earlier):
         return stages.key(name, physics, *(() if earlier is None else (fit_digest(earlier),)))
 
-    def step(name, compute, physics, earlier):
+    def task(item):
         """``(result, taken from the store, why it failed or "")``."""
+        _, physics, earlier = item
         try:
             if stages is None:
                 return compute((physics, earlier) if earlier is not None else physics), False, ""
-            found, value = stages.get(key(name, physics, earlier))
+            found, value = stages.get(key(physics, earlier))
             if not found:
                 value = compute((physics, earlier) if earlier is not None else physics)
-                stages.put(key(name, physics, earlier), value)
+                stages.put(key(physics, earlier), value)
         except np.linalg.LinAlgError as error:
             log.warning("%s: %s fit failed: %s", physics.name, name, error)
             return None, False, f"its {name} fit failed ({type(error).__name__}: {error})"
         return value, found, ""
 
-    def task(item):
-        """The outcome of each phase the item went through (the first, maybe the next)."""
-        _, physics, earlier = item
-        done = [step(*steps[0], physics, earlier)]
-        value, _, failed = done[0]
-        if then is not None and not failed and then[2](value):
-            done.append(step(*steps[1], physics, replace(value.fit, physics=physics)))
-        return done
-
     done = fork_map(task, items, workers)
-    for (i, physics, earlier), outcomes in zip(items, done, strict=True):
-        for n, ((name, _), (value, found, failed)) in enumerate(
-            zip(steps[: len(outcomes)], outcomes, strict=True)
-        ):
-            if failed:
-                failed += "; left out" if results[i] is None else "; the phase before kept"
-                say(
-                    f"{physics.name}{''.join(f' ({v})' for v in physics.settings().values())}"
-                    f": {failed}"
-                )
-                if results[i] is not None:
-                    results[i] = replace(results[i], failed=failed)
-                break
-            if n > 0:  # the next phase, built on the result of this one
-                earlier = results[i].fit
-            results[i] = replace(value, fit=replace(value.fit, physics=physics))
-            if found:
-                hits[i].append(name)
-            if stages is not None and workers > 1 and not found:  # a worker's put may not arrive
-                stages.put(key(name, physics, earlier), value)
+    for (i, physics, earlier), (value, found, failed) in zip(items, done, strict=True):
+        if failed:
+            failed += "; left out" if results[i] is None else "; the phase before kept"
+            variant = "".join(f" ({v})" for v in physics.settings().values())
+            say(f"{physics.name}{variant}: {failed}")
+            if results[i] is not None:
+                results[i] = replace(results[i], failed=failed)
+            continue
+        results[i] = replace(value, fit=replace(value.fit, physics=physics))
+        if found:
+            hits[i].append(name)
+        if stages is not None and workers > 1 and not found:  # a worker's put may not arrive
+            stages.put(key(physics, earlier), value)

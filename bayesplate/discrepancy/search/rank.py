@@ -64,6 +64,19 @@ LEADERS = 4.0
 #: Rough gains this far below the best refined one still get refined when a candidate may be
 #: named (:func:`_rivals`): a reduced coarse model misjudges a gain by ten nats and more.
 RIVAL_REACH = 10.0
+#: Nats below the best rough gain within which a candidate is refined first
+#: (:func:`_within_reach`). On a concealed point mass of 0.3 g (the concealment study's
+#: row 2, 50 x 50) the mass gained +26.8 on its coarse model and +29.5 refined; five of the
+#: seven candidates refined there ended 9 to 26 nats below it, and took two thirds of the
+#: refinement's time. A candidate behind by more is refined when it may still rival the
+#: refined best (:data:`RIVAL_REACH`).
+REACH = 10.0
+#: ... or within this share of the best gain, where that is more (both reaches): a coarse
+#: model's error grows with the deviations it fits. A point mass's +116 on it was +126
+#: refined (8 % more); on a 15 g mass with a 15 % taper (plate 1, 12 x 6) the pair of the
+#: two gained +4,822 on it, 153 nats below another pair, and +5,308 refined (10 % more),
+#: 323 nats above that pair.
+REACH_SHARE = 0.2
 #: The evidence gain over which a candidate may be named, when ``fitting`` does not say it.
 NAMED = 3.0
 #: Rounds at most of a refinement on the coarse mesh before the working mesh's (cheap ones:
@@ -109,18 +122,19 @@ class CandidateResult:
 def rank(fitting, physics_list):
     """Fit every candidate jointly with the constants; best evidence gain first.
 
-    In phases, each over the candidates in parallel (``fitting.workers``; a candidate goes
-    on from phase 1 to phase 2 in the same task, :func:`.phases.run_phase`):
+    In phases, each over the candidates in parallel (``fitting.workers``):
 
     1. *rough*: every start fitted on a reduced model of the modified plate on the coarse
        mesh (:func:`..physics.reduced_model.candidate_pencil`), corrected by the
        fine-to-coarse eigenvalue ratio at the nominal fit (:func:`rough_stage`);
-    2. *settled*: every candidate that gains more than ``fitting.margin`` there is refined
-       to its own optimum on the working mesh: its best distinct rough optima settled in
-       rounds on the coarse mesh, then in rounds of reduced models of the working mesh, each
-       checked by the finite-element model (:mod:`.settling`; :func:`settled_stage`);
+    2. *settled*: every candidate that gains more than ``fitting.margin`` there and lies
+       within :data:`REACH` of the best rough gain is refined to its own optimum on the
+       working mesh: its best distinct rough optima settled in rounds on the coarse mesh,
+       then in rounds of reduced models of the working mesh, each checked by the
+       finite-element model (:mod:`.settling`; :func:`settled_stage`, :func:`_within_reach`);
     2b. *rivals*: when a refined candidate may be named, the unrefined ones whose rough gain
-       lies within :data:`RIVAL_REACH` of it are refined too (:func:`_rivals`);
+       lies within :data:`RIVAL_REACH` of it are refined too; when none may, every one
+       that gained more than ``fitting.margin`` (:func:`_rivals`);
     3. *again*: a refined fit near the top whose rounds stopped before it settled goes on
        (:func:`_unsettled_leaders`, :func:`again_stage`).
 
@@ -153,33 +167,17 @@ def rank(fitting, physics_list):
     )
     results = [None] * len(physics_list)
     hits = [[] for _ in physics_list]  # the phases of each taken from the store
-    settled = partial(settled_stage, fitting)
-    # phases 1 and 2 in one task per candidate: a worker refines its candidate while the
-    # other still fits its rough one (the same results as one phase after the other)
-    run_phase(
-        stages,
-        "rough",
-        partial(rough_stage, fitting),
-        [(i, physics_list[i], None) for i in order],
-        results,
-        hits,
-        workers,
-        say,
-        then=("settled", settled, partial(_refines_said, fitting.margin)),
-    )
+    items = [(i, physics_list[i], None) for i in order]
+    run_phase(stages, "rough", partial(rough_stage, fitting), items, results, hits, workers, say)
     kept = [i for i, r in enumerate(results) if r is not None]  # a failed rough fit: left out
     physics_list, results, hits = ([x[i] for i in kept] for x in (physics_list, results, hits))
-    todo = _rivals(results, fitting.threshold)
-    run_phase(
-        stages,
-        "settled",
-        settled,
-        [(i, physics_list[i], results[i].fit) for i in todo],
-        results,
-        hits,
-        workers,
-        say,
-    )
+    settled = partial(settled_stage, fitting)
+    first = partial(_within_reach, margin=fitting.margin)
+    later = partial(_rivals, threshold=fitting.threshold, margin=fitting.margin)
+    for choose in (first, later):  # phases 2 and 2b
+        todo = sorted(choose(results), key=lambda i: -len(physics_list[i].parameters(model, b)))
+        items = [(i, physics_list[i], results[i].fit) for i in todo]
+        run_phase(stages, "settled", settled, items, results, hits, workers, say)
     todo = _unsettled_leaders(results)
     run_phase(
         stages,
@@ -274,18 +272,6 @@ def again_stage(fitting, item):
     return candidate_result(physics, fitting.model, fitting.nominal, result)
 
 
-def _refines_said(margin, rough):
-    """Phase 2's choice (:func:`_refines`), on the candidate's own rough fit alone, logged."""
-    chosen = _refines(rough, margin)
-    log.debug(
-        "%s: rough gain %+.1f, %s",
-        _label(rough),
-        rough.log_evidence_gain,
-        "refined" if chosen else "not refined",
-    )
-    return chosen
-
-
 def _summary(r, hit, physics):
     """The line said of a ranked candidate: its fit, its gain, and how it was reached."""
     where = "" if r.fit.refined else " (coarse mesh, not refined)"
@@ -314,25 +300,62 @@ def _best_refined(results):
     return max((r.log_evidence_gain for r in results if r.fit.refined), default=-np.inf)
 
 
-def _rivals(results, threshold):
-    """Indices of the rough fits to refine because a refined one may be named (phase 2b).
+def _within_reach(results, margin):
+    """Indices of the rough fits refined first (phase 2 of :func:`rank`), each logged.
+
+    Those that gain more than ``margin`` on their reduced coarse model (:func:`_refines`)
+    and lie within :data:`REACH` of the best rough gain (or :data:`REACH_SHARE` of it). A
+    candidate far behind the best on its coarse model is refined later only if it may
+    still rival the refined best (:func:`_rivals`).
+    """
+    top = max((r.log_evidence_gain for r in results if _refinable(r)), default=-np.inf)
+    chosen = []
+    for i, r in enumerate(results):
+        if not _refines(r, margin):
+            why = "not refined"
+        elif r.log_evidence_gain < top - _reach(top, REACH):
+            why = f"not refined yet ({top - r.log_evidence_gain:.1f} behind the best)"
+        else:
+            why = "refined"
+            chosen.append(i)
+        log.debug("%s: rough gain %+.1f, %s", _label(r), r.log_evidence_gain, why)
+    return chosen
+
+
+def _rivals(results, threshold, margin):
+    """Indices of the rough fits refined after the first ones (phase 2b of :func:`rank`).
 
     When the best refined gain exceeds ``threshold`` (a candidate may be named), every
     candidate left on its coarse reduced model whose rough gain lies within
-    :data:`RIVAL_REACH` of it is refined too: the verdict compares the best with its
-    runner-up (``ambiguous`` within 2 nats), and a coarse gain is not good enough for that.
+    :data:`RIVAL_REACH` of it (or :data:`REACH_SHARE` of it) is refined too: the verdict
+    compares the best with its runner-up (``ambiguous`` within 2 nats), and a coarse gain
+    is not good enough for that.
     Measured: a point support of 48,000 N/m (calibration study, Frederiksen plate, 40 x 20)
     gained -0.7 on its coarse model, +1.7 refined, against +3.5 for the foundation: named a
     foundation, where refined it is ``ambiguous`` with the truth among the two.
+
+    When none may be named, the leaders on the coarse model lost their gain on the working
+    mesh (a taper's +17 was +2.6 there), and every unrefined candidate that gains more than
+    ``margin`` on its coarse model is refined: one of them may still gain enough.
     """
     best = _best_refined(results)
     if best <= threshold:
-        return []
+        return [i for i, r in enumerate(results) if _refines(r, margin) and not r.failed]
     return [
         i
         for i, r in enumerate(results)
-        if not r.fit.refined and not r.failed and r.log_evidence_gain >= best - RIVAL_REACH
+        if _refinable(r)
+        and not r.failed
+        and r.log_evidence_gain >= best - _reach(best, RIVAL_REACH)
     ]
+
+
+def _reach(best, nats):
+    """How far below the best gain ``best`` a rough gain is within reach, nats.
+
+    ``nats``, or :data:`REACH_SHARE` of ``best`` where that is more.
+    """
+    return max(nats, REACH_SHARE * best)
 
 
 def _unsettled_leaders(results):
@@ -368,16 +391,19 @@ def candidate_result(physics, model, nominal, fitted):
 
 
 def _refines(rough, margin):
-    """Whether a rough fit is refined on the working mesh (phase 2 of :func:`rank`).
+    """Whether a rough fit may be refined on the working mesh (phases 2 and 2b of :func:`rank`).
 
     When it gains more than ``margin`` on its reduced coarse model. Not fewer: a reduced
     coarse model misjudges a gain by ten nats and more either way (a taper's +17 on it was
     +2.6 on the working mesh, a point mass's +116 was +126), and its optima move with the
     round-off of its many starts; the refined fits do not.
     """
-    return (
-        not rough.fit.refined and bool(rough.fit.rough_optima) and rough.log_evidence_gain > margin
-    )
+    return _refinable(rough) and rough.log_evidence_gain > margin
+
+
+def _refinable(rough):
+    """Whether a fit is left on its reduced coarse model, with optima to refine from."""
+    return not rough.fit.refined and bool(rough.fit.rough_optima)
 
 
 def candidate_polisher(problem, physics, model, modes, scale=None):
