@@ -115,6 +115,14 @@ def _label(tree):
         return str(tree)
 
 
+def _commit(tree):
+    """The commit of ``tree``, short, or "unknown" where git cannot read it."""
+    try:
+        return _machine.commit(tree)
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
 def _cpu():
     """Processor seconds of this process and its finished children (forked workers)."""
     own = resource.getrusage(resource.RUSAGE_SELF)
@@ -145,7 +153,7 @@ def write_report(rows, base_rows, info, out_dir, base_label, started):
     med, worst = statistics.median(seconds), max(seconds)
     workers = rows[0]["workers"]
     lines = [
-        f"Made by `python benchmarks/bench_diagnose.py` on {started}.",
+        f"Made by `python benchmarks/bench_diagnose.py` on {started}, code {_commit(ROOT)}.",
         "",
         "# diagnose: time over the concealment study's recordings",
         "",
