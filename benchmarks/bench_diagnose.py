@@ -115,14 +115,6 @@ def _label(tree):
         return str(tree)
 
 
-def _commit(tree):
-    """The commit of ``tree``, short, or "unknown" where git cannot read it."""
-    try:
-        return _machine.commit(tree)
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
-
-
 def _cpu():
     """Processor seconds of this process and its finished children (forked workers)."""
     own = resource.getrusage(resource.RUSAGE_SELF)
@@ -151,9 +143,9 @@ def run(index, tree, workers, quick=False, mesh=None, frequencies=None):
 def write_report(rows, base_rows, info, out_dir, base_label, started):
     seconds = [r["seconds"] for r in rows]
     med, worst = statistics.median(seconds), max(seconds)
-    workers = rows[0]["workers"]
+    workers, code = rows[0]["workers"], _machine.commit(ROOT)
     lines = [
-        f"Made by `python benchmarks/bench_diagnose.py` on {started}, code {_commit(ROOT)}.",
+        f"Made by `python benchmarks/bench_diagnose.py` on {started}, code {code}.",
         "",
         "# diagnose: time over the concealment study's recordings",
         "",

@@ -41,12 +41,13 @@ def run_phase(stages, name, compute, items, results, hits, workers, say):
     def task(item):
         """``(result, taken from the store, why it failed or "")``."""
         _, physics, earlier = item
+        given = physics if earlier is None else (physics, earlier)
         try:
             if stages is None:
-                return compute((physics, earlier) if earlier is not None else physics), False, ""
+                return compute(given), False, ""
             found, value = stages.get(key(physics, earlier))
             if not found:
-                value = compute((physics, earlier) if earlier is not None else physics)
+                value = compute(given)
                 stages.put(key(physics, earlier), value)
         except np.linalg.LinAlgError as error:
             log.warning("%s: %s fit failed: %s", physics.name, name, error)

@@ -128,13 +128,14 @@ def rank(fitting, physics_list):
        mesh (:func:`..physics.reduced_model.candidate_pencil`), corrected by the
        fine-to-coarse eigenvalue ratio at the nominal fit (:func:`rough_stage`);
     2. *settled*: every candidate that gains more than ``fitting.margin`` there and lies
-       within :data:`REACH` of the best rough gain is refined to its own optimum on the
+       within :data:`REACH` of the best rough gain (or :data:`REACH_SHARE` of it, where
+       more) is refined to its own optimum on the
        working mesh: its best distinct rough optima settled in rounds on the coarse mesh,
        then in rounds of reduced models of the working mesh, each checked by the
        finite-element model (:mod:`.settling`; :func:`settled_stage`, :func:`_within_reach`);
     2b. *rivals*: when a refined candidate may be named, the unrefined ones whose rough gain
-       lies within :data:`RIVAL_REACH` of it are refined too; when none may, every one
-       that gained more than ``fitting.margin`` (:func:`_rivals`);
+       lies within :data:`RIVAL_REACH` of it (or the share) are refined too; when none may,
+       every one that gained more than ``fitting.margin`` (:func:`_rivals`);
     3. *again*: a refined fit near the top whose rounds stopped before it settled goes on
        (:func:`_unsettled_leaders`, :func:`again_stage`).
 
@@ -161,10 +162,7 @@ def rank(fitting, physics_list):
         fitting = replace(fitting, stages=fitting.stages.then("located starts", LOCATED_STARTS))
     stages, workers, say = fitting.stages, fitting.workers, fitting.say
     # the candidates with most parameters take longest: they go first to the workers
-    model, b = fitting.model, fitting.nominal.b
-    order = sorted(
-        range(len(physics_list)), key=lambda i: -len(physics_list[i].parameters(model, b))
-    )
+    order = _longest_first(fitting, physics_list, range(len(physics_list)))
     results = [None] * len(physics_list)
     hits = [[] for _ in physics_list]  # the phases of each taken from the store
     items = [(i, physics_list[i], None) for i in order]
@@ -175,7 +173,7 @@ def rank(fitting, physics_list):
     first = partial(_within_reach, margin=fitting.margin)
     later = partial(_rivals, threshold=fitting.threshold, margin=fitting.margin)
     for choose in (first, later):  # phases 2 and 2b
-        todo = sorted(choose(results), key=lambda i: -len(physics_list[i].parameters(model, b)))
+        todo = _longest_first(fitting, physics_list, choose(results))
         items = [(i, physics_list[i], results[i].fit) for i in todo]
         run_phase(stages, "settled", settled, items, results, hits, workers, say)
     todo = _unsettled_leaders(results)
@@ -270,6 +268,12 @@ def again_stage(fitting, item):
     result = settle(problem, polish, [problem.pack(fitted.b, fitted.theta)])
     result = replace(result, alternatives=fitted.alternatives)
     return candidate_result(physics, fitting.model, fitting.nominal, result)
+
+
+def _longest_first(fitting, physics_list, indices):
+    """``indices`` of ``physics_list``, the candidates with most parameters first."""
+    model, b = fitting.model, fitting.nominal.b
+    return sorted(indices, key=lambda i: -len(physics_list[i].parameters(model, b)))
 
 
 def _summary(r, hit, physics):
