@@ -9,6 +9,7 @@ import pytest
 from scipy.stats import chi2
 
 from studies import calibration as cal
+from studies import outside_effects as outside
 
 
 def test_ideal_power_is_the_rejection_rate_of_simulated_recordings():
@@ -271,22 +272,29 @@ def test_tasks_run_the_fitted_size_first_with_clean_replicates_between_its_round
     assert [t[5] for t in rest] == sorted(t[5] for t in rest)
     assert [t[3] for t in rest[:6]] == ["3 x ideal 0.9"] * 2 + ["ideal 0.9"] * 2 + ["ideal 0.5"] * 2
     keys = [cal.task_key(t) for t in tasks]
-    assert len(keys) == len(set(keys)) == 2 * cal.N_CLEAN + 2 * cal.N_POWER * len(cal.SIZES)
+    n_outside = len(cal.outside_tasks())
+    assert (
+        len(keys)
+        == len(set(keys))
+        == (2 * cal.N_CLEAN + 2 * cal.N_POWER * len(cal.SIZES) + n_outside)
+    )
 
 
 def test_the_target_plan_runs_the_clean_replicates_and_the_fitted_size_alone():
-    """40 clean replicates and each candidate at its fitted 0.9 size (130 for the nine
-    candidates); they are the first tasks of the plan with every size, in the same order."""
+    """40 clean replicates, each candidate at its fitted 0.9 size (130 for the nine
+    candidates) and the four effects outside the candidates five times; they are the first
+    tasks of the plan with every size, in the same order."""
     table = {
         name: {**_table()["point_mass"], "sizes": [0.1 * (k + 1), 1.0, 2.0, 3.0]}
         for k, name in enumerate(cal.EFFECTS)
     }
     target, every = cal.tasks(table, plan="target"), cal.tasks(table, plan="all")
-    assert len(target) == 2 * cal.N_CLEAN + len(cal.EFFECTS) * cal.N_POWER == 130
+    assert len(target) == 2 * cal.N_CLEAN + len(cal.EFFECTS) * cal.N_POWER + 20 == 150
+    assert [t[0] for t in target[-20:]] == ["outside"] * 20
     assert every[: len(target)] == target
     assert {t[3] for t in target if t[0] == "power"} == {"fitted 0.9"}
     assert sum(t[0] == "clean" for t in target) == 2 * cal.N_CLEAN
-    assert len(every) == 2 * cal.N_CLEAN + len(cal.EFFECTS) * cal.N_POWER * len(cal.SIZES)
+    assert len(every) == 2 * cal.N_CLEAN + len(cal.EFFECTS) * cal.N_POWER * len(cal.SIZES) + 20
     # quick mode runs the fitted size alone under either plan, as before
     assert cal.tasks(_table(), True, "target") == cal.tasks(_table(), True, "all")
     assert len(cal.tasks(_table(), True, "target")) == 2 * 2 + 2
@@ -392,7 +400,8 @@ def test_the_report_is_the_current_table_alone_and_names_plan_band_and_rule(tmp_
         "Plan `target`" in head and "named 8 of 10 has a Wilson 95 % interval of 0.49-0.94" in head
     )
     assert f"upper bound of {top:.2f}" in head and "upper bound of 0.09" in head
-    assert f"{len(rows)} of {2 * cal.N_CLEAN + 2 * cal.N_POWER} replicates" in head
+    n_outside = len(cal.outside_tasks())
+    assert f"{len(rows)} of {2 * cal.N_CLEAN + 2 * cal.N_POWER + n_outside} replicates" in head
     assert f"mesh-error rule `{cal.DEFAULT_RULE}`" in head and "--mesh-error" in head
     assert "(ideal 0.5)" not in text and "(3 x ideal 0.9)" not in text  # sizes not run
     assert "(fitted 0.9)" in text and "at the ideal 0.9 size" not in text
@@ -479,3 +488,47 @@ def test_most_of_the_mesh_error_is_what_the_constants_absorb():
     for label in ("estimated", "actual"):
         assert 0.0 <= left[f"{label}_left"] <= left[label] <= left[f"{label}_max"]
     assert left["actual_left"] < 0.25 * left["actual"]
+
+
+def test_the_outside_effects_have_their_own_keys_and_seeds():
+    """Each effect outside the candidates (all but the control), N_OUTSIDE times; no key or
+    seed shared with a candidate's replicate or another outside one."""
+    out = cal.outside_tasks()
+    labels = {t[2] for t in out}
+    assert labels == {k for k, (physics, _) in outside.EFFECTS.items() if physics is not None}
+    assert len(out) == len(labels) * cal.N_OUTSIDE
+    power = [
+        ("power", cal.POWER_FAMILY, e, "fitted 0.9", 1.0, r) for e in cal.EFFECTS for r in (0, 1)
+    ]
+    keys = [cal.task_key(t) for t in out + power]
+    seeds = [tuple(cal._seed(t).spawn_key) for t in out + power]
+    assert len(set(keys)) == len(keys) and len(set(seeds)) == len(seeds)
+
+
+def test_the_report_counts_the_outside_effects_by_outcome():
+    """The outside rows are tabled apart (right, wrong, unexplained) and never counted as
+    power or false alarms."""
+    label = "edge notch 6 x 4 mm"
+    base = {"kind": "outside", "family": cal.POWER_FAMILY, "effect": label, "seconds": 60.0}
+    rows = [
+        {**base, "verdict": "unexplained", "named": [], "outcome": "right"},
+        {**base, "verdict": "explained", "named": ["cut_corner"], "outcome": "right"},
+        {**base, "verdict": "explained", "named": ["point_mass"], "outcome": "wrong"},
+    ]
+    text = "\n".join(cal._outside(rows))
+    line = next(x for x in text.splitlines() if x.startswith(f"| {label} "))
+    assert line.split(" | ")[1:6] == ["3", "0", "1", "1", "1"]
+    assert cal.false_alarms(rows) == (0, 0) and cal.power_cells(rows) == {}
+    assert "None run yet." in cal._outside([])
+
+
+def test_the_fitted_size_is_the_measured_one_where_there_is_one():
+    """The fitted 0.9 size is the fitted test's measured one (reports/fitted_test.md) where
+    measured, and the quick mode keeps the linearised one."""
+    assert cal.FITTED_MEASURED["point_mass"] == 0.24  # 10 of 10 rejected there
+    assert "thickness_taper" not in cal.FITTED_MEASURED
+    quick = cal.sizes(quick=True)["point_mass"]
+    assert quick["measured"] is False
+    for name, size in cal.FITTED_MEASURED.items():  # each inside its candidate's grid
+        grid = cal.EFFECTS[name][3]
+        assert grid[0] < size < grid[-1]
