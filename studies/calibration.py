@@ -507,11 +507,12 @@ def tasks(size_table, quick=False, plan="all"):
                 if entry["sizes"][j] is not None:
                     out.append(("power", POWER_FAMILY, name, SIZES[j][0], entry["sizes"][j], rep))
 
+    beyond = [] if quick else outside_tasks()
+    per_outside = -(-len(beyond) // n_power)  # outside replicates after each round
     for rep in range(n_power):
         power(first, rep)
         out.extend(clean[rep * per_round : (rep + 1) * per_round])
-    if not quick:
-        out.extend(outside_tasks())
+        out.extend(beyond[rep * per_outside : (rep + 1) * per_outside])
     if not quick and plan == "all":
         for rep in range(n_power):
             power(rest, rep)
@@ -521,6 +522,44 @@ def tasks(size_table, quick=False, plan="all"):
             seen.add(task_key(t))
             unique.append(t)
     return unique
+
+
+def decided(rows, effect, size):
+    """Whether the target at a candidate's size is decided by the rows run so far: ``"met"``
+    (named right in ``NEED``), ``"missed"`` (more than ``N_POWER - NEED`` not named; a
+    replicate that raised counts as not named), None while open. The remaining replicates
+    cannot change it: the study stops running them (:func:`rounds`)."""
+    mine = [
+        r
+        for r in rows
+        if r["kind"] == "power" and r["effect"] == effect and size_key(r["size"]) == size_key(size)
+    ]
+    k = sum(named(r) for r in mine if r["verdict"] != "error")
+    if k >= NEED:
+        return "met"
+    if len(mine) - k > N_POWER - NEED:
+        return "missed"
+    return None
+
+
+def curtailed(task, rows):
+    """Whether a fitted 0.9 replicate need not run: its candidate's target is decided."""
+    kind, _, effect, label, size, _ = task
+    return kind == "power" and label == "fitted 0.9" and decided(rows, effect, size) is not None
+
+
+def rounds(todo):
+    """The tasks in rounds, a new one where a power replicate of another number begins: each
+    round is run once the rows before it are in, so that a decided candidate's next
+    replicates are left out (:func:`curtailed`)."""
+    out, rep = [[]], None
+    for t in todo:
+        if t[0] == "power" and t[5] != rep and out[-1]:
+            out.append([])
+        if t[0] == "power":
+            rep = t[5]
+        out[-1].append(t)
+    return [r for r in out if r]
 
 
 def outside_tasks(replicates=N_OUTSIDE):
@@ -854,6 +893,7 @@ def main(
     effects=None,
     plan="target",
     rule=None,
+    curtail=True,
 ):
     """Run what this code has not run yet, write the report and figure; return its path.
 
@@ -862,7 +902,9 @@ def main(
     so a stopped run resumes where it stopped, and the report is built from these rows
     alone. ``plan``: ``"target"`` (the clean replicates and the fitted 0.9 size) or
     ``"all"`` (every size; :func:`tasks`). ``effects``: run only the power replicates of
-    these candidates (default: every replicate).
+    these candidates (default: every replicate). ``curtail``: run the tasks round by round
+    and leave out a candidate's fitted 0.9 replicates once its target is decided
+    (:func:`decided`).
     """
     rule = rule or DEFAULT_RULE
     if rule not in RULES or plan not in PLANS:
@@ -872,6 +914,7 @@ def main(
     code = code_version()  # the rows' code: commits made while it runs do not count
     stored = load(out_dir, quick, code, rule)
     stored["plan"] = plan  # what the report counts against (the rows serve either plan)
+    stored["curtail"] = curtail
     spec = [list(entry) for entry in SIZES]
     if (stored["sizes"] is None or stored.get("size_spec") != spec) and not report_only:
         stored["sizes"], stored["size_spec"] = sizes(quick), spec
@@ -909,23 +952,20 @@ def main(
         _write_head(out_dir, quick, stored)
         print(
             f"{_now()} {row['key']:48s} {row['verdict']:12s} {row['chosen'] or '-':22s} "
-            f"{row['seconds']:5.0f} s ({position + 1}/{len(todo)})"
+            f"{row['seconds']:5.0f} s ({stored['runs'][-1]['rows']}/{len(todo)})"
             + (f" {row['error']}" if row["verdict"] == "error" else ""),
             flush=True,
         )
         write_report(out_dir, stored, quick, workers)
 
     _ship_by_value()
-    if todo:
-        map_tasks(
-            functools.partial(
-                run_task_recorded, quick=quick, code=code, options={"mesh_error_part": rule}
-            ),
-            todo,
-            workers=workers,
-            progress=False,
-            on_result=keep,
-        )
+    run = functools.partial(
+        run_task_recorded, quick=quick, code=code, options={"mesh_error_part": rule}
+    )
+    for chunk in rounds(todo) if curtail else [todo]:
+        now = [t for t in chunk if not (curtail and curtailed(t, stored["rows"].values()))]
+        if now:
+            map_tasks(run, now, workers=workers, progress=False, on_result=keep)
     return write_report(out_dir, stored, quick, workers)
 
 
@@ -1052,7 +1092,7 @@ def _partial(done, n_tasks, plan):
     ]
 
 
-def _plan_band(plan, quick, n_tasks):
+def _plan_band(plan, quick, n_tasks, curtail=False):
     """The plan, and the binomial band its counts give (Wilson 95 %, :func:`wilson`)."""
     n_clean = len(FAMILIES) * (2 if quick else N_CLEAN)
     n_power = 1 if quick else N_POWER
@@ -1072,7 +1112,15 @@ def _plan_band(plan, quick, n_tasks):
         "counts give a band this wide: "
         f"a candidate named {need} of {n_power} has a Wilson 95 % interval of "
         f"{lo:.2f}-{hi:.2f}, and 0 false alarms of {n_clean} an upper bound of {top:.2f}; "
-        "rates within that band are not told apart by these counts.",
+        "rates within that band are not told apart by these counts."
+        + (
+            f" A candidate's replicates stopped once its target was decided ({NEED} named "
+            f"right: met; {N_POWER - NEED + 1} not: missed; `--every-replicate` runs them "
+            "all): the count decides the target as ten would, and the rate has the wider "
+            "band of the replicates run."
+            if curtail and not quick
+            else ""
+        ),
         "",
     ]
 
@@ -1102,11 +1150,23 @@ def _shown(size_table, cells, plan, quick):
     }
 
 
+def _planned(size_table, quick, plan, rows, curtail):
+    """The keys of the plan's replicates, less those a curtailed run leaves out."""
+    if not size_table:
+        return set()
+    have = {r["key"] for r in rows}
+    return {
+        task_key(t)
+        for t in tasks(size_table, quick, plan)
+        if task_key(t) in have or not (curtail and curtailed(t, rows))
+    }
+
+
 def report(rows, stored, quick, workers):
     size_table = stored["sizes"] or {}
     plan = stored.get("plan") or "all"
     rule = stored.get("rule") or DEFAULT_RULE
-    planned = {task_key(t) for t in tasks(size_table, quick, plan)} if size_table else set()
+    planned = _planned(size_table, quick, plan, rows, stored.get("curtail", True))
     n_tasks, done = len(planned), sum(r["key"] in planned for r in rows)
     beyond = len(rows) - done
     more = f" (and {beyond} of other sizes)" if beyond else ""
@@ -1119,6 +1179,7 @@ def report(rows, stored, quick, workers):
             (" --quick", quick),
             (f" --sizes {plan}", plan != "target"),
             (f" --mesh-error {rule}", rule != DEFAULT_RULE),
+            (" --every-replicate", not stored.get("curtail", True)),
         )
         if on
     )
@@ -1134,7 +1195,7 @@ def report(rows, stored, quick, workers):
         f"{uptime}.{_load_line(rows)}{_times(rows)}{code}",
         "",
         *_partial(done, n_tasks, plan),
-        *_plan_band(plan, quick, n_tasks),
+        *_plan_band(plan, quick, n_tasks, stored.get("curtail", True)),
         "Recordings: the plate (with the concealed effect) on a mesh twice as fine each way as "
         f"diagnose's, its lowest 14 frequencies with {100 * NOISE:.1f} % Gaussian noise, sorted; "
         "diagnose runs blind on the nominal case, pairing by order, at its defaults "
@@ -1470,12 +1531,13 @@ def _judge(c, need=8, of=N_POWER):
     if c is None or c["n"] == 0:
         return "not run yet"
     k, n = c["named"], c["n"]
-    so_far = f"named right in {k} of {n} run so far" if n < of else f"named right in {k} of {n}"
+    counted = f"named right in {k} of {n}"
+    rest = f" (the other {of - n} left out: decided)" if n < of else ""
     if k >= need:
-        return f"{so_far}: met"
+        return f"{counted}{rest}: met"
     if n - k > of - need:
-        return f"{so_far}: missed ({n - k} misses; the target allows {of - need})"
-    return f"{so_far}: open (partial)" if n < of else f"{so_far}: missed"
+        return f"{counted}{rest}: missed ({n - k} misses; the target allows {of - need})"
+    return f"{counted} run so far: open (partial)" if n < of else f"{counted}: missed"
 
 
 def entry_p(left, size_table, effect, j, power=None):
@@ -1645,6 +1707,11 @@ if __name__ == "__main__":
         default=DEFAULT_RULE,
         help=f"diagnose's mesh-error rule (default {DEFAULT_RULE!r}, diagnose's)",
     )
+    parser.add_argument(
+        "--every-replicate",
+        action="store_true",
+        help="run every replicate, also those of a candidate whose target is decided",
+    )
     args = parser.parse_args()
     print(
         main(
@@ -1655,5 +1722,6 @@ if __name__ == "__main__":
             args.effect,
             plan=args.sizes,
             rule=args.mesh_error,
+            curtail=not args.every_replicate,
         )
     )

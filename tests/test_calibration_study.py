@@ -290,7 +290,10 @@ def test_the_target_plan_runs_the_clean_replicates_and_the_fitted_size_alone():
     }
     target, every = cal.tasks(table, plan="target"), cal.tasks(table, plan="all")
     assert len(target) == 2 * cal.N_CLEAN + len(cal.EFFECTS) * cal.N_POWER + 20 == 150
-    assert [t[0] for t in target[-20:]] == ["outside"] * 20
+    # the outside effects two a round, after the round's clean replicates
+    assert [t for t in target if t[0] == "outside"] == cal.outside_tasks()
+    first_round = target[: len(cal.EFFECTS) + 4 + 2]
+    assert [t[0] for t in first_round[-6:]] == ["clean"] * 4 + ["outside"] * 2
     assert every[: len(target)] == target
     assert {t[3] for t in target if t[0] == "power"} == {"fitted 0.9"}
     assert sum(t[0] == "clean" for t in target) == 2 * cal.N_CLEAN
@@ -532,3 +535,72 @@ def test_the_fitted_size_is_the_measured_one_where_there_is_one():
     for name, size in cal.FITTED_MEASURED.items():  # each inside its candidate's grid
         grid = cal.EFFECTS[name][3]
         assert grid[0] < size < grid[-1]
+
+
+def _power_rows(named_flags, effect="cutout", size=7.5):
+    rows = []
+    for rep, hit in enumerate(named_flags):
+        task = ("power", cal.POWER_FAMILY, effect, "fitted 0.9", size, rep)
+        rows.append(
+            {**_row(task, "abc1234", "explained" if hit else "consistent"), "chosen": effect}
+        )
+    return rows
+
+
+def test_a_target_is_decided_by_eight_named_or_three_missed():
+    """Met once 8 of 10 are named (the two left cannot unmeet it), missed once 3 are not
+    (the rest cannot reach 8), open otherwise; a replicate that raised is not named."""
+    assert cal.decided(_power_rows([True] * 7), "cutout", 7.5) is None
+    assert cal.decided(_power_rows([True] * 8), "cutout", 7.5) == "met"
+    assert cal.decided(_power_rows([True, False, False, True, True]), "cutout", 7.5) is None
+    assert cal.decided(_power_rows([False, True, False, False]), "cutout", 7.5) == "missed"
+    errors = _power_rows([True, True])
+    errors += [{**r, "verdict": "error"} for r in _power_rows([True] * 3)[:3]]
+    errors[2:] = [{**r, "key": f"x{i}"} for i, r in enumerate(errors[2:])]
+    assert cal.decided(errors, "cutout", 7.5) == "missed"
+    # another size or candidate is not counted
+    assert cal.decided(_power_rows([False] * 3, size=6.2), "cutout", 7.5) is None
+    assert cal.decided(_power_rows([False] * 3, effect="point_mass"), "cutout", 7.5) is None
+    task = ("power", cal.POWER_FAMILY, "cutout", "fitted 0.9", 7.5, 9)
+    decided_rows = _power_rows([True] * 8)
+    assert cal.curtailed(task, decided_rows)
+    assert not cal.curtailed(("power", *task[1:3], "ideal 0.9", *task[4:]), decided_rows)
+    assert not cal.curtailed(("clean", cal.POWER_FAMILY, None, None, None, 9), decided_rows)
+
+
+def test_rounds_begin_where_a_power_replicate_of_another_number_does():
+    tasks = cal.tasks(_table())
+    chunks = cal.rounds(tasks)
+    assert [t for c in chunks for t in c] == tasks
+    firsts = [next(t[5] for t in c if t[0] == "power") for c in chunks]
+    assert firsts[: cal.N_POWER] == list(range(cal.N_POWER))
+    assert all(len({t[5] for t in c if t[0] == "power"}) == 1 for c in chunks)
+
+
+def test_a_curtailed_run_leaves_out_a_decided_candidates_replicates(
+    tmp_path, monkeypatch, package_log_level
+):
+    """Ten replicates of a candidate named every time: the first eight run, the last two are
+    left out, and the report counts 8 of 8 as the target met; with curtail=False all ten."""
+    plan = [("power", cal.POWER_FAMILY, "cutout", "fitted 0.9", 7.5, rep) for rep in range(10)]
+    ran = []
+
+    def fake(task, quick=False, code=None, options=None):
+        ran.append(task[5])
+        return {**_row(task, code, "explained"), "chosen": "cutout"}
+
+    monkeypatch.setattr(cal, "sizes", lambda quick=False: _table())
+    monkeypatch.setattr(cal, "tasks", lambda table, quick=False, plan_=None: plan)
+    monkeypatch.setattr(cal, "run_task_recorded", fake)
+    monkeypatch.setattr(cal, "write_report", lambda out_dir, stored, quick, workers: stored)
+    monkeypatch.setattr(cal, "code_version", lambda: "abc1234")
+    stored = cal.main(tmp_path, quick=True, workers=1)
+    assert ran == list(range(8)) and len(stored["rows"]) == 8
+    assert cal._planned(_table(), True, "target", list(stored["rows"].values()), True) == {
+        cal.task_key(t) for t in plan[:8]
+    }
+    assert "(the other 2 left out: decided): met" in cal._judge({"named": 8, "n": 8})
+    ran.clear()
+    monkeypatch.setattr(cal, "code_version", lambda: "def5678")
+    cal.main(tmp_path, quick=True, workers=1, curtail=False)
+    assert ran == list(range(10))
