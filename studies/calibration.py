@@ -34,8 +34,9 @@ estimate elsewhere.
 
 The plan (``--sizes``): ``target`` (the default) runs the clean replicates, each candidate
 at the fitted 0.9 size alone, the size the achievable target is judged at, and the effects
-outside the candidates (40 + 10 per candidate + 20: about 1.5 h on two cores); ``all`` adds
-the other three sizes (about 7 h). Ten
+outside the candidates (40 + 10 per candidate + 20; at the code of
+``reports/calibration.md`` a replicate takes 161 s of one core on average: about 3 h on two
+cores); ``all`` adds the other three sizes. Ten
 replicates a size tell a candidate named 8 of 10 only to a Wilson 95 % interval of about
 0.49-0.94, and 40 clean ones bound the false-alarm rate at about 0.09 (the report computes
 its own band).
@@ -719,8 +720,7 @@ def run_task(task, quick=False, options=None, made=None):
         "widening": (d.sigma_Hz / sigma).tolist(),
     }
     if kind == "outside":
-        names = [] if d.chosen is None else [d.chosen.name]
-        names += [c.name for c in ([d.rival] if d.rival else []) + list(d.also_tied)]
+        names = outside.names_given(d)
         row["named"] = names
         row["outcome"] = outside.outcome(d.verdict, names, outside.EFFECTS[effect][1])
     if physics is not None and d.chosen is not None and d.chosen.name == effect:
@@ -1365,24 +1365,7 @@ def _outside(rows):
     ]
     if not mine:
         return [*lines, "None run yet."]
-    lines += [
-        "| effect | runs | consistent | unexplained | named right | wrong | names given | "
-        "median s | nearest true physics |",
-        "|---|---|---|---|---|---|---|---|---|",
-    ]
-    for label, (physics, near) in outside.EFFECTS.items():
-        of = [r for r in mine if r["effect"] == label]
-        if physics is None or not of:
-            continue
-        count = {k: sum(r["outcome"] == k for r in of) for k in ("consistent", "right", "wrong")}
-        unexplained = sum(r["verdict"] == "unexplained" for r in of)
-        names = sorted({n for r in of for n in r["named"]})
-        lines.append(
-            f"| {label} | {len(of)} | {count['consistent']} | {unexplained} | "
-            f"{count['right'] - unexplained} | {count['wrong']} | {', '.join(names) or '-'} | "
-            f"{np.median([r['seconds'] for r in of]):.0f} | {', '.join(sorted(near)) or 'none'} |"
-        )
-    return lines
+    return lines + outside.table(mine)
 
 
 def _provenance(rows, stored):

@@ -118,8 +118,7 @@ def run_one(label, replicate):
     f = rec.recordings(case, fine, physics, [0.0], rec.stream(SEED, index))
     start = time.perf_counter()
     d = diagnose(rec.blind(case, f), model=model, rng=SEED, pairing="order", workers=2)
-    named = [] if d.chosen is None else [d.chosen.name]
-    named += [c.name for c in ([d.rival] if d.rival else []) + list(d.also_tied)]
+    named = names_given(d)
     unnamed = d.unnamed
     return {
         "effect": label,
@@ -133,6 +132,12 @@ def run_one(label, replicate):
         "unnamed_gain": None if unnamed is None else float(unnamed.log_evidence_gain),
         "seconds": time.perf_counter() - start,
     }
+
+
+def names_given(d):
+    """The candidates a diagnosis names: the chosen one, its rival, those tied with it."""
+    named = [] if d.chosen is None else [d.chosen.name]
+    return named + [c.name for c in ([d.rival] if d.rival else []) + list(d.also_tied)]
 
 
 def outcome(verdict, named, near, control=False):
@@ -181,23 +186,8 @@ def write_report(out_dir, rows, version):
         "`unexplained`, or every name given the nearest true physics (the last column); "
         "*wrong*: a name of unrelated physics among those given.",
         "",
-        "| effect | runs | consistent | unexplained | named right | wrong | names given | "
-        "median s | nearest true physics |",
-        "|---|---|---|---|---|---|---|---|---|",
+        *table(rows),
     ]
-    for label, (_, near) in EFFECTS.items():
-        mine = [r for r in rows if r["effect"] == label]
-        if not mine:
-            continue
-        unexplained = _count(mine, "verdict", "unexplained")
-        right, wrong = _count(mine, "outcome", "right"), _count(mine, "outcome", "wrong")
-        names = sorted({n for r in mine for n in r["named"]})
-        lines.append(
-            f"| {label} | {len(mine)} | {_count(mine, 'outcome', 'consistent')} | {unexplained} | "
-            f"{right - unexplained} | {wrong} | "
-            f"{', '.join(names) or '-'} | {statistics.median(r['seconds'] for r in mine):.0f} | "
-            f"{', '.join(sorted(near)) or 'none'} |"
-        )
     lines += ["", "Each run: verdict, names, best candidate's and the unnamed change's gains.", ""]
     lines += [
         f"- {r['effect']} #{r['replicate']}: {r['verdict']} {r['named']}, best {r['best']} "
@@ -208,6 +198,33 @@ def write_report(out_dir, rows, version):
     path = pathlib.Path(out_dir) / "outside_effects.md"
     atomic_write_text(path, "\n".join(lines) + "\n")
     return path
+
+
+def table(rows):
+    """The table of outcomes, a line per effect with rows:
+    runs, consistent, unexplained, named right, wrong, the names given, median seconds,
+    the nearest true physics. ``rows``: ``effect``, ``verdict``, ``named``, ``outcome``,
+    ``seconds`` each."""
+    lines = [
+        "| effect | runs | consistent | unexplained | named right | wrong | names given | "
+        "median s | nearest true physics |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for label in EFFECTS:
+        mine = [r for r in rows if r["effect"] == label]
+        if not mine:
+            continue
+        near = EFFECTS[label][1]
+        unexplained = _count(mine, "verdict", "unexplained")
+        right, wrong = _count(mine, "outcome", "right"), _count(mine, "outcome", "wrong")
+        names = sorted({n for r in mine for n in r["named"]})
+        lines.append(
+            f"| {label} | {len(mine)} | {_count(mine, 'outcome', 'consistent')} | {unexplained} | "
+            f"{right - unexplained} | {wrong} | "
+            f"{', '.join(names) or '-'} | {statistics.median(r['seconds'] for r in mine):.0f} | "
+            f"{', '.join(sorted(near)) or 'none'} |"
+        )
+    return lines
 
 
 def _count(rows, key, value):
