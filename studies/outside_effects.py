@@ -210,11 +210,10 @@ def table(rows):
         "median s | nearest true physics |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
-    for label in EFFECTS:
+    for label, (_, near) in EFFECTS.items():
         mine = [r for r in rows if r["effect"] == label]
         if not mine:
             continue
-        near = EFFECTS[label][1]
         unexplained = _count(mine, "verdict", "unexplained")
         right, wrong = _count(mine, "outcome", "right"), _count(mine, "outcome", "wrong")
         names = sorted({n for r in mine for n in r["named"]})

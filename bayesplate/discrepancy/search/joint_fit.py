@@ -39,11 +39,8 @@ _UNPHYSICAL_RESIDUAL = 1e4  # residual returned outside the lamina's physical re
 _NOT_YET = object()  # not in the cache
 #: ``ftol`` and ``xtol`` of the local fits of :func:`rough_fit`: a rough optimum only says
 #: where to refine from (the refinement converges on the working mesh), and its gain is
-#: judged to ten nats (:data:`.rank.REACH`). At 1e-4 (chi-square steps under 1e-4 of itself,
-#: 0.005 at 50) against 1e-8, with :data:`.rank.ROUGH_NFEV` 60 against 100, seven of the
-#: concealment study's recordings (50 x 50, two workers) kept their verdict, their chosen
-#: name and their refined candidates, and took 16-22 % less time
-#: (``reports/benchmark_diagnose.md``).
+#: judged to ten nats (:data:`.rank.REACH`): chi-square steps under 1e-4 of itself (0.005 at
+#: 50) are enough. Measured with :data:`.rank.ROUGH_NFEV` (see there).
 ROUGH_TOL = 1e-4
 
 

@@ -41,8 +41,10 @@ log = logging.getLogger(__name__)
 #: Evaluation cap of each local fit on a candidate's reduced coarse model. A fit still
 #: crawling at the cap is handed on as it is: the coarse rounds of the refinement go on from
 #: it. At 100, a quarter of a concealed 0.3 g point mass's rough fits ran to the cap and took
-#: 58 % of the rough evaluations; at 60 (with :data:`.joint_fit.ROUGH_TOL` 1e-4) the verdicts
-#: and the refined candidates of the recordings tried stayed the same.
+#: 58 % of the rough evaluations. At 60, with :data:`.joint_fit.ROUGH_TOL` 1e-4 (against 100
+#: and 1e-8), six of the concealment study's recordings (50 x 50, two workers) kept their
+#: verdict and chosen name and took 6-22 % less time; one refined a candidate more
+#: (``reports/benchmark_diagnose.md``).
 ROUGH_NFEV = 60
 #: Other nominal optima (``nominal.alternatives``, best first) whose constants start the
 #: candidates' reduced fits too.
