@@ -8,7 +8,7 @@ by order.
 
 - **False alarms**: plates with nothing wrong, ``N_CLEAN`` replicates in each of two families,
   the unidirectional Frederiksen T300/epoxy plate (100.1 x 53.0 x 3.36 mm, diagnosed on
-  40 x 20) and the 33-ply cross-ply laminate of the paper (100 x 50 x 3.3 mm, 32 x 16). Every
+  60 x 30) and the 33-ply cross-ply laminate of the paper (100 x 50 x 3.3 mm, 48 x 24). Every
   verdict other than ``consistent`` is a false alarm.
 - **Power**: each candidate concealed in the Frederiksen plate, ``N_POWER`` replicates at
   each size run: how often diagnose names it (``explained`` with it, or ``ambiguous`` with it
@@ -34,9 +34,8 @@ estimate elsewhere.
 
 The plan (``--sizes``): ``target`` (the default) runs the clean replicates, each candidate
 at the fitted 0.9 size alone, the size the achievable target is judged at, and the effects
-outside the candidates (40 + 10 per candidate + 20; at the code of
-``reports/calibration.md`` a replicate takes 161 s of one core on average: about 3 h on two
-cores); ``all`` adds the other three sizes. Ten
+outside the candidates (40 + 10 per candidate + 20: about 2 h on two cores, the time of the
+run in ``reports/calibration.md``); ``all`` adds the other three sizes. Ten
 replicates a size tell a candidate named 8 of 10 only to a Wilson 95 % interval of about
 0.49-0.94, and 40 clean ones bound the false-alarm rate at about 0.09 (the report computes
 its own band).
@@ -117,7 +116,11 @@ SIZES = (
     ("ideal 0.5", "ideal", 0.5, 1.0),
 )
 N_CONSTANTS = 6  # the constants diagnose fits (its stiffness coefficients)
-FAMILIES = {"frederiksen_t300": (40, 20), "crossply": (32, 16)}  # diagnose's mesh
+#: diagnose's working mesh for each family (the recordings' is twice as fine each way). Its
+#: frequencies sit 0.58 deviations rms from a converged mesh; 40 x 20's 1.29 widened the
+#: deviations enough to hide most candidates at their fitted 0.9 size
+#: (``reports/working_mesh_power.md``).
+FAMILIES = {"frederiksen_t300": (60, 30), "crossply": (48, 24)}
 QUICK_FAMILIES = {"frederiksen_t300": (6, 3), "crossply": (8, 4)}
 POWER_FAMILY = "frederiksen_t300"
 

@@ -1,13 +1,13 @@
 """diagnose on a working mesh coarser than the calibration's: the mesh-error rules where the
 correction is least sure.
 
-The calibration study diagnoses on 40 x 20 (Frederiksen plate) and 32 x 16 (cross-ply), where
+The calibration study diagnoses on 60 x 30 (Frederiksen plate) and 48 x 24 (cross-ply), where
 the corrected rule leaves its frequencies within what it adds to the deviations
 (``reports/mesh_correction.md``). A case without a mesh of its own is diagnosed on the
 package's default, 24 x 12, where the mesh's error is larger and the correction less sure.
 This study diagnoses the calibration study's own recordings (their mesh, seeds and 0.2 %
 noise: :func:`studies.calibration.recordings`) blind on the working meshes scaled by
-``factor`` each way (0.6: 24 x 12 and 19 x 10), under a mesh-error rule:
+``factor`` each way (0.4: 24 x 12 and 19 x 10), under a mesh-error rule:
 
 - ``clean``: the clean replicates of both families (a verdict other than ``consistent`` is a
   false alarm);
@@ -17,7 +17,7 @@ noise: :func:`studies.calibration.recordings`) blind on the working meshes scale
 
 Rows are cached by code version in ``out_dir/.cache/coarse_mesh/<version>.jsonl`` (a run
 resumes); the report ``coarse_mesh.md`` is the current version's rows alone. Run:
-``python -m studies.coarse_mesh WHAT [--rule RULE] [--factor 0.6] [--replicates 10]
+``python -m studies.coarse_mesh WHAT [--rule RULE] [--factor 0.4] [--replicates 10]
 [--workers 2] [--out DIR]`` (WHAT: ``clean`` or ``EFFECT:SIZE``; about a minute a replicate
 on one core).
 """
@@ -35,7 +35,7 @@ from bayesplate.parallel import fork_map
 from studies import calibration as cal
 from studies._study_host import code_version, cpu, jsonl_rows, utc_now
 
-FACTOR = 0.6  # the working mesh's elements each way, relative to the calibration's
+FACTOR = 0.4  # the working mesh's elements each way, relative to the calibration's
 
 
 def tasks(what, replicates):

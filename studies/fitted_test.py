@@ -30,8 +30,8 @@ is the same. ``--mesh-error RULE`` (a rule other than diagnose's default) diagno
 same replicates under that mesh-error rule alone, without the test, into
 ``<version>.rules.jsonl``; the report shows its verdicts in a column of their own. Run:
 ``python -m studies.fitted_test EFFECT SIZE [--replicates 0 1 ...] [--draws N] [--diagnose]
-[--mesh-error RULE] [--workers 2] [--out DIR]`` (about 5-6 min a replicate on one core,
-80 x 40 mesh; diagnose alone 0.5-2 min).
+[--mesh-error RULE] [--workers 2] [--out DIR]`` (about 5-6 min a replicate on one core
+on 80 x 40 recordings; diagnose alone 0.5-2 min).
 """
 
 import argparse
@@ -222,13 +222,15 @@ def _said(row):
 def write_report(out_dir, rows, version, ruled=()):
     """``fitted_test.md``: every size of the current version, one line a replicate; ``ruled``:
     diagnose's rows under other mesh-error rules, a column each."""
+    fine = [2 * n for n in cal.FAMILIES[cal.POWER_FAMILY]]  # the recordings' mesh
     lines = [
         "# The fitted test fitted globally",
         "",
         f"Date: {utc_now()}. Machine: {cpu()}, 2 cores. Code: {version}. Made by "
         "`python -m studies.fitted_test EFFECT SIZE --diagnose` (its docstring says how).",
         "",
-        "The calibration study's power replicates (Frederiksen plate, recordings on 80 x 40, "
+        "The calibration study's power replicates (Frederiksen plate, recordings on "
+        f"{fine[0]} x {fine[1]}, "
         "14 frequencies, 0.2 % noise): the six constants fitted with no prior, on the "
         "recordings' own mesh, from the true constants, the prior mean, eight starts aimed "
         "along the transverse shear coefficients and draws from the prior. The statistic is "
