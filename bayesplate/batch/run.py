@@ -227,6 +227,7 @@ class _client:
             raise
 
     def _open(self):
+        import dask
         from distributed import Client, LocalCluster
 
         from .quiet import QuietWorker
@@ -244,13 +245,14 @@ class _client:
             self.owned.insert(0, client)
             return client
         n = self.workers or _cores()
-        cluster = LocalCluster(
-            n_workers=n,
-            threads_per_worker=1,
-            processes=True,
-            dashboard_address=None,
-            env=_ONE_THREAD,
-        )
+        with dask.config.set(_KEEP_MALLOC):  # read as each worker's nanny starts
+            cluster = LocalCluster(
+                n_workers=n,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=None,
+                env=_ONE_THREAD,
+            )
         self.owned.append(cluster)
         client = Client(cluster)
         self.owned.insert(0, client)
@@ -281,6 +283,12 @@ def _close_all(things):
 
 #: BLAS and OpenMP threads of each local worker (a task also limits them by threadpoolctl).
 _ONE_THREAD = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
+#: Dask gives its workers ``MALLOC_TRIM_THRESHOLD_=65536`` to hand freed memory back to the
+#: system; setting it also fixes glibc's mmap threshold at 128 KiB, so every larger array a
+#: diagnosis makes and frees is mapped and unmapped again: a third of a calibration worker's
+#: processor time went to the kernel (reports/benchmark_batch.md). The workers keep glibc's
+#: default; a value set in this process's environment still reaches them.
+_KEEP_MALLOC = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
 
 
 def _cores():
