@@ -286,7 +286,7 @@ _ONE_THREAD = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_
 #: Dask gives its workers ``MALLOC_TRIM_THRESHOLD_=65536`` to hand freed memory back to the
 #: system; setting it also fixes glibc's mmap threshold at 128 KiB, so every larger array a
 #: diagnosis makes and frees is mapped and unmapped again: a third of a calibration worker's
-#: processor time went to the kernel (reports/benchmark_batch.md). The workers keep glibc's
+#: processor time went to the kernel (reports/benchmark_worker_malloc.md). The workers keep glibc's
 #: default; a value set in this process's environment still reaches them.
 _KEEP_MALLOC = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
 
