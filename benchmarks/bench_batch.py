@@ -1,12 +1,13 @@
 """Benchmark of ``bayesplate batch`` (issue 15): cases per minute with 1 and 2 Dask workers.
 
 The workload: every bundled case, ``--copies`` times (copies under other names, so each is a
-case of its own), the ``estimate`` step on a ``--mesh`` mesh. Each round runs it on a
-LocalCluster of 1 worker, then of 2 (single-threaded processes, as ``bayesplate batch``
-starts them), into a fresh output folder, so nothing is reused. Timed: the cluster's start,
-the tasks (submission to the last result stored) and the summary. Also measured for the
-scaling argument: the bytes each task ships and brings back (pickled), the workers' peak
-memory, and what building the plate model costs beside a step (it is built in each task).
+case of its own), the ``estimate`` step on a ``--mesh`` mesh. Each round runs it on the
+local cluster ``bayesplate batch`` starts (``bayesplate.batch.run._client``: single-threaded
+worker processes), of 1 worker, then of 2, into a fresh output folder, so nothing is
+reused. Timed: the cluster's start, the tasks (submission to the last result stored) and
+the summary. Also measured for the scaling argument: the bytes each task ships and brings
+back (pickled), the workers' peak memory, and what building the plate model costs beside a
+step (it is built in each task).
 
 Writes ``benchmark_batch.md``. Run: ``python benchmarks/bench_batch.py [--runs 2]
 [--copies 2] [--mesh 10 10] [--out reports]``.
@@ -49,21 +50,14 @@ def _peak_rss_MiB():
 
 def one_run(cases, n_workers, options):
     """Seconds of the cluster's start, the tasks and the summary; the workers' peak memory."""
-    from distributed import Client, LocalCluster
-
     from bayesplate.batch import run_batch
-    from bayesplate.batch.run import _ONE_THREAD
+    from bayesplate.batch.run import _client
 
     t0 = time.perf_counter()
+    # the engine's own local cluster, as `bayesplate batch` starts it (its workers'
+    # environment included)
     with (
-        LocalCluster(
-            n_workers=n_workers,
-            threads_per_worker=1,
-            processes=True,
-            dashboard_address=None,
-            env=_ONE_THREAD,
-        ) as cluster,
-        Client(cluster) as client,
+        _client(None, n_workers) as client,
         tempfile.TemporaryDirectory(prefix="bench-batch-") as out,
     ):
         client.wait_for_workers(n_workers)

@@ -37,7 +37,11 @@ def _study_row(index):
 
 @pytest.fixture(scope="module")
 def client():
-    """A client of a local cluster of 2 single-threaded workers, given to the engine."""
+    """A client of a local cluster of 2 single-threaded workers, given to the engine.
+
+    Started with Dask's own settings, as a user's cluster would be, not through the
+    engine's ``_client``: the tests below pass it as a client given by the caller.
+    """
     from distributed import Client, LocalCluster
 
     from bayesplate.batch.run import _ONE_THREAD
