@@ -577,6 +577,18 @@ def test_rounds_begin_where_a_power_replicate_of_another_number_does():
     assert all(len({t[5] for t in c if t[0] == "power"}) == 1 for c in chunks)
 
 
+def test_a_rounds_longest_kinds_of_task_go_to_the_workers_first():
+    tasks = cal.tasks(_table())
+    (first, *_) = cal.rounds(tasks)
+    assert {t[0] for t in first} == {"outside", "power", "clean"}
+    ordered = cal.longest_first(first)
+    kinds = [t[0] for t in ordered]
+    assert kinds == sorted(kinds, key=cal.KIND_ORDER.index)
+    assert sorted(ordered) == sorted(first)  # the same tasks, each once
+    power = [t for t in ordered if t[0] == "power"]
+    assert power == [t for t in first if t[0] == "power"]  # stable within a kind
+
+
 def test_a_curtailed_run_leaves_out_a_decided_candidates_replicates(
     tmp_path, monkeypatch, package_log_level
 ):
