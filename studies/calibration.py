@@ -583,6 +583,15 @@ def longest_first(chunk):
     return sorted(chunk, key=lambda t: KIND_ORDER.index(t[0]))
 
 
+def running_order(todo, curtail=True):
+    """The tasks as handed to the workers: the rounds (:func:`rounds`), each
+    :func:`longest_first`; run one after the other when ``curtail`` (a decided candidate's
+    later replicates are then left out), else as one submission in that order (a partial
+    run still has even counts)."""
+    chunks = [longest_first(r) for r in rounds(todo)]
+    return chunks if curtail else [[t for c in chunks for t in c]]
+
+
 def outside_tasks(replicates=N_OUTSIDE):
     """The replicates of the effects outside the candidates (:mod:`studies.outside_effects`,
     its control left out: the clean replicates are the controls), replicate by replicate."""
@@ -982,9 +991,8 @@ def main(
     run = functools.partial(
         run_task_recorded, quick=quick, code=code, options={"mesh_error_part": rule}
     )
-    for chunk in rounds(todo) if curtail else [todo]:
+    for chunk in running_order(todo, curtail):
         now = [t for t in chunk if not (curtail and curtailed(t, stored["rows"].values()))]
-        now = longest_first(now)
         if now:
             map_tasks(run, now, workers=workers, progress=False, on_result=keep)
     return write_report(out_dir, stored, quick, workers)

@@ -587,6 +587,10 @@ def test_a_rounds_longest_kinds_of_task_go_to_the_workers_first():
     assert sorted(ordered) == sorted(first)  # the same tasks, each once
     power = [t for t in ordered if t[0] == "power"]
     assert power == [t for t in first if t[0] == "power"]  # stable within a kind
+    chunks = cal.running_order(tasks)
+    assert chunks[0] == ordered and len(chunks) == len(cal.rounds(tasks))
+    (whole,) = cal.running_order(tasks, curtail=False)  # one submission, round by round
+    assert whole == [t for c in chunks for t in c]
 
 
 def test_a_curtailed_run_leaves_out_a_decided_candidates_replicates(
