@@ -37,10 +37,9 @@ at the fitted 0.9 size alone, the size the achievable target is judged at, and t
 outside the candidates (40 + 10 per candidate + 20, fewer once a target is decided: about
 2.2 h on two cores, replayed from the diagnoses' recorded times in
 ``reports/calibration.md``'s run, in :data:`KIND_ORDER`); ``all`` adds the other three
-sizes. Ten
-replicates a size tell a candidate named 8 of 10 only to a Wilson 95 % interval of about
-0.49-0.94, and 40 clean ones bound the false-alarm rate at about 0.09 (the report computes
-its own band).
+sizes. Ten replicates a size tell a candidate named 8 of 10 only to a Wilson 95 % interval
+of about 0.49-0.94, and 40 clean ones bound the false-alarm rate at about 0.09 (the report
+computes its own band).
 
 The mesh-error rule (``--mesh-error``, one of
 :data:`bayesplate.discrepancy.search.mesh_error.MESH_ERROR_PARTS`; default diagnose's
@@ -484,7 +483,10 @@ def absorbed(size_table, quick=False, widen=None, power=False):
 
 
 def tasks(size_table, quick=False, plan="all"):
-    """Every replicate, in running order: ``(kind, family, effect, size label, size, rep)``.
+    """Every replicate, in the plan's order: ``(kind, family, effect, size label, size, rep)``.
+
+    The workers get them round by round, each round's longest kinds first
+    (:func:`running_order`).
 
     First the size that decides the target (the fitted test's 0.9) replicate by replicate
     across the candidates, each round followed by two clean replicates of each family; then,
