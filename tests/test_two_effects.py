@@ -5,7 +5,7 @@ pairs are fitted and which is chosen, not the fitting, which the slow test of
 ``test_verdict.py`` runs on a real plate.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import SimpleNamespace
 
 import pytest
@@ -57,6 +57,17 @@ def _singles():
     return physics, ranked
 
 
+@dataclass(frozen=True)
+class _Fitting:
+    """The fields of :class:`~bayesplate.discrepancy.search.state.Fitting` the stage reads."""
+
+    say: object
+    model: object = None
+    scans: dict = field(default_factory=dict)
+    margin: float = 1.0
+    threshold: float = 3.0
+
+
 def _run(monkeypatch, pairs_gain_chi2, enough=None):
     """two_effects with stand-in fits; returns (chosen, pairs, names fitted per turn, said)."""
     turns = []
@@ -65,7 +76,9 @@ def _run(monkeypatch, pairs_gain_chi2, enough=None):
         first = leader.fit.physics
         return [_Pair(first, p) for p in physics if p.name != first.name]
 
-    def rank(physics_list, **_):
+    def rank(physics_list, fitting):
+        # ranked by the pairs' bars: over the best single gain (565), not the nominal's
+        assert (fitting.margin, fitting.threshold) == (565.0 + 1.0 - 0.2 * 565.0, 568.0)
         turns.append(sorted(frozenset((p.first.name, p.second.name)) for p in physics_list))
         out = []
         for p in physics_list:
@@ -77,7 +90,7 @@ def _run(monkeypatch, pairs_gain_chi2, enough=None):
     monkeypatch.setattr(stage, "rank", rank)
     physics, ranked = _singles()
     said = []
-    fitting = SimpleNamespace(model=None, scans={}, say=said.append)
+    fitting = _Fitting(say=said.append)
     chosen, pairs, stopped = stage.two_effects(
         ranked[0], ranked, physics, fitting, 3.0, 0.01, M, enough=enough
     )
@@ -144,3 +157,27 @@ def test_the_later_turn_runs_when_the_unnamed_change_is_not_ahead_by_its_margin(
     table = _table(("point_mass", "misalignment"))
     chosen, pairs, turns, _ = _run(monkeypatch, table, enough=_unnamed_at(gain))
     assert len(turns) == 2 and chosen.name == "point_mass+misalignment"
+
+
+def _rough(gain):
+    """A candidate's result left on its coarse reduced model, gaining ``gain``."""
+    fit = SimpleNamespace(refined=False, rough_optima=[object()], check=None)
+    return SimpleNamespace(name="pair", parameters={}, fit=fit, log_evidence_gain=gain, failed="")
+
+
+def test_pairs_that_cannot_be_chosen_are_left_on_the_coarse_mesh():
+    from bayesplate.discrepancy.search import rank
+
+    # the calibration study's fifth edge notch (60 x 30): the stiffness loss gained +6.0
+    # alone; its nine pairs' rough gains, of which the best was +5.9 refined
+    best = SimpleNamespace(log_evidence_gain=6.0)
+    bars = stage.pair_fitting(_Fitting(say=None), best, 3.0)
+    assert bars.margin == pytest.approx(6.0 + 1.0 - 0.2 * 6.0) and bars.threshold == 9.0
+    notch = [_rough(g) for g in (-1.9, 3.7, 5.3, 1.3, 2.8, 1.3, -1.6, 0.2, 2.1)]
+    assert rank._within_reach(notch, bars.margin) == []
+    assert rank._rivals(notch, bars.threshold, bars.margin) == []
+    # a pair whose rough gain is within the margin of the best single one's is refined
+    near = [*notch, _rough(6.5)]
+    assert rank._within_reach(near, bars.margin) == [9]
+    # against the nominal model's bars, as a single candidate's, six of the nine would be
+    assert len(rank._within_reach(notch, 1.0)) == 6
