@@ -318,44 +318,41 @@ def test_cli_hierarchical_refuses_other_priors_in_one_line(case_files, tmp_path,
     assert "several case files" in capsys.readouterr().err
 
 
-@pytest.mark.slow
-def test_cli_hierarchical_on_the_pool_writes_table_json_netcdf_figure(case_files, tmp_path, capsys):
+#: the sampler's options of the pool's runs (the hierarchical command and the batch's step)
+_POOL = ["--seed", "1", "--workers", "2", "--min-ess", "400", "--max-steps", "20000"]
+_POOL += ["--walkers", "24"]
+
+
+@pytest.fixture(scope="module")
+def pool_run(case_files, tmp_path_factory):
+    """``sample --hierarchical`` on the pool: (output folder, standard output, JSON)."""
+    import contextlib
+    import io
     import json
 
     from bayesplate.cli.main import main
+
+    folder = tmp_path_factory.mktemp("pool")
+    argv = ["sample", *map(str, case_files), "--hierarchical", *_POOL, "-o", str(folder)]
+    argv += ["--out", str(folder / "pop.nc"), "--json", str(folder / "pop.json")]
+    stdout = io.StringIO()
+    with contextlib.redirect_stdout(stdout):
+        status = main(argv)
+    assert status == 0
+    return folder, stdout.getvalue(), json.loads((folder / "pop.json").read_text())
+
+
+@pytest.mark.slow
+def test_cli_hierarchical_on_the_pool_writes_table_json_netcdf_figure(pool_run):
     from bayesplate.sampling.stopping import load_arviz
 
-    out = tmp_path / "pop.json"
-    argv = [
-        "sample",
-        *map(str, case_files),
-        "--hierarchical",
-        "--seed",
-        "1",
-        "--workers",
-        "2",
-        "--min-ess",
-        "400",
-        "--max-steps",
-        "20000",
-        "--walkers",
-        "24",
-        "-o",
-        str(tmp_path),
-        "--out",
-        str(tmp_path / "pop.nc"),
-        "--json",
-        str(out),
-    ]
-    assert main(argv) == 0
-    text = capsys.readouterr().out
+    folder, text, doc = pool_run
     assert "4 plates of one material" in text and "P(outlier)" in text and "E1_GPa" in text
-    doc = json.loads(out.read_text())
     assert doc["status"] == "converged" and len(doc["plates"]) == 4
     assert doc["chain"]["rhat_max"] < 1.01
-    idata = load_arviz().from_netcdf(str(tmp_path / "pop.nc"))
+    idata = load_arviz().from_netcdf(str(folder / "pop.nc"))
     assert idata.posterior["plate"].shape[-2:] == (4, 6)
-    assert (tmp_path / "population.png").stat().st_size > 0
+    assert (folder / "population.png").stat().st_size > 0
 
 
 def test_mixture_in_y_puts_both_forms_on_one_level(study, rng):
@@ -377,21 +374,23 @@ def test_mixture_in_y_puts_both_forms_on_one_level(study, rng):
 
 
 @pytest.mark.slow
-def test_batch_population_step_writes_the_population(case_files, tmp_path, capsys):
-    """``batch --steps population``: the folder's cases as one population, as ``--hierarchical``."""
+def test_batch_population_step_is_the_hierarchical_command(case_files, pool_run, tmp_path, capsys):
+    """``batch --steps population``: the folder's cases as one population, with the numbers
+    of ``sample --hierarchical`` on the same files and options."""
     import json
     from pathlib import Path
+
+    from test_interrupt import _same_numbers
 
     from bayesplate.cli.main import main
 
     out = tmp_path / "out"
-    argv = ["batch", str(case_files[0].parent), "-o", str(out), "--steps", "population"]
-    argv += ["--seed", "1", "--workers", "2", "--min-ess", "400", "--max-steps", "20000"]
+    argv = ["batch", str(case_files[0].parent), "-o", str(out), "--steps", "population", *_POOL]
     assert main(argv) == 0
     assert "4 plates of one material" in capsys.readouterr().out
     doc = json.loads((out / "population.json").read_text())
-    assert doc["status"] == "converged" and len(doc["plates"]) == 4
     names = sorted(Path(p["file"]).name for p in doc["plates"])
     assert names == sorted(f.name for f in case_files)
+    _same_numbers(doc, pool_run[2])
     assert (out / "population.nc").stat().st_size > 0
     assert (out / "population.png").stat().st_size > 0
