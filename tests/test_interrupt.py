@@ -203,7 +203,7 @@ def test_sample_killed_again_and_again_resumes_to_the_same_numbers(tmp_path, sam
 
 # ----------------------------------------------------------------------------- report
 
-_REPORT = ["report", CASE, "--quick", "--mesh", 6, 4, "--seed", 5, "--no-diagnose", "-o", "rep"]
+_REPORT = ["report", "plate1", "--quick", "--seed", 5, "--no-diagnose", "-o", "rep"]
 
 
 def _cache_numbers(folder):
