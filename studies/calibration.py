@@ -34,9 +34,9 @@ estimate elsewhere.
 
 The plan (``--sizes``): ``target`` (the default) runs the clean replicates, each candidate
 at the fitted 0.9 size alone, the size the achievable target is judged at, and the effects
-outside the candidates (40 + 10 per candidate + 20, fewer once a target is decided: about
-2.2 h on two cores, replayed from the diagnoses' recorded times in
-``reports/calibration.md``'s run, in :data:`KIND_ORDER`); ``all`` adds the other three
+outside the candidates (40 + 10 per candidate + 20, fewer once a target is decided: 147 min
+on two cores in ``reports/calibration.md``'s run at e1a1e85, about 21 min of it the size
+tables and the report's figures, computed once per code version); ``all`` adds the other three
 sizes. Ten replicates a size tell a candidate named 8 of 10 only to a Wilson 95 % interval
 of about 0.49-0.94, and 40 clean ones bound the false-alarm rate at about 0.09 (the report
 computes its own band).
@@ -571,10 +571,10 @@ def rounds(todo):
 
 
 #: The order a round's tasks are handed to the workers in, the longest kinds first: on
-#: 60 x 30 an effect outside the candidates took a median 47-436 s a diagnosis, a candidate
-#: 66-200 s, a clean plate 28-58 s. Run last, one long diagnosis kept a worker busy while
-#: the other waited at the round's end; replayed on the recorded times of the target plan
-#: (two workers, rounds as run), this order takes 0.90 of the wall time.
+#: 60 x 30 an effect outside the candidates took a median 49-284 s a diagnosis, a candidate
+#: 131-175 s, a clean plate 33-43 s (e1a1e85). Run last, one long diagnosis kept a worker
+#: busy while the other waited at the round's end; replayed on the recorded times of the
+#: target plan (two workers, rounds as run, 8976d20), this order takes 0.90 of the wall time.
 KIND_ORDER = ("outside", "power", "clean")
 
 

@@ -136,6 +136,6 @@ def two_effects(best, ranked, physics, fitting, threshold, alpha, m, leaders=Non
         top = max(
             (c for c in fitted if c.fit.refined), default=None, key=lambda c: c.log_evidence_gain
         )
-        if top is not None and top.log_evidence_gain > best.log_evidence_gain + threshold:
+        if top is not None and top.log_evidence_gain > ranking.threshold:  # g + threshold
             chosen = top
     return chosen, sorted(fitted, key=lambda c: -c.log_evidence_gain), stopped
