@@ -319,8 +319,8 @@ def test_cli_hierarchical_refuses_other_priors_in_one_line(case_files, tmp_path,
 
 
 #: the sampler's options of the pool's runs (the hierarchical command and the batch's step)
-_POOL = ["--seed", "1", "--workers", "2", "--min-ess", "400", "--max-steps", "20000"]
-_POOL += ["--walkers", "24"]
+_POOL = ["--seed", "1", "--workers", "2", "--walkers", "24", "--min-ess", "400"]
+_POOL += ["--max-steps", "20000"]
 
 
 @pytest.fixture(scope="module")
@@ -389,6 +389,7 @@ def test_batch_population_step_is_the_hierarchical_command(case_files, pool_run,
     assert main(argv) == 0
     assert "4 plates of one material" in capsys.readouterr().out
     doc = json.loads((out / "population.json").read_text())
+    assert doc["status"] == "converged" and len(doc["plates"]) == 4
     names = sorted(Path(p["file"]).name for p in doc["plates"])
     assert names == sorted(f.name for f in case_files)
     _same_numbers(doc, pool_run[2])
