@@ -23,21 +23,22 @@ def cpu():
     return platform.machine()
 
 
-def code_version(root=None):
+def code_version(root=None, paths=("bayesplate", "studies")):
     """The last commit that changed the package or the studies (``+modified`` when they differ
     from it): a commit of documents or reports alone leaves a study's cached rows current.
-    ``root``: the repository (default this one)."""
+    ``root``: the repository (default this one); ``paths``: in it, the code that counts
+    (default the package and the studies)."""
     root = pathlib.Path(__file__).resolve().parents[1] if root is None else root
     try:
         head = subprocess.run(
-            ["git", "log", "-1", "--format=%h", "--", "bayesplate", "studies"],
+            ["git", "log", "-1", "--format=%h", "--", *paths],
             cwd=root,
             text=True,
             capture_output=True,
             check=True,
         ).stdout.strip()
         dirty = subprocess.run(
-            ["git", "status", "--porcelain", "--", "bayesplate", "studies"],
+            ["git", "status", "--porcelain", "--", *paths],
             cwd=root,
             text=True,
             capture_output=True,

@@ -44,6 +44,7 @@ from bayesplate.laminate import (
 from bayesplate.parallel import fork_map
 from bayesplate.quantities import ENGINEERING_NAMES
 from studies import calibration as cal  # its effects, sizes and meshes
+from studies import calibration_sizes as cal_sizes  # its tests' noncentralities and power
 from studies._study_host import code_version, cpu, utc_now
 
 REPORT = "nonlinear_absorption.md"
@@ -132,8 +133,8 @@ def plate(quick=False):
 
 def _recorded(fitted, widening, dof):
     """:func:`calibration.recorded_noise_power` of an :class:`Exact` fit, seeded."""
-    return cal.recorded_noise_power(
-        fitted.residual, fitted.jacobian, widening, dof, np.random.default_rng(cal.DRAWS_SEED)
+    return cal_sizes.recorded_noise_power(
+        fitted.residual, fitted.jacobian, widening, dof, np.random.default_rng(cal_sizes.DRAWS_SEED)
     )
 
 
@@ -178,7 +179,9 @@ def row(task, plated, widening=None):
         widened = {
             "widening": float(np.median(widening)),
             "widened_prior_term": fitted.prior_term,
-            "widened_linearised": cal.fitted_noncentrality(delta, nominal.sensitivities, wide),
+            "widened_linearised": cal_sizes.fitted_noncentrality(
+                delta, nominal.sensitivities, wide
+            ),
             "widened_exact": fitted.chi2,
             "recorded_noise_power": power,
             "working_exact": seen.chi2,
@@ -192,7 +195,7 @@ def row(task, plated, widening=None):
         "size": float(size),
         "m": int(m),
         "ideal": float(np.sum((delta / sigma) ** 2)),
-        "linearised": cal.fitted_noncentrality(delta, nominal.sensitivities, sigma),
+        "linearised": cal_sizes.fitted_noncentrality(delta, nominal.sensitivities, sigma),
         "exact": free.chi2,
         "exact_ratio": (engineering_from_stiffness(free.b) / truth).tolist(),
         "prior_chi2": held.chi2,
@@ -326,7 +329,7 @@ def report(rows, quick, facts):
             "part) and its power (`m - 6` dof, 1 %) read as if the noise were as wide as the "
             "widened deviations; then its power with the noise as recorded (sd 0.2 %, not "
             "widened: the statistic is a generalised chi-square, whose tail is drawn from "
-            f"{cal.DRAWS:,} seeded noise vectors, `calibration.recorded_noise_power`); then "
+            f"{cal_sizes.DRAWS:,} seeded noise vectors, `calibration.recorded_noise_power`); then "
             "diagnose's nominal problem without its noise: the plate's model on diagnose's "
             "working mesh (half as fine each way as the recordings') fitted exactly to the "
             "recordings' eigenvalues with the same deviations and prior, its chi-square, "

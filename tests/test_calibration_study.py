@@ -9,6 +9,7 @@ import pytest
 from scipy.stats import chi2
 
 from studies import calibration as cal
+from studies import calibration_sizes as cal_sizes
 from studies import outside_effects as outside
 
 
@@ -34,7 +35,7 @@ def test_no_effect_rejects_at_the_significance_level():
 
 @pytest.mark.parametrize("power", [0.5, 0.9, 0.99])
 def test_the_noncentrality_found_gives_the_power_asked(power):
-    lam = cal.noncentrality_for(power, 14)
+    lam = cal_sizes.noncentrality_for(power, 14)
     assert cal.ideal_power(lam, 14) == pytest.approx(power, abs=1e-9)
 
 
@@ -43,9 +44,9 @@ def test_size_for_inverts_a_power_law_exactly():
     grid = np.geomspace(0.01, 3.0, 8)
     lams = 40.0 * grid**2
     for target in (0.5, 7.0, 300.0):
-        assert cal.size_for(grid, lams, target) == pytest.approx(np.sqrt(target / 40.0))
-    assert cal.size_for(grid, lams, 1e6) is None  # beyond the largest admissible size
-    assert cal.size_for(grid, lams, 1e-9) == grid[0]
+        assert cal_sizes.size_for(grid, lams, target) == pytest.approx(np.sqrt(target / 40.0))
+    assert cal_sizes.size_for(grid, lams, 1e6) is None  # beyond the largest admissible size
+    assert cal_sizes.size_for(grid, lams, 1e-9) == grid[0]
 
 
 def test_a_name_counts_when_explained_or_among_the_two_ambiguous_ones():
@@ -90,16 +91,16 @@ def test_quick_study_runs_and_clean_plates_are_consistent(tmp_path, monkeypatch)
     # absorb part of the effect, so the ideal test (true constants) sees more than its own
     # 0.9 noncentrality there, and what the constants leave is the fitted test's 0.9 one
     assert power["size_label"] == "fitted 0.9" and power["code"]
-    assert power["ideal_lambda"] > 0.8 * cal.noncentrality_for(0.9, 14)
-    (left,) = [lam for lam in cal.absorbed(stored["sizes"], quick=True)["point_mass"][:1]]
-    assert left == pytest.approx(cal.noncentrality_for(0.9, 14 - 6), rel=0.3)
+    assert power["ideal_lambda"] > 0.8 * cal_sizes.noncentrality_for(0.9, 14)
+    (left,) = [lam for lam in cal_sizes.absorbed(stored["sizes"], quick=True)["point_mass"][:1]]
+    assert left == pytest.approx(cal_sizes.noncentrality_for(0.9, 14 - 6), rel=0.3)
     # its power with the noise drawn (not widened: the declared deviations) is the noncentral
     # chi-square's at that noncentrality (closed form), to the Monte Carlo's error
-    (drawn,) = cal.absorbed(stored["sizes"], quick=True, power=True)["point_mass"][:1]
+    (drawn,) = cal_sizes.absorbed(stored["sizes"], quick=True, power=True)["point_mass"][:1]
     assert drawn == pytest.approx(cal.ideal_power(left, 14 - 6), abs=0.004)
-    widened = cal.absorbed(stored["sizes"], quick=True, widen=cal.widening(quick=True), power=True)[
-        "point_mass"
-    ][0]
+    widened = cal_sizes.absorbed(
+        stored["sizes"], quick=True, widen=cal_sizes.widening(quick=True), power=True
+    )["point_mass"][0]
     assert widened < drawn  # the widened test is the weaker
     assert (tmp_path / f"{cal.report_name(None, quick=True)}.png").exists()
     monkeypatch.setattr(cal, "run_task", None)  # everything must come from the cache now
@@ -114,11 +115,11 @@ def test_what_the_constants_can_mimic_leaves_no_noncentrality():
     S = rng.standard_normal((14, 6))
     sigma = rng.uniform(0.5, 2.0, 14)
     mimic = S @ rng.standard_normal(6)
-    assert cal.fitted_noncentrality(mimic, S, sigma) == pytest.approx(0.0, abs=1e-18)
+    assert cal_sizes.fitted_noncentrality(mimic, S, sigma) == pytest.approx(0.0, abs=1e-18)
     A = S / sigma[:, None]
     q, _ = np.linalg.qr(A, mode="complete")
     r = q[:, 6:] @ rng.standard_normal(8)  # whitened, orthogonal to the span of A
-    assert cal.fitted_noncentrality(r * sigma, S, sigma) == pytest.approx(np.sum(r**2))
+    assert cal_sizes.fitted_noncentrality(r * sigma, S, sigma) == pytest.approx(np.sum(r**2))
 
 
 def _noncentrality_for_power(power, dof, alpha=0.01):
@@ -146,7 +147,7 @@ def test_fitted_size_of_a_linear_effect_is_known_in_closed_form():
     mimic = S @ rng.standard_normal(6) * 50.0  # large, and entirely absorbed
     grid = np.geomspace(0.1, 10.0, 9)
     deltas = [s * (mimic + sigma * u) for s in grid]
-    found, lams = cal.fitted_size(grid, deltas, S, sigma, 0.9)
+    found, lams = cal_sizes.fitted_size(grid, deltas, S, sigma, 0.9)
     assert lams == pytest.approx(9.0 * grid**2, rel=1e-9)
     lam90 = _noncentrality_for_power(0.9, m - 6)
     assert found == pytest.approx(np.sqrt(lam90 / 9.0), rel=1e-6)
@@ -253,6 +254,64 @@ def test_a_run_resumes_from_its_versions_rows_and_a_new_version_starts_afresh(
     stored = cal.main(tmp_path, quick=True, workers=1)
     assert ran == keys and {r["code"] for r in stored["rows"].values()} == {"def5678"}
     assert len(rows_path.read_text().splitlines()) == len(keys)  # the older rows untouched
+
+
+def test_a_new_code_version_keeps_the_size_table_its_inputs_made(
+    tmp_path, monkeypatch, package_log_level
+):
+    """The size table is computed again when the code it runs on changes, not when diagnose
+    alone does: a new code version with the same inputs reads the kept table."""
+    made = []
+
+    def sizes(quick=False):
+        made.append(quick)
+        return _table()
+
+    monkeypatch.setattr(cal, "sizes", sizes)
+    monkeypatch.setattr(cal, "run_task_recorded", lambda task, *a, **k: _row(task, "x"))
+    monkeypatch.setattr(cal, "write_report", lambda out_dir, stored, quick, workers: stored)
+    monkeypatch.setattr(cal, "tasks", lambda table, quick=False, plan_=None: [])
+    for code, inputs, runs in (("abc1234", "1111111", 1), ("def5678", "1111111", 1)):
+        monkeypatch.setattr(cal, "code_version", lambda code=code: code)
+        monkeypatch.setattr(cal_sizes, "inputs_version", lambda inputs=inputs: inputs)
+        assert cal.main(tmp_path, quick=True, workers=1)["sizes"] == _table()
+        assert len(made) == runs
+    assert cal_sizes.table_path(tmp_path, True, version="1111111").exists()
+    monkeypatch.setattr(cal_sizes, "inputs_version", lambda: "2222222")  # the elements changed
+    monkeypatch.setattr(cal, "code_version", lambda: "0123abc")
+    cal.main(tmp_path, quick=True, workers=1)
+    assert len(made) == 2
+
+
+def test_the_size_tables_inputs_hold_every_function_it_calls():
+    """Every function of the package or the studies that the size table and its figures run
+    (traced on the quick meshes) lies in one of ``INPUTS``, the paths whose version keys it."""
+    import pathlib
+    import sys
+
+    root = pathlib.Path(cal_sizes.__file__).resolve().parents[1]
+    called = set()
+
+    def trace(frame, event, arg):
+        if event == "call":
+            called.add(frame.f_code.co_filename)
+
+    sys.setprofile(trace)
+    try:
+        table = cal_sizes.sizes(quick=True)
+        cal_sizes.figures(table, quick=True)
+    finally:
+        sys.setprofile(None)
+    ours = set()
+    for name in called:
+        path = pathlib.Path(name).resolve()
+        if path.is_relative_to(root) and path.parts[len(root.parts)] in ("bayesplate", "studies"):
+            ours.add(path.relative_to(root).as_posix())
+    assert "bayesplate/fem/eigen.py" in ours and "studies/recordings.py" in ours
+    outside_inputs = sorted(
+        p for p in ours if not any(p == i or p.startswith(i + "/") for i in cal_sizes.INPUTS)
+    )
+    assert outside_inputs == []
 
 
 def test_tasks_run_the_fitted_size_first_with_clean_replicates_between_its_rounds():
@@ -444,13 +503,13 @@ def test_a_replicate_that_raises_is_recorded(monkeypatch):
 def test_the_widening_is_the_one_diagnose_applies(rule):
     """The deviations diagnose reports it tested against, over the recordings' own."""
     case, model, fine = cal._models("frederiksen_t300", True)
-    f = np.sort(cal._frequencies(case, fine))
+    f = np.sort(cal_sizes._frequencies(case, fine))
     blind = case.with_measured(frequency_Hz=f, sigma_Hz=cal.NOISE * f)
     d = cal.diagnose(blind, model=model, rng=1, pairing="order", mesh_error_part=rule)
     if rule == "corrected":  # estimated at the first nominal fit; d.nominal is the second
-        widen, rel = cal.widening(quick=True, rule=rule, b=d.nominal.b), 0.1
+        widen, rel = cal_sizes.widening(quick=True, rule=rule, b=d.nominal.b), 0.1
     else:
-        widen, rel = cal.widening(quick=True, frequency_Hz=f, rule=rule), 0.02
+        widen, rel = cal_sizes.widening(quick=True, frequency_Hz=f, rule=rule), 0.02
     assert widen.max() > 1.0  # the coarse quick mesh's error is widened in
     assert d.sigma_Hz / (cal.NOISE * f) == pytest.approx(widen, rel=rel)
 
@@ -465,7 +524,7 @@ def test_the_aimed_test_of_the_fitted_model_rejects_at_the_bound():
     sigma = rng.uniform(0.5, 2.0, m)
     A = S / sigma[:, None]
     effect = rng.standard_normal(m) * sigma * 1.3  # some of it in the span of S
-    lam = cal.fitted_noncentrality(effect, S, sigma)
+    lam = cal_sizes.fitted_noncentrality(effect, S, sigma)
     r = effect / sigma
     coef, *_ = np.linalg.lstsq(A, r, rcond=None)
     left = r - A @ coef
@@ -487,7 +546,7 @@ def test_most_of_the_mesh_error_is_what_the_constants_absorb():
     # lengthens a vector. (Diagnose's Richardson estimate is far off on a mesh this coarse:
     # 103 deviations RMS against the actual 56, 44 % of it left; on the study's 40 x 20 mesh
     # 1.27 against 1.00, 3 % left: reports/calibration.md.)
-    left = cal.mesh_error_left(quick=True)
+    left = cal_sizes.mesh_error_left(quick=True)
     for label in ("estimated", "actual"):
         assert 0.0 <= left[f"{label}_left"] <= left[label] <= left[f"{label}_max"]
     assert left["actual_left"] < 0.25 * left["actual"]
@@ -528,11 +587,11 @@ def test_the_report_counts_the_outside_effects_by_outcome():
 def test_the_fitted_size_is_the_measured_one_where_there_is_one():
     """The fitted 0.9 size is the fitted test's measured one (reports/fitted_test.md) where
     measured, and the quick mode keeps the linearised one."""
-    assert cal.FITTED_MEASURED["point_mass"] == 0.24  # 10 of 10 rejected there
-    assert "thickness_taper" not in cal.FITTED_MEASURED
+    assert cal_sizes.FITTED_MEASURED["point_mass"] == 0.24  # 10 of 10 rejected there
+    assert "thickness_taper" not in cal_sizes.FITTED_MEASURED
     quick = cal.sizes(quick=True)["point_mass"]
     assert quick["measured"] is False
-    for name, size in cal.FITTED_MEASURED.items():  # each inside its candidate's grid
+    for name, size in cal_sizes.FITTED_MEASURED.items():  # each inside its candidate's grid
         grid = cal.EFFECTS[name][3]
         assert grid[0] < size < grid[-1]
 

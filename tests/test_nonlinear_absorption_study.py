@@ -8,7 +8,7 @@ import pytest
 from bayesplate.laminate import stiffness_from_engineering
 from studies import nonlinear_absorption as na
 
-cal = na.cal
+cal, cal_sizes = na.cal, na.cal_sizes
 
 
 @pytest.fixture(scope="module")
@@ -63,7 +63,7 @@ def test_recorded_noise_power_is_the_noncentral_chi_square_without_widening(chi2
     # w = 1, no prior: the fitted test's chi-square is ncx2(m - 6, chi2) (closed form)
     m = 14
     fit = _a_fit(m, chi2, 1)
-    got = cal.recorded_noise_power(
+    got = cal_sizes.recorded_noise_power(
         fit.residual, fit.jacobian, np.ones(m), m - 6, np.random.default_rng(2)
     )
     want = cal.ideal_power(chi2, m - 6) if chi2 > 0 else cal.ALPHA
@@ -78,7 +78,7 @@ def test_recorded_noise_power_under_a_uniform_widening_is_the_scaled_noncentral_
 
     m, w, chi2 = 14, 1.33, 12.0
     fit = _a_fit(m, chi2, 3)
-    got = cal.recorded_noise_power(
+    got = cal_sizes.recorded_noise_power(
         fit.residual, fit.jacobian, np.full(m, w), m - 6, np.random.default_rng(4)
     )
     crit = chi2_dist.ppf(1 - cal.ALPHA, m - 6)
@@ -117,7 +117,7 @@ def test_quick_run_writes_its_report(tmp_path):
     # a calibration cache whose replicates were not widened: the figures at diagnose's
     # deviations are then those at the declared ones
     table = cal.sizes(quick=True)
-    m = cal._case(cal.POWER_FAMILY).measured.size
+    m = cal_sizes._case(cal.POWER_FAMILY).measured.size
     rows = {
         f"r{j}": {"effect": "point_mass", "size": size, "widening": [1.0] * m, "p_value": 0.5}
         for j, size in enumerate(table["point_mass"]["sizes"])
