@@ -28,10 +28,12 @@ again; each row names the code that
 computed it (``code``), also a row carried over from an earlier version whose computation
 is the same. ``--mesh-error RULE`` (a rule other than diagnose's default) diagnoses the
 same replicates under that mesh-error rule alone, without the test, into
-``<version>.rules.jsonl``; the report shows its verdicts in a column of their own. Run:
+``<version>.rules.jsonl``; the report shows its verdicts in a column of their own.
+``--report NAME`` writes ``NAME.md`` instead: sizes measured on other recordings (another
+mesh of them) kept apart from ``fitted_test.md``'s. Run:
 ``python -m studies.fitted_test EFFECT SIZE [--replicates 0 1 ...] [--draws N] [--diagnose]
-[--mesh-error RULE] [--workers 2] [--out DIR]`` (about 5-6 min a replicate on one core
-on 80 x 40 recordings; diagnose alone 0.5-2 min).
+[--mesh-error RULE] [--workers 2] [--out DIR] [--report NAME]`` (about 5-6 min a replicate
+on one core on 80 x 40 recordings, 15-20 min on 120 x 60; diagnose alone 0.5-3 min).
 """
 
 import argparse
@@ -182,10 +184,12 @@ def main(
     workers=1,
     diagnose=False,
     rule=cal.DEFAULT_RULE,
+    report="fitted_test",
 ):
     """Run what the cache lacks (``workers`` replicates at a time; ``diagnose``: diagnose each
-    one too; ``rule`` other than the default: diagnose alone under it); write the report;
-    return this size's rows (the test's, or the rule's)."""
+    one too; ``rule`` other than the default: diagnose alone under it); write the report
+    ``out_dir/<report>.md`` from the rows of this version; return this size's rows (the
+    test's, or the rule's)."""
     version = code_version() + ("-quick" if quick else "")
     cache = pathlib.Path(out_dir) / ".cache" / "fitted_test" / f"{version}.jsonl"
     ruled = cache.with_suffix(".rules.jsonl")
@@ -207,7 +211,7 @@ def main(
         return row
 
     fork_map(one, todo, workers)
-    write_report(out_dir, jsonl_rows(cache), version, jsonl_rows(ruled))
+    write_report(out_dir, jsonl_rows(cache), version, jsonl_rows(ruled), report)
     mine = [r for r in jsonl_rows(path) if (r["effect"], r["size"]) == (effect, size)]
     return [r for r in mine if key(r)[3] == tag]  # of these draws (the test) or this rule
 
@@ -219,15 +223,17 @@ def _said(row):
     return f"{row['rule']}: {row['diagnose']['verdict']}, named {row['diagnose']['named']}"
 
 
-def write_report(out_dir, rows, version, ruled=()):
-    """``fitted_test.md``: every size of the current version, one line a replicate; ``ruled``:
+def write_report(out_dir, rows, version, ruled=(), name="fitted_test"):
+    """``<name>.md``: every size of the current version, one line a replicate; ``ruled``:
     diagnose's rows under other mesh-error rules, a column each."""
     fine = [2 * n for n in cal.FAMILIES[cal.POWER_FAMILY]]  # the recordings' mesh
     lines = [
         "# The fitted test fitted globally",
         "",
         f"Date: {utc_now()}. Machine: {cpu()}, 2 cores. Code: {version}. Made by "
-        "`python -m studies.fitted_test EFFECT SIZE --diagnose` (its docstring says how).",
+        "`python -m studies.fitted_test EFFECT SIZE --diagnose"
+        + ("" if name == "fitted_test" else f" --report {name}")
+        + "` (its docstring says how).",
         "",
         "The calibration study's power replicates (Frederiksen plate, recordings on "
         f"{fine[0]} x {fine[1]}, "
@@ -256,7 +262,7 @@ def write_report(out_dir, rows, version, ruled=()):
         tables += _group(effect, size, draws, mine, theirs, by)
         summary.append((effect, size, mine, by))
     lines += _summary(summary) + tables
-    path = pathlib.Path(out_dir) / "fitted_test.md"
+    path = pathlib.Path(out_dir) / f"{name}.md"
     atomic_write_text(path, "\n".join(lines) + "\n" + _kept_reading(path))
     return path
 
@@ -387,6 +393,7 @@ if __name__ == "__main__":
     parser.add_argument("--workers", type=int, default=1)
     parser.add_argument("--out", default=os.environ.get("STUDY_OUT", "reports"))
     parser.add_argument("--quick", action="store_true")
+    parser.add_argument("--report", default="fitted_test", help="the report's name (no .md)")
     a = parser.parse_args()
     main(
         a.effect,
@@ -398,4 +405,5 @@ if __name__ == "__main__":
         workers=a.workers,
         diagnose=a.diagnose,
         rule=a.mesh_error,
+        report=a.report,
     )

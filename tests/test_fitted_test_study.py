@@ -146,3 +146,7 @@ def test_the_power_table_counts_each_rule_and_the_reading_is_kept(tmp_path):
     ft.write_report(tmp_path, rows, "abc", ruled)
     again = path.read_text()
     assert again.count("## What it shows") == 1 and again.endswith(reading)
+    # another name keeps its own report, and says how it was made
+    other = ft.write_report(tmp_path, rows, "abc", ruled, name="fitted_test_other")
+    assert other.name == "fitted_test_other.md" and path.read_text() == again
+    assert "--diagnose --report fitted_test_other`" in other.read_text()
