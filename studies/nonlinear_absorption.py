@@ -2,7 +2,7 @@
 
 The calibration study sizes its effects, and judges what any method that estimates the
 constants can see, by the noncentrality the fitted nominal model leaves, linearised at the
-true constants (:func:`calibration.fitted_noncentrality`: ``|| (I - A A^+) r ||^2``). A fit
+true constants (:func:`calibration_sizes.fitted_noncentrality`: ``|| (I - A A^+) r ||^2``). A fit
 is not linear: where an effect is large the constants may move far, and a constant the
 frequencies hardly feel near its true value (a transverse shear modulus of a thin plate) can
 take up more than its slope there says. This study fits the six constants to each effect's
@@ -132,7 +132,7 @@ def plate(quick=False):
 
 
 def _recorded(fitted, widening, dof):
-    """:func:`calibration.recorded_noise_power` of an :class:`Exact` fit, seeded."""
+    """:func:`calibration_sizes.recorded_noise_power` of an :class:`Exact` fit, seeded."""
     return cal_sizes.recorded_noise_power(
         fitted.residual, fitted.jacobian, widening, dof, np.random.default_rng(cal_sizes.DRAWS_SEED)
     )
@@ -329,7 +329,8 @@ def report(rows, quick, facts):
             "part) and its power (`m - 6` dof, 1 %) read as if the noise were as wide as the "
             "widened deviations; then its power with the noise as recorded (sd 0.2 %, not "
             "widened: the statistic is a generalised chi-square, whose tail is drawn from "
-            f"{cal_sizes.DRAWS:,} seeded noise vectors, `calibration.recorded_noise_power`); then "
+            f"{cal_sizes.DRAWS:,} seeded noise vectors, "
+            "`calibration_sizes.recorded_noise_power`); then "
             "diagnose's nominal problem without its noise: the plate's model on diagnose's "
             "working mesh (half as fine each way as the recordings') fitted exactly to the "
             "recordings' eigenvalues with the same deviations and prior, its chi-square, "
