@@ -96,9 +96,6 @@ _CI_TIER = {
     "Frederiksen mesh twice (25 s); the module's small plates",
     "test_block_eigen.py::test_frederiksen_50x50_matches_arpack": "the 50 x 50 mesh (13 s)",
     "test_checked_order_study.py": "the study's quick rows are diagnoses (60 s in CI)",
-    "test_diagnose.py::test_workers_do_not_change_the_diagnosis": "two diagnoses (16 s in CI); "
-    "test_diagnose's control diagnosis stays in the quick run",
-    "test_diagnose.py::test_concealed_point_mass_is_named_and_recovered": "130 s in CI",
     "test_diagnose.py::test_a_located_candidate_defined_outside_the_package_is_mapped_scanned_"
     "and_fitted": "81 s in CI",
     "test_diagnose.py::test_control_without_effect_is_consistent": "a diagnosis (84 s); the "

@@ -21,6 +21,8 @@ from bayesplate.io import diagnosis_to_dict, write_json
 
 MESH = (12, 6)
 NOISE = 0.002
+#: The concealed point mass of the recordings below: grams, x and y in mm.
+POINT_MASS = (15.0, 50.0, 30.0)
 
 
 def _plate1_case():
@@ -43,6 +45,28 @@ def model():
     return PlateModel.from_case(_plate1_case(), mesh=MESH)
 
 
+@pytest.fixture(scope="module")
+def nudged_diagnoses(model):
+    """Recordings with a concealed point mass (:data:`POINT_MASS`), diagnosed with the
+    default settings as they are and twice nudged.
+
+    The nudges are 1e-12 relative on the frequencies and the deviations (about what
+    separates two BLAS kernels), one seeded stream. Returns (reference, [nudged, nudged]).
+    """
+    case = _recordings(_plate1_case(), PointMass(), POINT_MASS, seed=2)
+    reference = diagnose(case, model=model, rng=0)
+    rng = np.random.default_rng(16)
+    f, s = case.measured.frequency_Hz, case.measured.sigma_Hz
+    nudged = []
+    for _ in range(2):
+        again = case.with_measured(
+            frequency_Hz=f * (1 + 1e-12 * rng.standard_normal(f.size)),
+            sigma_Hz=s * (1 + 1e-12 * rng.standard_normal(s.size)),
+        )
+        nudged.append(diagnose(again, model=model, rng=0))
+    return reference, nudged
+
+
 def test_control_without_effect_is_consistent(model):
     d = diagnose(_recordings(_plate1_case(), seed=1), model=model, rng=0)
     assert d.verdict == "consistent"
@@ -50,19 +74,10 @@ def test_control_without_effect_is_consistent(model):
     assert all(c.log_evidence_gain < 3.0 for c in d.candidates)
 
 
-def test_workers_do_not_change_the_diagnosis(model):
-    case = _recordings(_plate1_case(), seed=1)
-    one = diagnose(case, model=model, rng=0, n_starts=1)
-    two = diagnose(case, model=model, rng=0, n_starts=1, workers=2)
-    assert two.verdict == one.verdict and two.nominal.chi2 == one.nominal.chi2
-    assert [(c.name, c.log_evidence_gain) for c in two.candidates] == [
-        (c.name, c.log_evidence_gain) for c in one.candidates
-    ]
-
-
-def test_concealed_point_mass_is_named_and_recovered(model, tmp_path):
-    truth = np.array([15.0, 50.0, 30.0])  # 15 g on a 132 g plate at (50, 30) mm
-    d = diagnose(_recordings(_plate1_case(), PointMass(), truth, seed=2), model=model, rng=0)
+@pytest.mark.slow
+def test_concealed_point_mass_is_named_and_recovered(nudged_diagnoses, tmp_path):
+    truth = np.array(POINT_MASS)  # 15 g on a 132 g plate at (50, 30) mm
+    d = nudged_diagnoses[0]  # the recordings as they are
     assert d.p_value < 0.01  # the nominal model is rejected
     assert d.verdict == "explained" and d.chosen.name == "point_mass"
     assert d.refit_p_value > 0.01
@@ -196,10 +211,11 @@ def _assert_decisive_order(d, reference, gap=5.0):
     ``reference`` keeps its order in ``d``.
 
     Runner-ups whose gains lie within a few nats of each other are told apart by fits of
-    several local optima; across 1e-12 nudges of the recordings below, the delamination's
-    gain moved over 121.0-123.5 nats and the local stiffness loss's over 119.2-122.4, and
-    their order swapped (``test_runner_ups_gains_do_not_depend_on_round_off``): only
-    decisive pairs are asserted here.
+    several local optima; across the two 1e-12 nudges of the recordings below, the
+    delamination's gain moved over 120.95-121.35 nats and the local stiffness loss's over
+    120.04-121.18, and their order swapped (2026-12-07;
+    ``test_runner_ups_gains_do_not_depend_on_round_off``): only decisive pairs are asserted
+    here.
     """
     gains = {_variant(c): c.log_evidence_gain for c in reference.candidates}
     rank = {_variant(c): k for k, c in enumerate(d.candidates)}
@@ -213,28 +229,6 @@ def _assert_decisive_order(d, reference, gap=5.0):
 def _variant(c):
     """A candidate's name with its settings (a taper's direction, a cut corner's corner)."""
     return c.name + "".join(v for v in c.parameters.values() if isinstance(v, str))
-
-
-@pytest.fixture(scope="module")
-def nudged_diagnoses(model):
-    """Recordings with a concealed point mass, diagnosed as they are and twice nudged.
-
-    The nudges are 1e-12 relative on the frequencies and the deviations (about what
-    separates two BLAS kernels), one seeded stream. Returns (reference, [nudged, nudged]).
-    """
-    truth = [15.0, 50.0, 30.0]  # as the test above: 15 g on a 132 g plate
-    case = _recordings(_plate1_case(), PointMass(), truth, seed=2)
-    reference = diagnose(case, model=model, rng=0, n_starts=1)
-    rng = np.random.default_rng(16)
-    f, s = case.measured.frequency_Hz, case.measured.sigma_Hz
-    nudged = []
-    for _ in range(2):
-        again = case.with_measured(
-            frequency_Hz=f * (1 + 1e-12 * rng.standard_normal(f.size)),
-            sigma_Hz=s * (1 + 1e-12 * rng.standard_normal(s.size)),
-        )
-        nudged.append(diagnose(again, model=model, rng=0, n_starts=1))
-    return reference, nudged
 
 
 @pytest.mark.slow
@@ -259,9 +253,9 @@ def test_diagnosis_does_not_depend_on_round_off(nudged_diagnoses):
 @pytest.mark.xfail(
     strict=False,
     reason="a defect of the method, not of the test: the located runner-ups' fits end in "
-    "local optima that round-off picks (delamination 121.0-123.5 nats, local stiffness loss "
-    "119.2-122.4 across 1e-12 nudges of the recordings); the verdict, the chosen candidate "
-    "and its numbers do not move",
+    "local optima that round-off picks (delamination 120.95-121.35 nats, local stiffness "
+    "loss 120.04-121.18 across 1e-12 nudges of the recordings, their order swapped); the "
+    "verdict, the chosen candidate and its numbers do not move",
 )
 def test_runner_ups_gains_do_not_depend_on_round_off(nudged_diagnoses):
     reference, nudged = nudged_diagnoses

@@ -133,6 +133,30 @@ def _same_numbers(got, want):
     assert not differ, [(k, a[k], b[k]) for k in differ[:5]]
 
 
+#: Uninterrupted runs, once a test process for this module and tests/test_signals.py:
+#: {command line: (its out.json, wall time in s, s from its `mark` line to its end)}.
+_REFERENCES = {}
+
+
+def _reference(args, folder, mark=None, done=(0,)):
+    """The uninterrupted run of `args` (which writes out.json), made once a process.
+
+    The first call runs it in ``folder / "reference"``; with `mark`, timing the rest of the
+    run from the first line of standard output holding it (:func:`_run_marked`).
+    """
+    key = tuple(map(str, args))
+    if key not in _REFERENCES:
+        cwd = Path(folder) / "reference"
+        cwd.mkdir()
+        if mark is None:
+            (status, err, wall), rest = _run(args, cwd), None
+        else:
+            status, err, wall, rest = _run_marked(args, cwd, mark)
+        assert status in done, err
+        _REFERENCES[key] = (json.loads((cwd / "out.json").read_text()), wall, rest)
+    return _REFERENCES[key]
+
+
 def _whole_json(path, reference):
     """An output file after a kill: absent, or whole with the reference's numbers."""
     if path.exists():
@@ -162,10 +186,9 @@ _SAMPLE_DONE = (0, 1)  # 1: the step cap came first (a short chain on purpose)
 @pytest.fixture(scope="module")
 def sample_reference(tmp_path_factory):
     """An uninterrupted run with its chain file: (JSON document, wall time)."""
-    cwd = tmp_path_factory.mktemp("sample_ref")
-    status, err, wall = _run([*_SAMPLE, "--backend", "chain.h5", "--json", "out.json"], cwd)
-    assert status in _SAMPLE_DONE, err
-    return json.loads((cwd / "out.json").read_text()), wall
+    args = [*_SAMPLE, "--backend", "chain.h5", "--json", "out.json"]
+    reference, wall, _ = _reference(args, tmp_path_factory.mktemp("sample"), done=_SAMPLE_DONE)
+    return reference, wall
 
 
 def _chain_readable(path):
@@ -330,10 +353,7 @@ def _diagnose_killed_and_resumed(tmp_path, sig, fraction, longest=None):
     The killed run and the run again keep their stages in the default folder
     (``.bayesplate-cache/diagnose`` beside ``out.json``). Returns whether the kill landed.
     """
-    status, err, _, rest = _run_marked([*_DIAGNOSE, "--cache", "ref-cache"], tmp_path, _NOMINAL)
-    assert status == 0, err
-    reference = json.loads((tmp_path / "out.json").read_text())
-    (tmp_path / "out.json").unlink()
+    reference, _, rest = _reference([*_DIAGNOSE, "--cache", "ref-cache"], tmp_path, _NOMINAL)
     delay = fraction * rest if longest is None else min(fraction * rest, longest)
     status, err = _interrupt(_DIAGNOSE, tmp_path, sig, delay, _NOMINAL)
     stages = tmp_path / ".bayesplate-cache" / "diagnose"

@@ -348,23 +348,60 @@ def test_full_report_on_plate1(tmp_path):
 def test_readme_first_command_in_a_fresh_environment(tmp_path):
     """The README's first command as a newcomer runs it, in a new virtual environment.
 
-    A plain (not editable) install of this checkout from PyPI's dependencies, so the bundled
-    case files must come with the package; then `bayesplate report frederiksen_t300` with
-    ``--quick``: the full report takes about 10 minutes on a loaded 2-core machine (see the
-    README), too long for CI; --quick runs every step on a coarser mesh.
+    A wheel of this checkout, installed (not editable) in a new environment: every module
+    and bundled case file must come with the package, and the command must run from any
+    folder; then `bayesplate report frederiksen_t300` with ``--quick`` (the full report takes
+    about a minute and a half on a quiet 2-core machine, several on a loaded one; --quick runs
+    every step on a coarser mesh). The dependencies are this environment's, seen from the
+    new one and checked against the wheel's requirements by ``pip check``: `.ci/run` has
+    just installed them from PyPI in a fresh environment of its own, as the README's command
+    does, so installing them a second time here would test nothing more.
     """
+    import sysconfig
+    import zipfile
+
     readme = (REPO / "README.md").read_text()
     assert "bayesplate report frederiksen_t300 -o report" in readme
+    pip = [sys.executable, "-m", "pip"]
+    wheels = tmp_path / "wheels"
+    subprocess.run([*pip, "wheel", "--quiet", "--no-deps", "-w", wheels, REPO], check=True)
+    (wheel,) = wheels.glob("bayesplate-*.whl")
+    with zipfile.ZipFile(wheel) as archive:
+        packed = set(archive.namelist())
+    tree = {
+        p.relative_to(REPO).as_posix()
+        for p in (REPO / "bayesplate").rglob("*")
+        if p.suffix in (".py", ".toml") and "__pycache__" not in p.parts
+    }
+    assert tree <= packed, sorted(tree - packed)  # modules and case files in the wheel
     venv = tmp_path / "venv"
-    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True)
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", venv], check=True)
     bin_dir = venv / ("Scripts" if os.name == "nt" else "bin")
-    pip = [str(bin_dir / "python"), "-m", "pip", "install", "--quiet"]
-    subprocess.run([*pip, "--upgrade", "pip"], check=True)
-    subprocess.run([*pip, str(REPO)], check=True)
+    python = bin_dir / "python"
+    purelib = subprocess.run(
+        [python, "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout.strip()
+    here = sysconfig.get_paths()
+    dependencies = dict.fromkeys((here["purelib"], here["platlib"]))  # after the new one's
+    pathlib.Path(purelib, "dependencies.pth").write_text("\n".join(dependencies) + "\n")
+    subprocess.run([*pip, "--python", python, "install", "--quiet", "--no-deps", wheel], check=True)
+    subprocess.run([*pip, "--python", python, "check"], check=True, capture_output=True)
     out = tmp_path / "report"
     env = {k: v for k, v in os.environ.items() if not k.startswith(("PYTHON", "VIRTUAL_ENV"))}
     env["PATH"] = f"{bin_dir}{os.pathsep}{env.get('PATH', '')}"
     env["MPLBACKEND"] = "Agg"
+    where = subprocess.run(
+        [python, "-c", "import bayesplate; print(bayesplate.__file__)"],
+        cwd=tmp_path,
+        env=env,
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout
+    assert pathlib.Path(where.strip()).is_relative_to(venv), where  # the wheel's, not REPO's
     run = subprocess.run(
         ["bayesplate", "report", "frederiksen_t300", "-o", str(out), "--quick"],
         cwd=tmp_path,

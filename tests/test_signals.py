@@ -35,12 +35,14 @@ import numpy as np
 import pytest
 from test_interrupt import (
     _DIAGNOSE,
+    _NOMINAL,
     _SAMPLE,
     _SAMPLE_DONE,
     _cache_numbers,
     _chain_readable,
     _command,
     _default_sigint,
+    _reference,
     _report_text,
     _run,
     _same_numbers,
@@ -455,10 +457,9 @@ def test_report_stopped_leaves_no_process_and_resumes(tmp_path, full_report_refe
 # diagnose on two forked workers (test_interrupt's settings)
 @pytest.fixture(scope="module")
 def diagnose_reference(tmp_path_factory):
-    cwd = tmp_path_factory.mktemp("diagnose_ref")
-    status, err, _ = _run([*_DIAGNOSE, "--cache", "ref-cache"], cwd)
-    assert status == 0, err
-    return json.loads((cwd / "out.json").read_text())
+    # test_interrupt's (one run in a process that runs both modules)
+    folder = tmp_path_factory.mktemp("diagnose")
+    return _reference([*_DIAGNOSE, "--cache", "ref-cache"], folder, _NOMINAL)[0]
 
 
 @pytest.mark.slow
@@ -478,10 +479,8 @@ _SAMPLE_POOL = [*_SAMPLE, "--workers", 2, "--backend", "chain.h5", "--json", "ou
 
 @pytest.fixture(scope="module")
 def serial_sample_reference(tmp_path_factory):
-    cwd = tmp_path_factory.mktemp("sample_ref")
-    status, err, _ = _run([*_SAMPLE, "--backend", "chain.h5", "--json", "out.json"], cwd)
-    assert status in _SAMPLE_DONE, err
-    return json.loads((cwd / "out.json").read_text())
+    args = [*_SAMPLE, "--backend", "chain.h5", "--json", "out.json"]
+    return _reference(args, tmp_path_factory.mktemp("sample"), done=_SAMPLE_DONE)[0]
 
 
 @pytest.mark.slow
