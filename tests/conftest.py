@@ -185,24 +185,27 @@ _CI_TIER = {
 
 
 def pytest_configure(config):
-    missing = {name.split("::")[0] for name in _CI_TIER} - {
-        p.name for p in Path(__file__).parent.glob("test_*.py")
-    }
+    here = Path(__file__).parent
+    missing = {name.split("::")[0] for name in _CI_TIER} - {p.name for p in here.glob("test_*.py")}
     if missing:  # a renamed module would silently join the quick run
         raise pytest.UsageError(f"tests/conftest.py _CI_TIER names no module: {sorted(missing)}")
+    # a renamed test would silently join the quick run: each named test is defined in its
+    # module (read from the source, so that running a few tests by name checks it too)
+    stale = [
+        key
+        for key in _CI_TIER
+        if "::" in key
+        and f"def {key.split('::')[1]}(" not in (here / key.split("::")[0]).read_text()
+    ]
+    if stale:
+        raise pytest.UsageError(f"tests/conftest.py _CI_TIER names no test: {stale}")
 
 
 @pytest.hookimpl(tryfirst=True)  # before `-m` deselects by marker
 def pytest_collection_modifyitems(items):
     """Mark the tests of the ci tier (`_CI_TIER`) with `ci`."""
-    named = {key for key in _CI_TIER if "::" in key}
     for item in items:
         name = item.path.name
         test = f"{name}::{getattr(item, 'originalname', item.name)}"
         if name in _CI_TIER or test in _CI_TIER:
             item.add_marker(pytest.mark.ci)
-            named.discard(test)
-    collected = {item.path.name for item in items}
-    stale = sorted(key for key in named if key.split("::")[0] in collected)
-    if stale:  # a renamed test would silently join the quick run
-        raise pytest.UsageError(f"tests/conftest.py _CI_TIER names no test: {stale}")
