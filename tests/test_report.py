@@ -388,7 +388,8 @@ def test_readme_first_command_in_a_fresh_environment(tmp_path):
     dependencies = dict.fromkeys((here["purelib"], here["platlib"]))  # after the new one's
     pathlib.Path(purelib, "dependencies.pth").write_text("\n".join(dependencies) + "\n")
     subprocess.run([*pip, "--python", python, "install", "--quiet", "--no-deps", wheel], check=True)
-    subprocess.run([*pip, "--python", python, "check"], check=True, capture_output=True)
+    checked = subprocess.run([*pip, "--python", python, "check"], capture_output=True, text=True)
+    assert checked.returncode == 0, checked.stdout + checked.stderr  # what is missing, named
     out = tmp_path / "report"
     env = {k: v for k, v in os.environ.items() if not k.startswith(("PYTHON", "VIRTUAL_ENV"))}
     env["PATH"] = f"{bin_dir}{os.pathsep}{env.get('PATH', '')}"
