@@ -134,7 +134,7 @@ def _same_numbers(got, want):
 
 
 #: Uninterrupted runs, once a test process for this module and tests/test_signals.py:
-#: {command line: (its out.json, wall time in s, s from its `mark` line to its end)}.
+#: {(command line, mark): (its out.json, wall time in s, s from its `mark` line to its end)}.
 _REFERENCES = {}
 
 
@@ -144,7 +144,7 @@ def _reference(args, folder, mark=None, done=(0,)):
     The first call runs it in ``folder / "reference"``; with `mark`, timing the rest of the
     run from the first line of standard output holding it (:func:`_run_marked`).
     """
-    key = tuple(map(str, args))
+    key = (tuple(map(str, args)), mark)  # with the mark: a caller timing it gets the time
     if key not in _REFERENCES:
         cwd = Path(folder) / "reference"
         cwd.mkdir()
