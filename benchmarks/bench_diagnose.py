@@ -162,7 +162,9 @@ def write_report(rows, base_rows, info, out_dir, base_label, started):
         f"Targets: median under {TARGET_MEDIAN_S:.0f} s, worst under {TARGET_WORST_S:.0f} s. "
         f"Here: median {med:.0f} s, worst {worst:.0f} s over {len(rows)} recordings: "
         + ("met." if med < TARGET_MEDIAN_S and worst < TARGET_WORST_S else "NOT met."),
-        f"Issue 40's: median within 1.2 x {ISSUE40_MEDIAN_S:.0f} s, none over "
+        f"Issue 40's, applied to these recordings (its {ISSUE40_MEDIAN_S:.0f} s is the median "
+        f"on the recordings kept back; with its code as the base, the last line carries it "
+        f"over): median within 1.2 x {ISSUE40_MEDIAN_S:.0f} s, none over "
         f"{ISSUE40_WORST_S:.0f} s: "
         + (
             "met."
@@ -200,22 +202,29 @@ def write_report(rows, base_rows, info, out_dir, base_label, started):
             + f" (median {statistics.median(ratios):.1f}x).",
         ]
     if len(pairs) == len(rows):
-        lines += ["", *_medians(med, statistics.median(b for b, _ in pairs), base_label)]
+        lines += ["", *_medians(pairs, base_label)]
     return _machine.write_report(out_dir, REPORT, [*lines, ""])
 
 
-def _medians(now, then, base_label):
-    """The medians of both codes over the same rows and, for issue 40's code, the 40 s carried."""
-    ratio = now / then
+def _medians(pairs, base_label):
+    """Both codes' medians over the same rows and, for issue 40's code, its 40 s carried over.
+
+    ``pairs``: ``(base seconds, this code's seconds)`` of each row. Carried at the larger of
+    two ratios: of the medians, and the median of the rows' own ratios.
+    """
+    now, then = statistics.median(n for _, n in pairs), statistics.median(b for b, _ in pairs)
+    own = statistics.median(n / b for b, n in pairs)
     lines = [
         f"Medians over the same recordings in this run: this code {now:.0f} s, the base "
-        f"{then:.0f} s ({ratio:.2f}x the base)."
+        f"{then:.0f} s ({now / then:.2f}x the base; the rows' own ratios: median {own:.2f}x, "
+        f"{min(n / b for b, n in pairs):.2f}-{max(n / b for b, n in pairs):.2f}x)."
     ]
     if base_label.startswith(ISSUE40_CODE):
+        ratio = max(own, now / then)
         lines[0] += (
             f" The base is the code the recordings kept back were timed with (median "
-            f"{ISSUE40_MEDIAN_S:.0f} s): at the same ratio this code would take about "
-            f"{ratio * ISSUE40_MEDIAN_S:.0f} s there, against issue 40's "
+            f"{ISSUE40_MEDIAN_S:.0f} s): at the larger of the two ratios this code would take "
+            f"about {ratio * ISSUE40_MEDIAN_S:.0f} s there, against issue 40's "
             f"{1.2 * ISSUE40_MEDIAN_S:.0f} s (an estimate: those recordings are other plates "
             "and effects)."
         )
