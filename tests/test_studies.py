@@ -185,6 +185,40 @@ def test_benchmark_diagnose_scaling_table_fits_the_growth(tmp_path):
     assert "slope 1.50 on log-log axes" in text
 
 
+def test_benchmark_diagnose_carries_issue_40s_time_at_the_larger_ratio(tmp_path):
+    # made-up rows: this code 30, 40, 50 s against a base's 20, 100, 110 s. The ratio of the
+    # medians is 40 / 100 = 0.40; the rows' own ratios 1.5, 0.40, 0.4545 have median 0.4545:
+    # with issue 40's code as the base the 40 s is carried at the larger, 18.2 s
+    bench = _benchmark("bench_diagnose")
+    info = {"cpu": "c", "nproc": 2, "platform": "p", "python": "3", "numpy": "2", "scipy": "1"}
+
+    def row(index, seconds):
+        return {
+            "index": index,
+            "effect": "control",
+            "size": "-",
+            "seconds": seconds,
+            "cpu": seconds,
+            "load": [1.0, 1.0],
+            "verdict": "consistent",
+            "chosen": None,
+            "refined": 0,
+            "workers": 2,
+        }
+
+    rows = [row(i, s) for i, s in enumerate((30.0, 40.0, 50.0))]
+    base = [row(i, s) for i, s in enumerate((20.0, 100.0, 110.0))]
+    label = f"{bench.ISSUE40_CODE} in /somewhere"
+    text = bench.write_report(rows, base, info, tmp_path, label, "2026-12-07 00:00 UTC").read_text()
+    assert "this code 40 s, the base 100 s (0.40x the base" in text
+    assert "median 0.45x, 0.40-1.50x" in text
+    assert f"this code would take about {0.4545 * 40:.0f} s there" in text
+    other = bench.write_report(rows, base, info, tmp_path, "abc1234 in /x", "t").read_text()
+    assert "0.40x the base" in other and "would take about" not in other
+    partial = bench.write_report(rows, base[:2], info, tmp_path, label, "t").read_text()
+    assert "Medians over the same recordings" not in partial  # only over every row
+
+
 @pytest.mark.slow
 def test_forward_full_convergence(tmp_path):
     # Paper section 6.3: the 50 x 50 mesh "satisfactorily resolves the first 14 modes".
