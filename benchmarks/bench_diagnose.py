@@ -42,8 +42,8 @@ TARGET_MEDIAN_S, TARGET_WORST_S = 30.0, 90.0
 #: Issue 40's (the recordings kept back): a median within 1.2 times 40 s, none over 5 min.
 ISSUE40_MEDIAN_S, ISSUE40_WORST_S = 40.0, 300.0
 #: The code the recordings kept back were timed with at that 40 s median (the last landed on
-#: 2026-11-28 before issue 40; its package is 7dd055e's): as ``--base`` over every row, the
-#: ratio of the medians carries the 40 s over to this code.
+#: 2026-11-28 before issue 40; its package is 7dd055e's): as ``--base`` over every row, its
+#: time against this code's carries the 40 s over (:func:`_medians`).
 ISSUE40_CODE = "8c3ddc4"
 #: The recording, meshes and frequency counts of the scaling rows.
 SCALING_RUN, SCALING_MESHES, SCALING_FREQUENCIES = 2, ((24, 24), (36, 36), (50, 50)), (8, 11, 14)
@@ -213,11 +213,12 @@ def _medians(pairs, base_label):
     two ratios: of the medians, and the median of the rows' own ratios.
     """
     now, then = statistics.median(n for _, n in pairs), statistics.median(b for b, _ in pairs)
-    own = statistics.median(n / b for b, n in pairs)
+    ratios = [n / b for b, n in pairs]
+    own = statistics.median(ratios)
     lines = [
         f"Medians over the same recordings in this run: this code {now:.0f} s, the base "
         f"{then:.0f} s ({now / then:.2f}x the base; the rows' own ratios: median {own:.2f}x, "
-        f"{min(n / b for b, n in pairs):.2f}-{max(n / b for b, n in pairs):.2f}x)."
+        f"{min(ratios):.2f}-{max(ratios):.2f}x)."
     ]
     if base_label.startswith(ISSUE40_CODE):
         ratio = max(own, now / then)
