@@ -191,12 +191,9 @@ def pytest_configure(config):
         raise pytest.UsageError(f"tests/conftest.py _CI_TIER names no module: {sorted(missing)}")
     # a renamed test would silently join the quick run: each named test is defined in its
     # module (read from the source, so that running a few tests by name checks it too)
-    stale = [
-        key
-        for key in _CI_TIER
-        if "::" in key
-        and f"def {key.split('::')[1]}(" not in (here / key.split("::")[0]).read_text()
-    ]
+    named = [key.split("::") for key in _CI_TIER if "::" in key]
+    sources = {module: (here / module).read_text() for module, _ in named}  # each read once
+    stale = [f"{module}::{test}" for module, test in named if f"def {test}(" not in sources[module]]
     if stale:
         raise pytest.UsageError(f"tests/conftest.py _CI_TIER names no test: {stale}")
 
