@@ -12,6 +12,17 @@ ROOT = Path(__file__).resolve().parents[1]
 MIN_PNG_BYTES = 10_000  # an empty or failed figure is a few kB; ours are 35-250 kB
 
 
+#: A machine's description as benchmarks/_machine.machine() gives it, for made-up rows.
+_MACHINE = {
+    "cpu": "test cpu",
+    "nproc": 2,
+    "platform": "p",
+    "python": "3",
+    "numpy": "2",
+    "scipy": "1",
+}
+
+
 def _benchmark(name):
     """The script ``benchmarks/<name>.py`` (a folder of scripts, not a package), executed."""
     spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / f"{name}.py")
@@ -106,14 +117,6 @@ def test_benchmark_diagnose_pairs_table_gives_the_ratio_of_medians(tmp_path):
     # two runs of this code (100 and 120 s) and two of the base (400 and 500 s), made here:
     # the report's ratio is that of the medians, 450 / 110
     bench = _benchmark("bench_diagnose")
-    info = {
-        "cpu": "test cpu",
-        "nproc": 2,
-        "platform": "p",
-        "python": "3",
-        "numpy": "2",
-        "scipy": "1",
-    }
     rows = [
         {
             "code": code,
@@ -126,7 +129,7 @@ def test_benchmark_diagnose_pairs_table_gives_the_ratio_of_medians(tmp_path):
         }
         for code, t in (("this", 100.0), ("/base", 400.0), ("this", 120.0), ("/base", 500.0))
     ]
-    text = bench.write_pairs(rows, info, tmp_path, "/base", "2026-11-26 00:00 UTC").read_text()
+    text = bench.write_pairs(rows, _MACHINE, tmp_path, "/base", "2026-11-26 00:00 UTC").read_text()
     assert (
         "| this | 100 | 100 | 1.0 / 1.0 | explained point_mass+ply_misalignment | "
         "point_mass+ply_misalignment (+12.5) |" in text
@@ -152,14 +155,6 @@ def test_benchmark_diagnose_scaling_table_fits_the_growth(tmp_path):
     # rows whose wall time grows as unknowns**1.5 (made here, not measured): the report's
     # log-log slope is 1.5, and each row lands with its mesh, unknowns and verdict
     bench = _benchmark("bench_diagnose")
-    info = {
-        "cpu": "test cpu",
-        "nproc": 2,
-        "platform": "p",
-        "python": "3",
-        "numpy": "2",
-        "scipy": "1",
-    }
     rows = []
     for (nx, ny), k in (((24, 24), 14), ((36, 36), 14), ((50, 50), 14), ((50, 50), 8)):
         n = 8 * (nx + 1) * (ny + 1)
@@ -178,7 +173,7 @@ def test_benchmark_diagnose_scaling_table_fits_the_growth(tmp_path):
                 "size": "0.3 g",
             }
         )
-    path = bench.write_scaling(rows, info, tmp_path, "2026-11-26 00:00 UTC")
+    path = bench.write_scaling(rows, _MACHINE, tmp_path, "2026-11-26 00:00 UTC")
     text = path.read_text()
     assert path.name == bench.SCALING_REPORT
     assert "| 36 x 36 | 14 | 10952 |" in text and "| 50 x 50 | 8 | 20808 |" in text
@@ -190,7 +185,6 @@ def test_benchmark_diagnose_carries_issue_40s_time_at_the_larger_ratio(tmp_path)
     # medians is 40 / 100 = 0.40; the rows' own ratios 1.5, 0.40, 0.4545 have median 0.4545:
     # with issue 40's code as the base the 40 s is carried at the larger, 18.2 s
     bench = _benchmark("bench_diagnose")
-    info = {"cpu": "c", "nproc": 2, "platform": "p", "python": "3", "numpy": "2", "scipy": "1"}
 
     def row(index, seconds):
         return {
@@ -209,13 +203,15 @@ def test_benchmark_diagnose_carries_issue_40s_time_at_the_larger_ratio(tmp_path)
     rows = [row(i, s) for i, s in enumerate((30.0, 40.0, 50.0))]
     base = [row(i, s) for i, s in enumerate((20.0, 100.0, 110.0))]
     label = f"{bench.ISSUE40_CODE} in /somewhere"
-    text = bench.write_report(rows, base, info, tmp_path, label, "2026-12-07 00:00 UTC").read_text()
+    text = bench.write_report(
+        rows, base, _MACHINE, tmp_path, label, "2026-12-07 00:00 UTC"
+    ).read_text()
     assert "this code 40 s, the base 100 s (0.40x the base" in text
     assert "median 0.45x, 0.40-1.50x" in text
     assert f"this code would take about {0.4545 * 40:.0f} s there" in text
-    other = bench.write_report(rows, base, info, tmp_path, "abc1234 in /x", "t").read_text()
+    other = bench.write_report(rows, base, _MACHINE, tmp_path, "abc1234 in /x", "t").read_text()
     assert "0.40x the base" in other and "would take about" not in other
-    partial = bench.write_report(rows, base[:2], info, tmp_path, label, "t").read_text()
+    partial = bench.write_report(rows, base[:2], _MACHINE, tmp_path, label, "t").read_text()
     assert "Medians over the same recordings" not in partial  # only over every row
 
 
